@@ -1,0 +1,1 @@
+"""The ``gyrostar`` command line (see :mod:`gyrostar.cli.main`)."""

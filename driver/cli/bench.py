@@ -1,0 +1,71 @@
+"""``gyrostar bench [SUITE ...]``: speed benchmarks from the checkout's ``bench/`` folder.
+
+A suite is ``bench/bench_<name>.py`` exposing ``run(quick: bool) -> dict`` that returns
+``{case: {"us": t, "baseline_us": b, "ratio": b / t, ...}}`` — every figure measured in
+the same run as its baseline (plain numpy or a peer). Benchmarks need a source checkout.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import time
+
+from ..errors import ConfigError, NotAvailableError
+from ..paths import repo_root
+from .main import add_json
+from .output import emit
+
+
+def configure(parser) -> None:
+    parser.add_argument("suites", nargs="*", metavar="SUITE", help="suites to run (default: all)")
+    parser.add_argument("--quick", action="store_true", help="fewer repetitions")
+    parser.add_argument("--list", action="store_true", help="list the suites and exit")
+    add_json(parser)
+
+
+def discover() -> dict:
+    root = repo_root()
+    if root is None:
+        raise NotAvailableError("benchmarks run from a source checkout (bench/ not found)")
+    return {p.stem.removeprefix("bench_"): p for p in sorted((root / "bench").glob("bench_*.py"))}
+
+
+def _load(path):
+    spec = importlib.util.spec_from_file_location(f"gyrostar_bench_{path.stem}", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def run(args) -> int:
+    suites = discover()
+    if args.list:
+        emit(args, {"suites": list(suites)}, "\n".join(suites) or "(no suites)")
+        return 0
+    chosen = args.suites or list(suites)
+    unknown = [s for s in chosen if s not in suites]
+    if unknown:
+        raise ConfigError(f"unknown bench suite(s) {unknown}; known: {list(suites)}")
+    from rich.table import Table
+
+    result = {}
+    table = Table(title="gyrostar bench")
+    for col in ("suite", "case", "µs", "baseline µs", "ratio", "note"):
+        table.add_column(col)
+    for name in chosen:
+        t0 = time.perf_counter()
+        cases = _load(suites[name]).run(quick=args.quick)
+        result[name] = cases
+        for case, fig in cases.items():
+            table.add_row(name, case, _f(fig.get("us")), _f(fig.get("baseline_us")),
+                          _f(fig.get("ratio")), str(fig.get("note", "")))
+        result[name]["_suite_seconds"] = round(time.perf_counter() - t0, 2)
+    from rich.console import Console
+
+    Console(stderr=args.json).print(table)
+    emit(args, result)
+    return 0
+
+
+def _f(value) -> str:
+    return "" if value is None else f"{value:.3g}"

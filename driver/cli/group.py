@@ -1,0 +1,41 @@
+"""Commands made of named targets (``gyrostar eval starcount``, ``gyrostar sim frame``…).
+
+Each target is a module exposing ``HELP`` (one line), ``configure(parser)`` and
+``run(args) -> int``. Target modules must be cheap to import (heavy imports go inside
+``run``) so that ``gyrostar --help`` stays fast. A target whose module is missing or
+fails to import is still listed, and running it explains why (exit code 4).
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+
+from ..errors import NotAvailableError
+
+log = logging.getLogger(__name__)
+
+
+def add_targets(parser, targets: dict[str, str], dest: str) -> None:
+    """Register one sub-parser per target module (name -> dotted module path)."""
+    sub = parser.add_subparsers(dest=dest, metavar="TARGET", required=True)
+    for name, module_path in targets.items():
+        try:
+            module = importlib.import_module(module_path)
+        except ImportError as exc:
+            p = sub.add_parser(name, help=f"(not available: {exc})")
+            p.set_defaults(_target_run=_unavailable(name, module_path, exc))
+            continue
+        p = sub.add_parser(name, help=module.HELP, description=module.HELP)
+        module.configure(p)
+        p.set_defaults(_target_run=module.run)
+
+
+def run_target(args) -> int:
+    return args._target_run(args)
+
+
+def _unavailable(name: str, module_path: str, exc: Exception):
+    def run(args) -> int:
+        raise NotAvailableError(f"'{name}' is not available in this build ({module_path}: {exc})")
+    return run

@@ -1,0 +1,26 @@
+"""``gyrostar replay LOG``: feed a recorded log back through the driver, or export it."""
+
+from __future__ import annotations
+
+import importlib
+
+from ..errors import NotAvailableError
+from .main import add_json
+
+REPLAYER = "gyrostar.hil.replay"
+
+
+def configure(parser) -> None:
+    parser.add_argument("log", metavar="LOG", help="recorded log file")
+    parser.add_argument("--export", choices=["csv", "hdf5"], default=None, help="export instead of replaying")
+    parser.add_argument("--out", metavar="PATH", default=None, help="export path")
+    parser.add_argument("--check", action="store_true", help="compare replayed outputs with the recorded ones")
+    add_json(parser)
+
+
+def run(args) -> int:
+    try:
+        replayer = importlib.import_module(REPLAYER)
+    except ImportError as exc:
+        raise NotAvailableError(f"replay is not available in this build ({exc})") from exc
+    return replayer.run(args)

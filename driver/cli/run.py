@@ -1,0 +1,35 @@
+"""``gyrostar run``: the coupled loop on the built-in simulated flatsat or a real one.
+
+The loop itself lives in :mod:`gyrostar.hil.runner`; this module only parses arguments.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+from .main import add_json
+
+RUNNER = "gyrostar.hil.runner"
+
+
+def configure(parser) -> None:
+    parser.add_argument("--config", metavar="TOML", help="flatsat config (default: built-in simulated flatsat)")
+    parser.add_argument("--duration", type=float, default=None, metavar="S",
+                        help="run length in seconds of flatsat time (default: the scenario's, ~30 s)")
+    parser.add_argument("--scenario", default=None, help="built-in scenario name (default: demo)")
+    parser.add_argument("--seed", type=int, default=1, help="simulator seed")
+    parser.add_argument("--out", metavar="DIR", default=None, help="run folder (default: runs/<timestamp>)")
+    parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    parser.add_argument("--realtime", action="store_true",
+                        help="pace the simulated flatsat on the monotonic clock (default: as fast as possible)")
+    add_json(parser)
+
+
+def run(args) -> int:
+    try:
+        runner = importlib.import_module(RUNNER)
+    except ImportError as exc:
+        from .stages import report_missing_loop
+
+        return report_missing_loop(args, exc)
+    return runner.run(args)

@@ -1,0 +1,1 @@
+"""gyrostar.hil — flatsat runner, HIL scenarios, record/replay (``hil/``)."""

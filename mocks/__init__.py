@@ -1,0 +1,1 @@
+"""gyrostar.mocks — physical simulator, device emulators and fake transports (``mocks/``)."""

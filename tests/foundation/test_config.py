@@ -1,0 +1,85 @@
+"""Config validation: unknown or ill-typed keys name the key, the file and the type."""
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+import pytest
+from gyrostar import config
+from gyrostar.errors import ConfigError
+
+
+@dataclass
+class Gyro:
+    bus: int = 1
+    address: int = 0x68
+    kind: Literal["bmi088", "l3gd20h"] = "bmi088"
+
+
+@dataclass
+class Flatsat:
+    name: str
+    rate_hz: float = 400.0
+    gyro: Gyro = field(default_factory=Gyro)
+    urls: list[str] = field(default_factory=list)
+    offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    log: Path | None = None
+
+
+def test_valid_file_round_trips(tmp_path):
+    p = tmp_path / "f.toml"
+    p.write_text('name = "bench"\nrate_hz = 400\nurls = ["loop://"]\noffset = [1, 2.5, 3]\n'
+                 'log = "/tmp/x.log"\n[gyro]\nbus = 2\nkind = "l3gd20h"\n')
+    cfg = config.load(p, Flatsat)
+    assert cfg.rate_hz == 400.0 and isinstance(cfg.rate_hz, float)
+    assert cfg.gyro == Gyro(bus=2, address=0x68, kind="l3gd20h")
+    assert cfg.offset == (1.0, 2.5, 3.0)
+    assert cfg.log == Path("/tmp/x.log")
+    assert config.to_dict(cfg)["gyro"]["kind"] == "l3gd20h"
+
+
+def test_unknown_key_names_key_and_file(tmp_path):
+    p = tmp_path / "bad.toml"
+    p.write_text('name = "x"\n[gyro]\nbuss = 1\n')
+    with pytest.raises(ConfigError) as err:
+        config.load(p, Flatsat)
+    msg = str(err.value)
+    assert "gyro.buss" in msg and str(p) in msg and "bus" in msg
+
+
+@pytest.mark.parametrize("text,key,expected", [
+    ('name = 3', "name", "a string"),
+    ('name = "x"\nrate_hz = "fast"', "rate_hz", "a number"),
+    ('name = "x"\n[gyro]\nbus = 1.5', "gyro.bus", "an integer"),
+    ('name = "x"\n[gyro]\nbus = true', "gyro.bus", "an integer"),
+    ('name = "x"\nurls = [1]', "urls[0]", "a string"),
+    ('name = "x"\noffset = [1, 2]', "offset", "3 items"),
+    ('name = "x"\n[gyro]\nkind = "mpu6050"', "gyro.kind", "one of"),
+])
+def test_ill_typed_key_names_expected_type(text, key, expected):
+    with pytest.raises(ConfigError) as err:
+        config.loads(text, Flatsat, source="cfg.toml")
+    msg = str(err.value)
+    assert f"'{key}'" in msg and expected in msg and "cfg.toml" in msg
+
+
+def test_missing_required_and_bad_toml(tmp_path):
+    with pytest.raises(ConfigError, match="missing required key 'name'"):
+        config.loads("rate_hz = 1", Flatsat)
+    with pytest.raises(ConfigError, match="not valid TOML"):
+        config.loads("name = ", Flatsat)
+    with pytest.raises(ConfigError, match="does not exist"):
+        config.load(tmp_path / "nope.toml", Flatsat)
+
+
+def test_validate_hook_reports_range_errors():
+    @dataclass
+    class Exposure:
+        ms: float = 10.0
+
+        def validate(self):
+            if not 0 < self.ms <= 1000:
+                raise ValueError(f"ms must be in (0, 1000], got {self.ms}")
+
+    with pytest.raises(ConfigError, match="ms must be in"):
+        config.loads("ms = -1", Exposure, source="e.toml")
