@@ -1,0 +1,82 @@
+"""The loop's output record: one per gyro sample (400 Hz), a numpy structured dtype.
+
+Every field is little-endian and fixed-size, so the raw bytes of an array of records are
+the UDP datagram payload and the log's OUTPUT payload (see docs/FLATSAT.md).
+
+=================  ==========  ===============================================================
+field              type        meaning (frames: gyrostar.attitude; body = camera frame)
+=================  ==========  ===============================================================
+``t``              f8          host time of the gyro sample, s (monotonic or simulated clock)
+``seq``            u4          output counter (gaps mean lost outputs)
+``mode``           u1          MODE_ACQUIRE 0, MODE_TRACK 1, MODE_COAST 2
+``n_stars``        u1          stars tracked (valid rows of ``star_id``/``centroid_px``)
+``flags``          u2          quality flags, ``FLAG_*`` below
+``q``              f8[4]       attitude estimate [x, y, z, w], ICRS → body
+``omega``          f8[3]       body rate, bias-corrected, rad/s
+``bias``           f8[3]       gyro bias estimate, rad/s
+``cov``            f8[6,6]     covariance of [δθ (rad, body), bias (rad/s)]
+``star_id``        i4[16]      catalog ids of tracked stars (-1 = none)
+``centroid_px``    f4[16,2]    predicted centroids (column, row) in pixels, sensor coords
+``latency_us``     f4          host time from the gyro sample's FIFO read to this output, µs
+=================  ==========  ===============================================================
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+MAX_STARS = 16
+
+MODE_ACQUIRE = 0
+MODE_TRACK = 1
+MODE_COAST = 2
+MODE_NAMES = {MODE_ACQUIRE: "ACQUIRE", MODE_TRACK: "TRACK", MODE_COAST: "COAST"}
+
+FLAG_ATTITUDE_VALID = 0x0001   # q is from an identified attitude (TRACK or COAST after TRACK)
+FLAG_IMAGE_UPDATE = 0x0002     # an image update was applied at this sample
+FLAG_GYRO_GAP = 0x0004         # samples before this one were lost (FIFO overrun, bus error)
+FLAG_GYRO_SATURATED = 0x0008   # an axis hit the gyro's range
+FLAG_FEW_STARS = 0x0010        # fewer than 2 valid stars in the last image
+FLAG_LINK_ERROR = 0x0020       # the last image failed (timeout, corrupt frame, head error)
+FLAG_HEAD_LOST = 0x0040        # the head does not answer (disconnected); reconnecting
+FLAG_OVERRUN = 0x0080          # the loop missed its deadline before this sample
+FLAG_BIAS_CONVERGED = 0x0100   # bias covariance below threshold
+FLAG_ID_VERIFIED = 0x0200      # identification verified by residuals after the last solve
+FLAG_NAMES = {
+    FLAG_ATTITUDE_VALID: "attitude_valid", FLAG_IMAGE_UPDATE: "image_update",
+    FLAG_GYRO_GAP: "gyro_gap", FLAG_GYRO_SATURATED: "gyro_saturated",
+    FLAG_FEW_STARS: "few_stars", FLAG_LINK_ERROR: "link_error", FLAG_HEAD_LOST: "head_lost",
+    FLAG_OVERRUN: "overrun", FLAG_BIAS_CONVERGED: "bias_converged", FLAG_ID_VERIFIED: "id_verified",
+}
+
+OUTPUT_DTYPE = np.dtype([
+    ("t", "<f8"), ("seq", "<u4"), ("mode", "u1"), ("n_stars", "u1"), ("flags", "<u2"),
+    ("q", "<f8", (4,)), ("omega", "<f8", (3,)), ("bias", "<f8", (3,)), ("cov", "<f8", (6, 6)),
+    ("star_id", "<i4", (MAX_STARS,)), ("centroid_px", "<f4", (MAX_STARS, 2)), ("latency_us", "<f4"),
+])
+
+TRUTH_DTYPE = np.dtype([
+    ("t", "<f8"), ("q", "<f8", (4,)), ("omega", "<f8", (3,)), ("bias", "<f8", (3,)),
+])
+"""Simulator truth at each gyro sample (simulated flatsats only): attitude, rate, bias."""
+
+UDP_MAGIC = b"GYS1"
+"""UDP datagram = UDP_MAGIC + u16 record size + u16 count + count raw OUTPUT_DTYPE records."""
+
+
+def empty(n: int = 0) -> np.ndarray:
+    """An array of ``n`` zeroed output records with ids set to -1."""
+    out = np.zeros(n, OUTPUT_DTYPE)
+    out["star_id"] = -1
+    return out
+
+
+def flag_names(flags: int) -> list[str]:
+    return [name for bit, name in FLAG_NAMES.items() if flags & bit]
+
+
+def describe() -> dict:
+    """JSON-safe description of the record layout (stored in every log's META)."""
+    return {"dtype": OUTPUT_DTYPE.descr, "itemsize": OUTPUT_DTYPE.itemsize, "modes": MODE_NAMES,
+            "flags": {name: bit for bit, name in FLAG_NAMES.items()},
+            "truth_dtype": TRUTH_DTYPE.descr}

@@ -1,0 +1,93 @@
+"""Output sinks: where the loop's 400 Hz output records go.
+
+Each sink has ``put(records, t_ns)`` (an array of :data:`~gyrostar.loop.record.OUTPUT_DTYPE`
+produced in one loop step) and ``close()``. They never block the loop for long: the UDP
+sink drops datagrams the kernel refuses (counted), the recorder buffers in user space.
+"""
+
+from __future__ import annotations
+
+import socket
+import struct
+
+import numpy as np
+
+from ..errors import ConfigError
+from ..recording import logfile as lf
+from .record import OUTPUT_DTYPE, UDP_MAGIC
+
+_UDP_HEAD = struct.Struct("<4sHH")
+UDP_MAX_RECORDS = (65507 - _UDP_HEAD.size) // OUTPUT_DTYPE.itemsize
+
+
+class CallbackSink:
+    """Call ``fn(records)`` with each step's records (a read-only view: copy to keep)."""
+
+    def __init__(self, fn):
+        self.fn = fn
+
+    def put(self, records: np.ndarray, t_ns: int = 0) -> None:
+        if len(records):
+            self.fn(records)
+
+    def close(self) -> None:
+        pass
+
+
+class RecorderSink:
+    """Append each step's records to a log as one OUTPUT record."""
+
+    def __init__(self, writer: lf.LogWriter):
+        self.writer = writer
+
+    def put(self, records: np.ndarray, t_ns: int = 0) -> None:
+        if len(records):
+            self.writer.append(lf.OUTPUT, records.tobytes(), t_ns=t_ns)
+
+    def close(self) -> None:
+        self.writer.flush()
+
+
+class UdpSink:
+    """Send records as UDP datagrams (default loopback only).
+
+    Datagram: ``b"GYS1"``, u16 record size, u16 count, then ``count`` raw records
+    (little-endian OUTPUT_DTYPE). Decode with :func:`decode_datagram`.
+    """
+
+    def __init__(self, host: str = "127.0.0.1", port: int = 47800, allow_remote: bool = False):
+        if not allow_remote and host not in ("127.0.0.1", "localhost", "::1"):
+            raise ConfigError(f"UDP output to {host} refused: the stream is loopback-only "
+                              "unless allow_remote = true")
+        if not 0 < port < 65536:
+            raise ConfigError(f"UDP port {port} out of range 1..65535")
+        self.addr = (host, port)
+        self.sock = socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.setblocking(False)
+        self.sent = 0
+        self.dropped = 0
+
+    def put(self, records: np.ndarray, t_ns: int = 0) -> None:
+        for start in range(0, len(records), UDP_MAX_RECORDS):
+            chunk = records[start: start + UDP_MAX_RECORDS]
+            payload = _UDP_HEAD.pack(UDP_MAGIC, OUTPUT_DTYPE.itemsize, len(chunk)) + chunk.tobytes()
+            try:
+                self.sock.sendto(payload, self.addr)
+                self.sent += len(chunk)
+            except OSError:   # no listener buffer, EAGAIN, ECONNREFUSED: count, never stall
+                self.dropped += len(chunk)
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+def decode_datagram(data: bytes) -> np.ndarray:
+    """Records of one UDP datagram from :class:`UdpSink` (raises ConfigError if malformed)."""
+    if len(data) < _UDP_HEAD.size:
+        raise ConfigError("UDP datagram shorter than its header")
+    magic, size, count = _UDP_HEAD.unpack_from(data)
+    if magic != UDP_MAGIC or size != OUTPUT_DTYPE.itemsize:
+        raise ConfigError(f"not a gyrostar output datagram (magic {magic!r}, record size {size})")
+    if len(data) != _UDP_HEAD.size + size * count:
+        raise ConfigError(f"datagram length {len(data)} does not match {count} records")
+    return np.frombuffer(data, OUTPUT_DTYPE, count, _UDP_HEAD.size)

@@ -1,0 +1,189 @@
+"""The gyrostar log format: append-only records, each with its own CRC-32C.
+
+File layout (all integers little-endian)::
+
+    file   = MAGIC (8 bytes b"GYSTLOG1") record*
+    record = SYNC (u8 0xA5) kind (u8) channel (u16) length (u32) t_ns (i64)
+             payload (length bytes) crc (u32, CRC-32C of the 16 header bytes + payload)
+
+``t_ns`` is the host time of the event in integer nanoseconds (monotonic clock, or the
+simulated clock on a simulated flatsat). ``channel`` tells devices apart (0 = the head
+link, 1 = the gyro bus, ...). The writer keeps records in a user-space buffer and
+``write(2)``\\ s it to the kernel every ``flush_bytes`` bytes or ``flush_s`` seconds, so a
+SIGKILL loses at most that unflushed tail; ``fsync`` (power loss) is optional. A reader
+stops at the first truncated or corrupt record and reports how many bytes it ignored.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import struct
+import threading
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import crc32c
+
+from ..errors import ConfigError
+
+MAGIC = b"GYSTLOG1"
+SYNC = 0xA5
+HEADER = struct.Struct("<BBHIq")
+CRC = struct.Struct("<I")
+MAX_PAYLOAD = 64 * 1024 * 1024
+
+# record kinds
+META = 1      # JSON: config, scenario, versions, output dtype description
+TX = 2        # bytes host -> device (link channel)
+RX = 3        # bytes device -> host (link channel)
+BUS = 4       # one register-bus transaction (see taps.encode_bus)
+CLOCK = 5     # one clock reading: f8 seconds
+OUTPUT = 6    # one or more loop output records (raw bytes of gyrostar.loop.record.OUTPUT_DTYPE)
+EVENT = 7     # JSON: a notable event (mode change, fault injected, reconnect, ...)
+TRUTH = 8     # simulator truth (raw bytes of gyrostar.loop.record.TRUTH_DTYPE)
+KIND_NAMES = {META: "meta", TX: "tx", RX: "rx", BUS: "bus", CLOCK: "clock", OUTPUT: "output",
+              EVENT: "event", TRUTH: "truth"}
+
+CH_HEAD = 0
+CH_GYRO = 1
+
+
+@dataclass(frozen=True)
+class Record:
+    kind: int
+    channel: int
+    t_ns: int
+    payload: bytes
+
+
+class LogWriter:
+    """Append records to a log file; thread-safe (a link reader thread may record too)."""
+
+    def __init__(self, path: str | Path, flush_bytes: int = 64 * 1024, flush_s: float = 0.05,
+                 fsync: bool = False):
+        self.path = Path(path)
+        self.flush_bytes = int(flush_bytes)
+        self.flush_s = float(flush_s)
+        self.fsync = fsync
+        self._lock = threading.Lock()
+        self._buf = bytearray()
+        self._last_flush = time.monotonic()
+        self.records = 0
+        self.bytes_written = 0
+        self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_APPEND, 0o644)
+        self._write_all(MAGIC)
+
+    def append(self, kind: int, payload: bytes | bytearray | memoryview, channel: int = 0,
+               t_ns: int = 0) -> None:
+        """Add one record; it reaches the kernel at the next flush."""
+        payload = bytes(payload)
+        if len(payload) > MAX_PAYLOAD:
+            raise ValueError(f"log record of {len(payload)} bytes exceeds {MAX_PAYLOAD}")
+        head = HEADER.pack(SYNC, kind, channel, len(payload), int(t_ns))
+        crc = crc32c.crc32c(payload, crc32c.crc32c(head))
+        with self._lock:
+            if self._fd < 0:
+                raise ValueError(f"log {self.path} is closed")
+            self._buf += head
+            self._buf += payload
+            self._buf += CRC.pack(crc)
+            self.records += 1
+            if len(self._buf) >= self.flush_bytes or time.monotonic() - self._last_flush >= self.flush_s:
+                self._flush_locked()
+
+    def meta(self, obj: dict, t_ns: int = 0) -> None:
+        self.append(META, json.dumps(obj, sort_keys=True).encode(), t_ns=t_ns)
+
+    def event(self, obj: dict, t_ns: int = 0) -> None:
+        self.append(EVENT, json.dumps(obj, sort_keys=True).encode(), t_ns=t_ns)
+
+    def flush(self) -> None:
+        with self._lock:
+            self._flush_locked()
+
+    def _flush_locked(self) -> None:
+        if self._buf and self._fd >= 0:
+            self._write_all(self._buf)
+            self._buf.clear()
+            if self.fsync:
+                os.fsync(self._fd)
+        self._last_flush = time.monotonic()
+
+    def _write_all(self, data) -> None:
+        view = memoryview(bytes(data))
+        while view:
+            n = os.write(self._fd, view)
+            self.bytes_written += n
+            view = view[n:]
+
+    def close(self) -> None:
+        with self._lock:
+            if self._fd >= 0:
+                self._flush_locked()
+                os.fsync(self._fd)
+                os.close(self._fd)
+                self._fd = -1
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+@dataclass
+class ReadReport:
+    records: int = 0
+    good_bytes: int = 0
+    ignored_tail_bytes: int = 0
+    tail_reason: str = ""
+
+
+def read_records(path: str | Path, report: ReadReport | None = None) -> Iterator[Record]:
+    """Yield every intact record; stop quietly at a truncated or corrupt tail.
+
+    ``report`` (if given) receives the count of records and of ignored tail bytes.
+    Raises :class:`ConfigError` if the file is not a gyrostar log at all.
+    """
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError as exc:
+        raise ConfigError(f"log {path} does not exist") from exc
+    if data[: len(MAGIC)] != MAGIC:
+        raise ConfigError(f"{path} is not a gyrostar log (bad magic {data[:8]!r})")
+    report = report if report is not None else ReadReport()
+    pos = len(MAGIC)
+    end = len(data)
+    while pos < end:
+        if end - pos < HEADER.size + CRC.size:
+            report.tail_reason = "truncated record header"
+            break
+        sync, kind, channel, length, t_ns = HEADER.unpack_from(data, pos)
+        if sync != SYNC or length > MAX_PAYLOAD:
+            report.tail_reason = f"bad record header at byte {pos}"
+            break
+        stop = pos + HEADER.size + length
+        if stop + CRC.size > end:
+            report.tail_reason = "truncated record payload"
+            break
+        (crc,) = CRC.unpack_from(data, stop)
+        if crc32c.crc32c(data[pos:stop]) != crc:
+            report.tail_reason = f"CRC mismatch at byte {pos}"
+            break
+        report.records += 1
+        yield Record(kind, channel, t_ns, data[pos + HEADER.size: stop])
+        pos = stop + CRC.size
+    report.good_bytes = pos
+    report.ignored_tail_bytes = end - pos
+
+
+def read_meta(path: str | Path) -> dict:
+    """The first META record of a log (the run's description)."""
+    for rec in read_records(path):
+        if rec.kind == META:
+            return json.loads(rec.payload)
+    raise ConfigError(f"log {path} has no META record")
