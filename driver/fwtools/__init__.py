@@ -1,0 +1,1 @@
+"""Firmware tools: protocol generator, builds, host program and QEMU runners (``gyrostar fw``)."""

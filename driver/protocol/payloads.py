@@ -1,0 +1,226 @@
+"""Payload encoding (requests) and decoding (replies) per message type.
+
+Fixed parts follow ``defs.REQUEST_LAYOUT`` / ``defs.REPLY_LAYOUT`` (little-endian);
+variable tails: PING ``echo`` bytes, SET_WINDOWS ``spans`` (N×4 int array of
+``[window_id, row, col_start, col_stop)``), WINDOW_DATA ``windows`` (list of
+:class:`WindowPixels`), FULL_FRAME ``pixels`` (uint16 array).
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+
+import numpy as np
+
+from .defs import REPLY_FLAG, REPLY_LAYOUT, REQUEST_LAYOUT, MsgType, PixelFormat
+from .errors import PayloadError, ProtocolUsageError, error_for
+from .framing import Frame
+
+_SPAN = struct.Struct("<HHHH")
+_WIN_HEADER = struct.Struct("<HHI")
+
+
+@dataclass(frozen=True)
+class WindowPixels:
+    """One window of a capture: its id, the sum of its pixel values and the pixels (span order)."""
+
+    window_id: int
+    sum: int
+    pixels: np.ndarray  # uint16, span order (rows ascending, columns ascending)
+
+
+def _struct(layout: tuple[str, tuple[str, ...]]) -> struct.Struct:
+    return struct.Struct("<" + layout[0])
+
+
+def encode_request(msg_type: int, tail: bytes = b"", **fields) -> bytes:
+    """Payload of a request: the fixed fields (reserved ones default to 0) then ``tail`` bytes."""
+    msg_type = MsgType(msg_type)
+    if msg_type not in REQUEST_LAYOUT:
+        raise ProtocolUsageError(f"{msg_type.name} is reply-only")
+    fmt, names = REQUEST_LAYOUT[msg_type]
+    unknown = set(fields) - set(names)
+    if unknown:
+        raise ProtocolUsageError(f"{msg_type.name} has no field(s) {sorted(unknown)}; fields: {list(names)}")
+    values = []
+    for name in names:
+        if name not in fields and not name.startswith("reserved"):
+            raise ProtocolUsageError(f"{msg_type.name} needs field '{name}'")
+        values.append(int(fields.get(name, 0)))
+    try:
+        return _struct((fmt, names)).pack(*values) + bytes(tail)
+    except struct.error as exc:
+        raise ProtocolUsageError(f"{msg_type.name}: a field does not fit its type ({exc})") from None
+
+
+def encode_spans(spans) -> bytes:
+    """SET_WINDOWS payload for an N×4 array of ``[window_id, row, col_start, col_stop)`` rows."""
+    arr = np.asarray(spans, dtype=np.int64).reshape(-1, 4)
+    if arr.size and (arr.min() < 0 or arr.max() > 0xFFFF):
+        raise ProtocolUsageError("span values must fit uint16 (0..65535)")
+    head = encode_request(MsgType.SET_WINDOWS, n_spans=len(arr))
+    return head + arr.astype("<u2").tobytes()
+
+
+def decode_spans(tail: bytes) -> np.ndarray:
+    """Inverse of the span tail of :func:`encode_spans`: N×4 int32 array."""
+    if len(tail) % _SPAN.size:
+        raise PayloadError(f"span table of {len(tail)} bytes is not a multiple of {_SPAN.size}")
+    return np.frombuffer(tail, dtype="<u2").reshape(-1, 4).astype(np.int32)
+
+
+def pack10(values) -> bytes:
+    """10-bit values as an LSB-first bit stream: value i occupies bits [10i, 10i+10)."""
+    v = np.asarray(values, dtype=np.uint64)
+    if v.size and int(v.max()) > 0x3FF:
+        raise ProtocolUsageError("pixel value above 1023 cannot be packed in 10 bits")
+    n = v.size
+    pad = (-n) % 4
+    v = np.concatenate([v, np.zeros(pad, np.uint64)]).reshape(-1, 4)
+    word = v[:, 0] | (v[:, 1] << 10) | (v[:, 2] << 20) | (v[:, 3] << 30)  # 40 bits per group
+    out = np.stack([(word >> (8 * k)) & 0xFF for k in range(5)], axis=1).astype(np.uint8).ravel()
+    return out[: (10 * n + 7) // 8].tobytes()
+
+
+def unpack10(data: bytes, n: int) -> np.ndarray:
+    """Inverse of :func:`pack10`: ``n`` uint16 values."""
+    need = (10 * n + 7) // 8
+    if len(data) < need:
+        raise PayloadError(f"{n} packed 10-bit pixels need {need} bytes, got {len(data)}")
+    b = np.frombuffer(bytes(data[:need]) + b"\x00" * ((-need) % 5), dtype=np.uint8)
+    b = b.reshape(-1, 5).astype(np.uint64)
+    word = b[:, 0] | (b[:, 1] << 8) | (b[:, 2] << 16) | (b[:, 3] << 24) | (b[:, 4] << 32)
+    vals = np.stack([(word >> (10 * k)) & 0x3FF for k in range(4)], axis=1).ravel()
+    return vals[:n].astype(np.uint16)
+
+
+def pixel_bytes(n: int, pixel_format: int) -> int:
+    """Bytes that ``n`` pixels take in ``pixel_format``."""
+    return 2 * n if pixel_format == PixelFormat.U16 else (10 * n + 7) // 8
+
+
+def encode_pixels(values, pixel_format: int) -> bytes:
+    """Pixels (≤ 1023 for PACKED10) in a wire format."""
+    if pixel_format == PixelFormat.U16:
+        return np.asarray(values, dtype="<u2").tobytes()
+    if pixel_format == PixelFormat.PACKED10:
+        return pack10(values)
+    raise ProtocolUsageError(f"unknown pixel format {pixel_format}")
+
+
+def decode_pixels(data: bytes, n: int, pixel_format: int) -> np.ndarray:
+    if pixel_format == PixelFormat.U16:
+        if len(data) < 2 * n:
+            raise PayloadError(f"{n} 16-bit pixels need {2 * n} bytes, got {len(data)}")
+        return np.frombuffer(bytes(data[: 2 * n]), dtype="<u2").astype(np.uint16)
+    if pixel_format == PixelFormat.PACKED10:
+        return unpack10(data, n)
+    raise PayloadError(f"unknown pixel format {pixel_format} in reply")
+
+
+def _decode_windows(fields: dict, tail: bytes) -> list[WindowPixels]:
+    out, off = [], 0
+    fmt = fields["pixel_format"]
+    for _ in range(fields["count"]):
+        if off + _WIN_HEADER.size > len(tail):
+            raise PayloadError("WINDOW_DATA ends inside a window header")
+        wid, n, total = _WIN_HEADER.unpack_from(tail, off)
+        off += _WIN_HEADER.size
+        nbytes = pixel_bytes(n, fmt)
+        if off + nbytes > len(tail):
+            raise PayloadError(f"WINDOW_DATA window {wid}: {n} pixels need {nbytes} bytes, "
+                               f"{len(tail) - off} left")
+        out.append(WindowPixels(wid, total, decode_pixels(tail[off:off + nbytes], n, fmt)))
+        off += nbytes
+    if off != len(tail):
+        raise PayloadError(f"WINDOW_DATA has {len(tail) - off} bytes after its last window")
+    return out
+
+
+def decode_reply(frame: Frame, expect: int | None = None) -> dict:
+    """Fields of a reply frame as a dict (plus ``echo``/``windows``/``pixels`` tails).
+
+    An ERROR frame raises the matching :class:`~gyrostar.protocol.errors.FirmwareError`;
+    a reply of another type than ``expect`` | REPLY_FLAG, or a malformed payload, raises
+    :class:`~gyrostar.protocol.errors.PayloadError`.
+    """
+    if frame.type == MsgType.ERROR:
+        fmt, names = REPLY_LAYOUT[MsgType.ERROR]
+        if len(frame.payload) != struct.calcsize("<" + fmt):
+            raise PayloadError(f"ERROR reply of {len(frame.payload)} bytes")
+        err = dict(zip(names, _struct((fmt, names)).unpack(frame.payload)))
+        raise error_for(err["code"], err["request_type"], err["detail"])
+    if not frame.type & REPLY_FLAG:
+        raise PayloadError(f"frame type 0x{frame.type:02X} is a request, not a reply")
+    try:
+        msg_type = MsgType(frame.type & ~REPLY_FLAG)
+    except ValueError:
+        raise PayloadError(f"unknown reply type 0x{frame.type:02X}") from None
+    if expect is not None and msg_type != expect:
+        raise PayloadError(f"expected a {MsgType(expect).name} reply, got {msg_type.name}")
+    fmt, names = REPLY_LAYOUT[msg_type]
+    st = _struct((fmt, names))
+    if len(frame.payload) < st.size:
+        raise PayloadError(f"{msg_type.name} reply of {len(frame.payload)} bytes, fixed part is {st.size}")
+    fields = dict(zip(names, st.unpack_from(frame.payload)))
+    tail = frame.payload[st.size:]
+    if msg_type == MsgType.PING:
+        fields["echo"] = bytes(tail)
+    elif msg_type == MsgType.WINDOW_DATA:
+        fields["windows"] = _decode_windows(fields, tail)
+    elif msg_type == MsgType.FULL_FRAME:
+        n, fmt_px = fields["count"], fields["pixel_format"]
+        if len(tail) != pixel_bytes(n, fmt_px):
+            raise PayloadError(f"FULL_FRAME: {n} pixels in {len(tail)} bytes")
+        fields["pixels"] = decode_pixels(tail, n, fmt_px)
+    elif tail:
+        raise PayloadError(f"{msg_type.name} reply has {len(tail)} unexpected trailing bytes")
+    return fields
+
+
+def encode_reply(msg_type: int, tail: bytes = b"", **fields) -> bytes:
+    """Payload of a reply (for emulators and tests): the fixed fields then ``tail``."""
+    msg_type = MsgType(msg_type)
+    fmt, names = REPLY_LAYOUT[msg_type]
+    values = [int(fields.get(n, 0)) for n in names]
+    missing = [n for n in names if n not in fields and not n.startswith("reserved")]
+    if missing:
+        raise ProtocolUsageError(f"{msg_type.name} reply needs field(s) {missing}")
+    return _struct((fmt, names)).pack(*values) + bytes(tail)
+
+
+def encode_windows_tail(windows: list[WindowPixels], pixel_format: int) -> bytes:
+    """WINDOW_DATA tail for a list of windows (for emulators and tests)."""
+    out = bytearray()
+    for w in windows:
+        out += _WIN_HEADER.pack(w.window_id, len(w.pixels), w.sum)
+        out += encode_pixels(w.pixels, pixel_format)
+    return bytes(out)
+
+
+def spans_pixel_count(spans) -> int:
+    """Number of pixels covered by an N×4 span array."""
+    arr = np.asarray(spans, dtype=np.int64).reshape(-1, 4)
+    return int((arr[:, 3] - arr[:, 2]).sum())
+
+
+def decode_request(frame: Frame) -> dict:
+    """Fields of a request frame (for emulators and tests), plus ``tail`` bytes.
+
+    SET_WINDOWS adds ``spans`` (N×4 int32) when the tail is a whole number of spans.
+    """
+    try:
+        msg_type = MsgType(frame.type)
+    except ValueError:
+        raise PayloadError(f"unknown request type 0x{frame.type:02X}") from None
+    if msg_type not in REQUEST_LAYOUT:
+        raise PayloadError(f"{msg_type.name} is reply-only")
+    st = _struct(REQUEST_LAYOUT[msg_type])
+    if len(frame.payload) < st.size:
+        raise PayloadError(f"{msg_type.name} request of {len(frame.payload)} bytes, fixed part is {st.size}")
+    fields = dict(zip(REQUEST_LAYOUT[msg_type][1], st.unpack_from(frame.payload)))
+    fields["tail"] = bytes(frame.payload[st.size:])
+    if msg_type == MsgType.SET_WINDOWS and len(fields["tail"]) % _SPAN.size == 0:
+        fields["spans"] = decode_spans(fields["tail"])
+    return fields
