@@ -26,4 +26,4 @@ def runs_dir() -> Path:
 def repo_root() -> Path | None:
     """The source checkout this package was installed from (editable), if any."""
     here = Path(__file__).resolve().parent.parent
-    return here if (here / "firmware").is_dir() and (here / "driver").is_dir() else None
+    return here if (here / "pyproject.toml").is_file() and (here / "driver").is_dir() else None
