@@ -1,0 +1,163 @@
+"""The calibration TOML the driver loads: schema (``gyrostar.config`` dataclasses), writer, loader.
+
+One file holds one table per calibration; each ``gyrostar calibrate NAME`` replaces its
+own table and keeps the others, so a field campaign builds up one file::
+
+    [gyro_static]   bias (rad/s), ARW (rad/√s), bias instability (rad/s), RRW (rad/s/√s)
+    [gyro_scale]    ω_true = correction · (ω_meas − bias); scale factor errors (ppm)
+    [dark]          dark-current FITS path, read noise (DN), hot pixels [[column, row], …]
+    [camera]        focal length, principal point (px), Brown–Conrady k1 k2 k3 p1 p2
+    [alignment]     q_gyro_to_camera [x, y, z, w] (maps gyro-frame vectors to the camera
+                    frame), time_offset_s (add to gyro timestamps to get camera time)
+
+Written with ``tomli-w``; read back with :func:`gyrostar.config.load`, which rejects
+unknown or ill-typed keys.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .. import config
+from ..errors import ConfigError
+
+Vec3 = tuple[float, float, float]
+Mat3 = tuple[Vec3, Vec3, Vec3]
+
+
+@dataclass
+class GyroStaticCal:
+    """Static gyro log: per-axis bias and IEEE 952 noise terms (SI units, gyro axes)."""
+
+    bias_rps: Vec3
+    arw_rad_per_sqrt_s: Vec3
+    bias_instability_rps: Vec3
+    rrw_rps_per_sqrt_s: Vec3
+    quantization_rad: Vec3 = (0.0, 0.0, 0.0)
+    duration_s: float = 0.0
+    temperature_c: float | None = None
+    bias_temp_coeff_rps_per_c: Vec3 | None = None
+
+
+@dataclass
+class GyroScaleCal:
+    """Scale factor and misalignment: ``ω_true = correction @ (ω_meas − bias_rps)``.
+
+    ``sensitivity`` is the inverse of ``correction`` (``ω_meas = sensitivity @ ω_true + b``);
+    its diagonal minus one, in ppm, is ``scale_factor_ppm``."""
+
+    correction: Mat3
+    sensitivity: Mat3
+    bias_rps: Vec3
+    scale_factor_ppm: Vec3
+    method: str = "rate-table"
+
+    def validate(self) -> None:
+        for row in self.correction:
+            if any(abs(v) > 2.0 for v in row):
+                raise ValueError("correction matrix entries above 2 are not a gyro calibration")
+
+
+@dataclass
+class DarkCal:
+    """Dark frames: map file (FITS, DN/s per pixel), read noise, hot pixels (column, row)."""
+
+    fits: str
+    read_noise_dn: float
+    dark_current_median_dn_per_s: float
+    offset_median_dn: float
+    hot_pixels: list[tuple[int, int]] = field(default_factory=list)
+    temperature_c: float | None = None
+
+
+@dataclass
+class CameraCal:
+    """Intrinsics in pixels; Brown–Conrady on normalised coordinates (x = X/Z, y = Y/Z)."""
+
+    focal_length_px: float
+    principal_point_px: tuple[float, float]
+    k1: float = 0.0
+    k2: float = 0.0
+    k3: float = 0.0
+    p1: float = 0.0
+    p2: float = 0.0
+    image_size_px: tuple[int, int] = (1024, 1024)
+    residual_rms_px: float = 0.0
+
+    def validate(self) -> None:
+        if not self.focal_length_px > 0:
+            raise ValueError("focal_length_px must be positive")
+
+
+@dataclass
+class AlignmentCal:
+    """Gyro → camera rotation ([x, y, z, w], vector part first) and clock offset (s)."""
+
+    q_gyro_to_camera: tuple[float, float, float, float]
+    time_offset_s: float
+    residual_rms_arcsec: float = 0.0
+
+    def validate(self) -> None:
+        n = sum(v * v for v in self.q_gyro_to_camera) ** 0.5
+        if abs(n - 1.0) > 1e-6:
+            raise ValueError(f"q_gyro_to_camera must be a unit quaternion (norm {n:.9f})")
+
+
+@dataclass
+class Meta:
+    """Provenance: when each table was last written and from what."""
+
+    updated: dict[str, str] = field(default_factory=dict)
+    source: dict[str, str] = field(default_factory=dict)
+
+
+@dataclass
+class Calibration:
+    """Root of the calibration TOML; every table is optional."""
+
+    meta: Meta = field(default_factory=Meta)
+    gyro_static: GyroStaticCal | None = None
+    gyro_scale: GyroScaleCal | None = None
+    dark: DarkCal | None = None
+    camera: CameraCal | None = None
+    alignment: AlignmentCal | None = None
+
+
+SECTIONS = {"gyro_static": GyroStaticCal, "gyro_scale": GyroScaleCal, "dark": DarkCal,
+            "camera": CameraCal, "alignment": AlignmentCal}
+
+
+def load(path: str | Path) -> Calibration:
+    """Read and validate a calibration TOML (``ConfigError`` on any bad key or type)."""
+    return config.load(path, Calibration)
+
+
+def write_section(path: str | Path, section: str, value, source: str) -> Calibration:
+    """Replace table ``section`` of the calibration file at ``path`` (created if absent),
+    keeping the others. The merged result is validated before the file is replaced, and
+    the file is written to a temporary name first, so a failure loses nothing."""
+    import tomli_w
+
+    if section not in SECTIONS or not isinstance(value, SECTIONS[section]):
+        raise ConfigError(f"unknown calibration section {section!r} or wrong value type")
+    path = Path(path)
+    raw: dict = {}
+    if path.exists():
+        try:
+            raw = tomllib.loads(path.read_text())
+        except tomllib.TOMLDecodeError as exc:
+            raise ConfigError(f"existing calibration file {path} is not valid TOML: {exc}") from exc
+        config.from_dict(raw, Calibration, source=str(path))
+    raw[section] = config.to_dict(value)
+    meta = raw.setdefault("meta", {})
+    meta.setdefault("updated", {})[section] = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
+    meta.setdefault("source", {})[section] = source
+    cal = config.from_dict(raw, Calibration, source=str(path))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_bytes(tomli_w.dumps(raw).encode())
+    tmp.replace(path)
+    return cal

@@ -1,0 +1,141 @@
+"""What every calibration command shares: its common arguments, the report folder, the
+parameter table (value, truth, error) and its emission as JSON / human text."""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import ConfigError
+
+
+def add_common_args(parser, input_help: str) -> None:
+    """``INPUT``/``--simulate``/``--seed``/``--toml``/``--report``/``--json`` for one command."""
+    from ..cli.main import add_json
+
+    parser.add_argument("input", nargs="?", type=Path, help=input_help)
+    parser.add_argument("--simulate", action="store_true",
+                        help="generate simulated data with known truth and calibrate on it")
+    parser.add_argument("--seed", type=int, default=1, help="random seed for --simulate (default 1)")
+    parser.add_argument("--live", action="store_true", help="record from the connected device")
+    parser.add_argument("--toml", type=Path, default=None,
+                        help="calibration TOML to update (default: calibration.toml in the report folder)")
+    parser.add_argument("--report", type=Path, default=None,
+                        help="report folder for plots and products (default: runs/calibrate/NAME-TIME)")
+    parser.add_argument("--no-plots", action="store_true", help="skip the report plots")
+    add_json(parser)
+
+
+def check_source(args) -> str:
+    """Which data source the arguments ask for: 'simulate', 'live' or 'file'."""
+    chosen = [bool(args.simulate), bool(args.live), args.input is not None]
+    if sum(chosen) != 1:
+        raise ConfigError("give exactly one of: an input file, --live, or --simulate")
+    if args.input is not None and not Path(args.input).exists():
+        raise ConfigError(f"input file {args.input} does not exist")
+    return "simulate" if args.simulate else "live" if args.live else "file"
+
+
+def report_dir(args, name: str) -> Path:
+    """The report folder (created): ``--report`` or ``runs/calibrate/NAME-YYYYmmddTHHMMSS``."""
+    from ..paths import runs_dir
+
+    if args.report is not None:
+        path = Path(args.report)
+    else:
+        stamp = _dt.datetime.now(_dt.UTC).strftime("%Y%m%dT%H%M%S")
+        path = runs_dir() / "calibrate" / f"{name}-{stamp}"
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+@dataclass
+class ParamTable:
+    """Estimated parameters in report order: name -> {value, unit, truth?, error?}."""
+
+    rows: dict = field(default_factory=dict)
+
+    def add(self, name: str, value, unit: str, truth=None, error=None) -> None:
+        """Record one parameter; ``error`` defaults to ``value − truth`` when truth is given."""
+        row = {"value": _plain(value), "unit": unit}
+        if truth is not None:
+            row["truth"] = _plain(truth)
+            row["error"] = _plain(np.asarray(value, float) - np.asarray(truth, float) if error is None else error)
+        self.rows[name] = row
+
+    def human(self, title: str) -> str:
+        lines = [f"[bold]{title}[/bold]", f"{'parameter':<34} {'value':>30} {'truth':>30} {'error':>26}"]
+        for name, row in self.rows.items():
+            lines.append(f"{name:<34} {_fmt(row['value']):>30} {_fmt(row.get('truth', '')):>30} "
+                         f"{_fmt(row.get('error', '')):>26}  {row['unit']}")
+        return "\n".join(lines)
+
+
+def _plain(v):
+    a = np.asarray(v)
+    return a.item() if a.ndim == 0 else a.tolist()
+
+
+def _fmt(v) -> str:
+    if isinstance(v, str):
+        return v
+    a = np.atleast_1d(np.asarray(v, float))
+    return " ".join(f"{x:.6g}" for x in a.ravel())
+
+
+def finish(args, name: str, table: ParamTable, extra: dict, folder: Path, checks: dict | None = None) -> int:
+    """Emit the result (JSON object / human table), save ``result.json`` in the report
+    folder, and return the exit code: 1 if any acceptance check (simulated runs) failed."""
+    from ..cli.output import emit
+
+    result = {"calibration": name, "parameters": table.rows, **extra, "report": str(folder)}
+    if checks:
+        result["acceptance"] = checks
+    (folder / "result.json").write_text(json.dumps(_json_safe(result), indent=2))
+    human = table.human(f"gyrostar calibrate {name}")
+    if checks:
+        human += "\n" + "\n".join(f"  {'PASS' if c['pass'] else 'FAIL'}  {k}: {c['value']:.4g} "
+                                  f"(limit {c['limit']:.4g} {c['unit']})" for k, c in checks.items())
+    human += f"\nreport: {folder}"
+    emit(args, result, human)
+    return 0 if not checks or all(c["pass"] for c in checks.values()) else 1
+
+
+def check(value: float, limit: float, unit: str) -> dict:
+    """One acceptance criterion: |value| ≤ limit."""
+    return {"value": float(abs(value)), "limit": float(limit), "unit": unit, "pass": bool(abs(value) <= limit)}
+
+
+def _json_safe(obj):
+    if isinstance(obj, dict):
+        return {str(k): _json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_json_safe(v) for v in obj]
+    if hasattr(obj, "tolist"):
+        return obj.tolist()
+    if isinstance(obj, float) and not np.isfinite(obj):
+        return None
+    return obj
+
+
+def new_figure(*args, **kwargs):
+    """A matplotlib figure on the Agg backend (no display needed)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt.subplots(*args, **kwargs)
+
+
+def save_figure(fig, path: Path) -> Path:
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
