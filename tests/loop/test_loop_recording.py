@@ -8,7 +8,6 @@ import time
 
 import numpy as np
 import pytest
-
 from gyrostar.errors import ConfigError, DeviceError
 from gyrostar.recording import logfile as lf
 from gyrostar.recording import taps

@@ -1,0 +1,67 @@
+"""Run figures from output records and simulator truth (numpy, after the run).
+
+Errors follow :mod:`gyrostar.attitude`: ``δθ = 2 vec(q_est ⊗ q_true⁻¹)`` in body axes;
+x and y are cross-boresight, z is roll. "1σ cross-boresight" is the per-axis RMS over
+both cross-boresight axes, ``sqrt(mean((δθx² + δθy²) / 2))``, over samples in TRACK mode
+with a valid attitude.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..loop.record import FLAG_ATTITUDE_VALID, MODE_NAMES, MODE_TRACK
+
+ARCSEC = 180.0 / np.pi * 3600.0
+
+
+def quat_error_angles_many(q_est: np.ndarray, q_true: np.ndarray) -> np.ndarray:
+    """δθ (n, 3) rad for arrays of quaternions [x, y, z, w] (vectorised attitude.quat_error_angles)."""
+    p = q_true * np.array([-1.0, -1.0, -1.0, 1.0])
+    q = q_est
+    x = p[:, 3] * q[:, 0] + q[:, 3] * p[:, 0] - (q[:, 1] * p[:, 2] - q[:, 2] * p[:, 1])
+    y = p[:, 3] * q[:, 1] + q[:, 3] * p[:, 1] - (q[:, 2] * p[:, 0] - q[:, 0] * p[:, 2])
+    z = p[:, 3] * q[:, 2] + q[:, 3] * p[:, 2] - (q[:, 0] * p[:, 1] - q[:, 1] * p[:, 0])
+    w = q[:, 3] * p[:, 3] - (q[:, 0] * p[:, 0] + q[:, 1] * p[:, 1] + q[:, 2] * p[:, 2])
+    s = np.where(w >= 0.0, 2.0, -2.0)
+    return np.stack([s * x, s * y, s * z], axis=1)
+
+
+def attitude_errors(out: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """δθ (n, 3) rad of each output against the truth at the same sample."""
+    return quat_error_angles_many(out["q"], truth["q"])
+
+
+def tracking_mask(out: np.ndarray) -> np.ndarray:
+    return (out["mode"] == MODE_TRACK) & ((out["flags"] & FLAG_ATTITUDE_VALID) != 0)
+
+
+def summarize(out: np.ndarray, truth: np.ndarray | None, gyro_hz: float) -> dict:
+    """The figures every run reports (see ``gyrostar run --json``)."""
+    res: dict = {}
+    n = len(out)
+    res["outputs"] = n
+    res["mode_seconds"] = {name: round(float(np.count_nonzero(out["mode"] == m)) / gyro_hz, 3)
+                           for m, name in MODE_NAMES.items()}
+    lat = out["latency_us"][np.isfinite(out["latency_us"])].astype(float)
+    res["latency_p50_ms"] = float(np.percentile(lat, 50)) / 1e3 if lat.size else None
+    res["latency_p99_ms"] = float(np.percentile(lat, 99)) / 1e3 if lat.size else None
+    res["latency_max_ms"] = float(lat.max()) / 1e3 if lat.size else None
+    if truth is not None and len(truth) == n and n:
+        err = attitude_errors(out, truth) * ARCSEC
+        m = tracking_mask(out)
+        if np.any(m):
+            e = err[m]
+            res["attitude_error_arcsec_1sigma"] = float(np.sqrt(np.mean((e[:, 0] ** 2 + e[:, 1] ** 2) / 2)))
+            res["attitude_error_arcsec_x_y_roll_rms"] = [float(v) for v in np.sqrt(np.mean(e ** 2, axis=0))]
+            res["attitude_error_arcsec_cross_p99"] = float(np.percentile(np.hypot(e[:, 0], e[:, 1]), 99))
+        else:
+            res["attitude_error_arcsec_1sigma"] = None
+        coast = out["mode"] != MODE_TRACK
+        valid = (out["flags"] & FLAG_ATTITUDE_VALID) != 0
+        if np.any(coast & valid):
+            res["coast_error_arcsec_max"] = float(np.max(np.hypot(err[coast & valid, 0], err[coast & valid, 1])))
+        b_err = (out["bias"][-1] - truth["bias"][-1]) * 180 / np.pi
+        res["bias_error_dps_final"] = [float(v) for v in b_err]
+        res["track_fraction"] = float(np.mean(m))
+    return res

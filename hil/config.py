@@ -1,0 +1,197 @@
+"""Flatsat and scenario configuration (TOML, validated by :mod:`gyrostar.config`).
+
+A **flatsat config** says which devices the loop talks to and where outputs go::
+
+    [head]    kind = "emulator" | "firmware-host" | "serial";  url, baudrate, program
+    [gyro]    kind = "emulator" | "i2c" | "spi";  model, i2c_bus, i2c_address, spi_bus, ...
+    [sim]     preset, gyro_errors, catalog, mag_limit        (simulated devices only)
+    [loop]    rates, window size, identification settings
+    [outputs] record, udp, udp_host, udp_port
+    [realtime] sched_fifo_priority, cpus
+    calibration = "path/to/calibration.toml"                  (optional)
+
+A **scenario** says what the sky and the platform do: the start boresight, a body-rate
+profile as piecewise-linear segments, star-less stretches (eclipse) and injected faults.
+The built-in files are ``hil/flatsat.toml`` and ``hil/scenarios/*.toml``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Literal
+
+from .. import config as gconfig
+from ..errors import ConfigError
+
+
+@dataclass
+class HeadConfig:
+    kind: Literal["emulator", "firmware-host", "serial"] = "emulator"
+    url: str = ""                      # serial: /dev/ttyACM0, socket://host:port, rfc2217://...
+    baudrate: int = 921600
+    program: str = ""                  # firmware-host: path (default firmware/build/host/gyrostar-head)
+    timeout_s: float = 0.05            # per request
+    retries: int = 2
+    exposure_ms: float = 10.0
+    gain: int = 1
+
+    def validate(self):
+        if self.kind == "serial" and not self.url:
+            raise ValueError("head.kind = 'serial' needs head.url (e.g. /dev/ttyACM0)")
+        if not 0 < self.exposure_ms <= 100:
+            raise ValueError(f"head.exposure_ms {self.exposure_ms} outside (0, 100]")
+
+
+@dataclass
+class GyroConfig:
+    kind: Literal["emulator", "i2c", "spi"] = "emulator"
+    model: Literal["bmi088", "l3gd20h"] = "bmi088"
+    i2c_bus: int = 1
+    i2c_address: int = 0x68
+    spi_bus: int = 0
+    spi_device: int = 0
+    spi_hz: int = 5_000_000
+    range_dps: int = 500
+    odr_hz: int = 400
+    fifo_watermark: int = 1
+
+    def validate(self):
+        if self.odr_hz not in (100, 200, 400, 800, 1000, 2000):
+            raise ValueError(f"gyro.odr_hz {self.odr_hz} is not an ODR the drivers support")
+        if not 0x03 <= self.i2c_address <= 0x77:
+            raise ValueError(f"gyro.i2c_address 0x{self.i2c_address:x} outside 0x03..0x77")
+
+
+@dataclass
+class SimConfig:
+    preset: Literal["xing2012", "qian2015"] = "xing2012"
+    gyro_errors: str = "bmi088"        # a gyro error parameter set of gyrostar.mocks
+    catalog: Literal["hip2", "gaia"] = "hip2"
+    mag_limit: float = 6.5
+
+
+@dataclass
+class LoopConfig:
+    frame_hz: float = 100.0
+    window_k: int = 6                  # k×k squares along the predicted trajectory (paper 000)
+    max_stars: int = 12                # stars tracked at once (≤ gyrostar.loop.record.MAX_STARS)
+    min_stars: int = 2                 # fewer valid stars than this → COAST
+    coast_timeout_s: float = 5.0       # COAST longer than this → ACQUIRE (full frame)
+    acquire_every_s: float = 0.5       # full-frame attempt period while ACQUIRE
+    mag_limit: float = 6.5             # stars predicted into the field brighter than this are tracked
+
+    def validate(self):
+        from ..loop.record import MAX_STARS
+
+        if not 1 <= self.max_stars <= MAX_STARS:
+            raise ValueError(f"loop.max_stars {self.max_stars} outside 1..{MAX_STARS}")
+        if self.window_k < 3 or self.window_k > 32:
+            raise ValueError(f"loop.window_k {self.window_k} outside 3..32")
+
+
+@dataclass
+class OutputsConfig:
+    record: bool = True
+    udp: bool = False
+    udp_host: str = "127.0.0.1"
+    udp_port: int = 47800
+
+
+@dataclass
+class RealtimeConfig:
+    sched_fifo_priority: int = 0       # 0 = do not ask for SCHED_FIFO
+    cpus: list[int] = field(default_factory=list)
+
+
+@dataclass
+class FlatsatConfig:
+    name: str = "simulated flatsat"
+    head: HeadConfig = field(default_factory=HeadConfig)
+    gyro: GyroConfig = field(default_factory=GyroConfig)
+    sim: SimConfig = field(default_factory=SimConfig)
+    loop: LoopConfig = field(default_factory=LoopConfig)
+    outputs: OutputsConfig = field(default_factory=OutputsConfig)
+    realtime: RealtimeConfig = field(default_factory=RealtimeConfig)
+    calibration: str = ""
+
+    @property
+    def simulated(self) -> bool:
+        """True when both devices are simulated (emulator or firmware host on a pty)."""
+        return self.head.kind in ("emulator", "firmware-host") and self.gyro.kind == "emulator"
+
+
+@dataclass
+class Segment:
+    """Body rate ramps linearly from ``rate_dps`` to ``rate_end_dps`` over ``seconds``."""
+
+    seconds: float
+    rate_dps: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rate_end_dps: tuple[float, float, float] | None = None
+
+    def validate(self):
+        if self.seconds <= 0:
+            raise ValueError(f"segment length {self.seconds} s must be positive")
+
+
+@dataclass
+class Fault:
+    """A fault injected at ``at_s`` for ``seconds``: see hil/scenarios/README in FLATSAT.md."""
+
+    kind: Literal["head-disconnect", "link-corruption", "gyro-fifo-overrun", "gyro-nack"]
+    at_s: float
+    seconds: float = 0.0
+    rate: float = 0.01                 # link-corruption: fraction of bytes corrupted
+
+
+@dataclass
+class Scenario:
+    name: str
+    description: str = ""
+    duration_s: float = 30.0
+    ra_deg: float = 80.0
+    dec_deg: float = 20.0
+    roll_deg: float = 0.0
+    segments: list[Segment] = field(default_factory=list)
+    eclipse: list[tuple[float, float]] = field(default_factory=list)   # [start_s, end_s] with no stars
+    faults: list[Fault] = field(default_factory=list)
+    preset: str = ""                   # overrides sim.preset when set
+    gyro_errors: str = ""              # overrides sim.gyro_errors when set
+    mag_limit: float = 0.0             # overrides sim.mag_limit when > 0
+    # acceptance of the scenario in the HIL suite
+    max_error_arcsec_1sigma: float = 0.0   # 0 = not checked
+    min_track_fraction: float = 0.0
+    must_reacquire: bool = False
+
+    def validate(self):
+        if self.duration_s <= 0:
+            raise ValueError("duration_s must be positive")
+        for a, b in self.eclipse:
+            if not 0 <= a < b:
+                raise ValueError(f"eclipse [{a}, {b}] must satisfy 0 <= start < end")
+
+
+def default_config_path() -> Path:
+    return Path(str(resources.files("gyrostar.hil") / "flatsat.toml"))
+
+
+def load_flatsat(path: str | Path | None = None) -> FlatsatConfig:
+    """The flatsat config at ``path`` (default: the built-in simulated flatsat)."""
+    return gconfig.load(path or default_config_path(), FlatsatConfig)
+
+
+def scenario_names() -> list[str]:
+    folder = resources.files("gyrostar.hil") / "scenarios"
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
+
+
+def load_scenario(name_or_path: str | None) -> Scenario:
+    """A built-in scenario by name (default ``demo``) or a scenario TOML file by path."""
+    name_or_path = name_or_path or "demo"
+    path = Path(name_or_path)
+    if not path.suffix == ".toml":
+        path = Path(str(resources.files("gyrostar.hil") / "scenarios" / f"{name_or_path}.toml"))
+        if not path.exists():
+            raise ConfigError(f"unknown scenario '{name_or_path}' (built-in: {', '.join(scenario_names())})")
+    return gconfig.load(path, Scenario)

@@ -1,0 +1,99 @@
+"""Output record layout, UDP stream, scheduler, flatsat config."""
+
+import socket
+
+import numpy as np
+import pytest
+from gyrostar.errors import ConfigError
+from gyrostar.hil import config as hc
+from gyrostar.loop import record, sinks
+from gyrostar.loop.scheduler import PeriodicScheduler, realtime_setup
+
+
+def test_record_layout_is_fixed_little_endian():
+    dt = record.OUTPUT_DTYPE
+    assert dt.itemsize == 8 + 4 + 1 + 1 + 2 + 32 + 24 + 24 + 288 + 64 + 128 + 4 == 580
+    assert dt.fields["q"][1] == 16 and dt.fields["cov"][1] == 96
+    r = record.empty(2)
+    assert (r["star_id"] == -1).all()
+    assert record.flag_names(record.FLAG_ATTITUDE_VALID | record.FLAG_GYRO_GAP) == ["attitude_valid", "gyro_gap"]
+
+
+def test_udp_stream_roundtrip_on_loopback():
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.bind(("127.0.0.1", 0))
+    rx.settimeout(2.0)
+    sink = sinks.UdpSink("127.0.0.1", rx.getsockname()[1])
+    recs = record.empty(300)                      # > one datagram's worth: split
+    recs["seq"] = np.arange(300)
+    recs["q"][:, 3] = 1.0
+    sink.put(recs)
+    got = []
+    while sum(len(g) for g in got) < 300:
+        got.append(sinks.decode_datagram(rx.recv(65535)))
+    assert len(got) == 3 and len(got[0]) == sinks.UDP_MAX_RECORDS
+    back = np.concatenate(got)
+    assert back.tobytes() == recs.tobytes()
+    sink.close()
+    rx.close()
+
+
+def test_udp_refuses_remote_and_bad_datagrams():
+    with pytest.raises(ConfigError):
+        sinks.UdpSink("10.0.0.1", 5000)
+    with pytest.raises(ConfigError):
+        sinks.decode_datagram(b"GYS1\x00\x00")
+    with pytest.raises(ConfigError):
+        sinks.decode_datagram(b"XXXX" + bytes(4))
+
+
+class FakeTime:
+    def __init__(self):
+        self.t = 100.0
+
+    def now(self):
+        return self.t
+
+    def sleep(self, dt):
+        self.t += dt
+
+
+def test_scheduler_is_drift_free_and_counts_overruns():
+    ft = FakeTime()
+    s = PeriodicScheduler(0.0025, clock=ft.now, sleep=ft.sleep, spin_s=0.0)
+    s.start()
+    wakes = []
+    for k in range(400):
+        wakes.append(s.wait())
+        ft.t += 0.0011 if k != 100 else 0.0080     # one step takes 8 ms: misses 3 deadlines
+        s.done()
+    assert s.overruns == 3
+    wakes = np.array(wakes) - 100.0
+    # every wake-up is on the grid t0 + k·period: no accumulated drift
+    k = np.round(wakes / 0.0025)
+    assert np.max(np.abs(wakes - k * 0.0025)) < 1e-9
+    assert k[-1] == 399 + 3
+
+
+def test_realtime_setup_reports_instead_of_failing():
+    st = realtime_setup(priority=10, cpus=[0])
+    assert st.sched_fifo or any("SCHED_FIFO" in n for n in st.notes)
+
+
+def test_flatsat_config_and_scenarios_validate(tmp_path):
+    cfg = hc.load_flatsat()
+    assert cfg.simulated and cfg.gyro.odr_hz == 400
+    names = hc.scenario_names()
+    for need in ("demo", "sim1", "sim2", "sim3", "sim4", "slew10", "eclipse", "disconnect",
+                 "fifo_overrun", "corruption"):
+        assert need in names
+        hc.load_scenario(need)
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[gyro]\nkind = "usb"\n')
+    with pytest.raises(ConfigError, match="gyro.kind"):
+        hc.load_flatsat(bad)
+    bad.write_text('[head]\nkind = "serial"\n')
+    with pytest.raises(ConfigError, match="head.url"):
+        hc.load_flatsat(bad)
+    with pytest.raises(ConfigError, match="unknown scenario"):
+        hc.load_scenario("nope")
