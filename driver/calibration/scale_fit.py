@@ -125,22 +125,7 @@ def attitude_increments(q: np.ndarray) -> np.ndarray:
 
 
 def integrate_gyro(t_gyro: np.ndarray, gyro: np.ndarray, t_edges: np.ndarray) -> np.ndarray:
-    """∫ω dt (rad) between consecutive ``t_edges`` of the piecewise-linear gyro signal
-    sampled at ``t_gyro`` (s). Returns (len(t_edges) − 1, 3)."""
-    t_gyro = np.asarray(t_gyro, float)
-    gyro = np.asarray(gyro, float)
-    if np.any(np.diff(t_gyro) <= 0):
-        raise ConfigError("gyro timestamps must increase strictly")
-    if t_edges[0] < t_gyro[0] or t_edges[-1] > t_gyro[-1]:
-        raise ConfigError("camera epochs fall outside the gyro record")
-    cum = np.concatenate([np.zeros((1, 3)),
-                          np.cumsum(0.5 * (gyro[1:] + gyro[:-1]) * np.diff(t_gyro)[:, None], axis=0)])
-    at = np.column_stack([_integral_at(t_gyro, gyro, cum[:, i], i, t_edges) for i in range(3)])
-    return np.diff(at, axis=0)
+    """∫ω dt (rad) between consecutive ``t_edges`` (see :mod:`gyrostar.calibration.gyro_integral`)."""
+    from .gyro_integral import GyroIntegral
 
-
-def _integral_at(t, w, cum, axis, te):
-    j = np.clip(np.searchsorted(t, te, side="right") - 1, 0, len(t) - 2)
-    h = te - t[j]
-    slope = (w[j + 1, axis] - w[j, axis]) / (t[j + 1] - t[j])
-    return cum[j] + w[j, axis] * h + 0.5 * slope * h * h
+    return np.diff(GyroIntegral(t_gyro, gyro).at(np.asarray(t_edges, float)), axis=0)
