@@ -1,0 +1,262 @@
+"""Centroiding of one window given as row spans and its pixel values.
+
+``spans`` (n, 4) int32 ``[window_id, row, col_start, col_stop)`` (see ``windows``) and
+``values`` (Σ widths,) the window's pixel values (DN or e⁻) concatenated in span order —
+the layout a windowed readout returns. Positions are (u, v) = (column, row), pixel
+centres integer.
+
+* ``window_background`` — sigma-clipped background level and noise of the window (biased
+  high when the star fills most of a small window: prefer ``background_far``).
+* ``background_far`` — background from the window's pixels farther than r_min px from the
+  predicted trajectory (average it over frames: the level is stable).
+* ``cog`` — centre of gravity of background-subtracted pixels above a threshold
+  (the paper's centroid method on an extraction window).
+* ``iwcog`` — iteratively weighted CoG with a weight shaped like the smeared spot: a
+  Gaussian (σ_w px) swept along the predicted trajectory offsets. It down-weights the
+  pixels that carry mostly noise, so it is less noisy than ``cog`` at low SNR; since the
+  weight is re-centred on the estimate until it converges, it stays unbiased for a
+  spot symmetric about its centre.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def window_background(values, n_sigma_clip):
+    """(background, noise σ) of a window: median/MAD, then mean/std of the clipped pixels."""
+    n = values.shape[0]
+    if n == 0:
+        return np.nan, np.nan
+    v = np.sort(values.astype(np.float64))
+    med = v[n // 2] if n % 2 == 1 else 0.5 * (v[n // 2 - 1] + v[n // 2])
+    dev = np.sort(np.abs(v - med))
+    mad = dev[n // 2]
+    sig = 1.4826 * mad
+    if sig <= 0.0:
+        sig = 1.0
+    # clip the star's pixels (one-sided: the star only adds light) and re-estimate
+    for _ in range(2):
+        s = 0.0
+        s2 = 0.0
+        c = 0
+        for i in range(n):
+            if v[i] < med + n_sigma_clip * sig:
+                s += v[i]
+                s2 += v[i] * v[i]
+                c += 1
+        if c < 3:
+            break
+        mean = s / c
+        var = s2 / c - mean * mean
+        med = mean
+        sig = np.sqrt(max(var, 1e-12))
+    return med, sig
+
+
+@njit(cache=True)
+def background_far(spans, values, traj_uv, r_min):
+    """(mean, std, count) of the pixels farther than ``r_min`` px from the polyline ``traj_uv``."""
+    s = 0.0
+    s2 = 0.0
+    c = 0
+    k = 0
+    r2 = r_min * r_min
+    m = traj_uv.shape[0]
+    for i in range(spans.shape[0]):
+        row = spans[i, 1]
+        for col in range(spans[i, 2], spans[i, 3]):
+            val = values[k]
+            k += 1
+            dmin = 1e30
+            for j in range(max(1, m - 1)):
+                ax, ay = traj_uv[j, 0], traj_uv[j, 1]
+                bx, by = traj_uv[min(j + 1, m - 1), 0], traj_uv[min(j + 1, m - 1), 1]
+                ex, ey = bx - ax, by - ay
+                ll = ex * ex + ey * ey
+                t = 0.0 if ll == 0.0 else ((col - ax) * ex + (row - ay) * ey) / ll
+                t = min(1.0, max(0.0, t))
+                dx = col - ax - t * ex
+                dy = row - ay - t * ey
+                dmin = min(dmin, dx * dx + dy * dy)
+            if dmin >= r2:
+                s += val
+                s2 += val * val
+                c += 1
+    if c == 0:
+        return np.nan, np.nan, 0
+    mean = s / c
+    return mean, np.sqrt(max(s2 / c - mean * mean, 0.0)), c
+
+
+@njit(cache=True)
+def cog(spans, values, bg, thresh):
+    """Thresholded centre of gravity: (u, v, flux, npix) over pixels with value > ``thresh``.
+
+    Weights are ``value − bg``. ``npix`` = 0 (and u, v = nan) when nothing is above the
+    threshold.
+    """
+    su = 0.0
+    sv = 0.0
+    sw = 0.0
+    npix = 0
+    k = 0
+    for i in range(spans.shape[0]):
+        row = spans[i, 1]
+        for col in range(spans[i, 2], spans[i, 3]):
+            val = values[k]
+            k += 1
+            if val > thresh:
+                w = val - bg
+                su += w * col
+                sv += w * row
+                sw += w
+                npix += 1
+    if npix == 0 or sw <= 0.0:
+        return np.nan, np.nan, 0.0, 0
+    return su / sw, sv / sw, sw, npix
+
+
+@njit(cache=True)
+def iwcog(spans, values, bg, u0, v0, offsets, sigma_w, n_iter, tol):
+    """Trajectory-weighted iterative CoG: (u, v, flux, iterations).
+
+    ``offsets`` (m, 2) are the predicted trajectory points during the exposure relative
+    to their mean (px, (du, dv)); the weight of a pixel at p is
+    ``mean_j exp(−|p − c − o_j|² / 2σ_w²)`` around the current estimate c, starting at
+    (u0, v0). Background-subtracted values (negative ones included, so noise averages
+    out) are weighted; iteration stops when the step is below ``tol`` px.
+    """
+    m = offsets.shape[0]
+    inv = 0.5 / (sigma_w * sigma_w)
+    u, v = u0, v0
+    flux = 0.0
+    it = 0
+    for it in range(1, n_iter + 1):
+        su = 0.0
+        sv = 0.0
+        sw = 0.0
+        sf = 0.0
+        swt = 0.0
+        k = 0
+        for i in range(spans.shape[0]):
+            row = spans[i, 1]
+            for col in range(spans[i, 2], spans[i, 3]):
+                val = values[k] - bg
+                k += 1
+                wt = 0.0
+                for j in range(m):
+                    du = col - u - offsets[j, 0]
+                    dv = row - v - offsets[j, 1]
+                    wt += np.exp(-(du * du + dv * dv) * inv)
+                wt /= m
+                su += wt * val * col
+                sv += wt * val * row
+                sw += wt * val
+                sf += wt * val
+                swt += wt * wt
+        if sw <= 0.0:
+            return np.nan, np.nan, 0.0, it
+        nu = su / sw
+        nv = sv / sw
+        flux = sf / swt if swt > 0.0 else 0.0
+        step = abs(nu - u) + abs(nv - v)
+        u, v = nu, nv
+        if step < tol:
+            break
+    return u, v, flux, it
+
+
+@njit(cache=True)
+def window_spans_of(spans, window_id):
+    """(first span index, stop span index, first value index) of ``window_id`` in ``spans``."""
+    start = -1
+    stop = -1
+    off = 0
+    first_val = 0
+    for i in range(spans.shape[0]):
+        if spans[i, 0] == window_id:
+            if start < 0:
+                start = i
+                first_val = off
+            stop = i + 1
+        off += spans[i, 3] - spans[i, 2]
+    if start < 0:
+        return 0, 0, 0
+    return start, stop, first_val
+
+
+@njit(cache=True)
+def centroid_variance(spans, values, bg, thresh, u, v, sigma_bg, e_per_dn):
+    """Per-axis variance (px²) of a thresholded CoG by error propagation.
+
+    Each used pixel contributes ``(p − c)² σ_p² / flux²`` with
+    ``σ_p² = σ_bg² + (value − bg)/e_per_dn`` (read/background noise plus shot noise, DN²).
+    Returns (var_u, var_v); inf when no pixel is used. It ignores the randomness of
+    which pixels pass the threshold and the background error, so at low SNR it is a lower
+    bound (measured ~2.5× low for a 2000 e⁻ spot in 10 e⁻ read noise).
+    """
+    fu = 0.0
+    fv = 0.0
+    sw = 0.0
+    k = 0
+    for i in range(spans.shape[0]):
+        row = spans[i, 1]
+        for col in range(spans[i, 2], spans[i, 3]):
+            val = values[k]
+            k += 1
+            if val > thresh:
+                w = val - bg
+                var_p = sigma_bg * sigma_bg + max(w, 0.0) / e_per_dn
+                fu += (col - u) ** 2 * var_p
+                fv += (row - v) ** 2 * var_p
+                sw += w
+    if sw <= 0.0:
+        return np.inf, np.inf
+    return fu / (sw * sw), fv / (sw * sw)
+
+
+@njit(cache=True)
+def iwcog_variance(spans, values, bg, u, v, offsets, sigma_w, sigma_bg, e_per_dn):
+    """Per-axis variance (px²) of ``iwcog`` at its solution (u, v), by error propagation.
+
+    At convergence the estimate solves g(c) = Σ w_i(c) (I_i − bg)(p_i − c) = 0, so
+    var_c = Σ w_i² σ_i² (p_i − c)² / (∂g/∂c)², with ∂g/∂c including the weights' own
+    dependence on c, and σ_i² as in ``centroid_variance``. Returns (var_u, var_v).
+    """
+    m = offsets.shape[0]
+    s2 = sigma_w * sigma_w
+    inv = 0.5 / s2
+    fu = 0.0
+    fv = 0.0
+    du_sum = 0.0
+    dv_sum = 0.0
+    k = 0
+    for i in range(spans.shape[0]):
+        row = spans[i, 1]
+        for col in range(spans[i, 2], spans[i, 3]):
+            val = values[k] - bg
+            k += 1
+            wt = 0.0
+            dwu = 0.0
+            dwv = 0.0
+            for j in range(m):
+                du = col - u - offsets[j, 0]
+                dv = row - v - offsets[j, 1]
+                e = np.exp(-(du * du + dv * dv) * inv)
+                wt += e
+                dwu += e * du / s2
+                dwv += e * dv / s2
+            wt /= m
+            dwu /= m
+            dwv /= m
+            var_p = sigma_bg * sigma_bg + max(val, 0.0) / e_per_dn
+            fu += wt * wt * var_p * (col - u) ** 2
+            fv += wt * wt * var_p * (row - v) ** 2
+            du_sum += val * (wt - (col - u) * dwu)
+            dv_sum += val * (wt - (row - v) * dwv)
+    if du_sum <= 0.0 or dv_sum <= 0.0:
+        return np.inf, np.inf
+    return fu / (du_sum * du_sum), fv / (dv_sum * dv_sum)
