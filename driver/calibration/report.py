@@ -68,23 +68,19 @@ class ParamTable:
         self.rows[name] = row
 
     def human(self, title: str) -> str:
-        lines = [f"[bold]{title}[/bold]", f"{'parameter':<34} {'value':>30} {'truth':>30} {'error':>26}"]
+        lines = [f"[bold]{title}[/bold]", f"{'parameter':<28} {'value':>14} {'truth':>14} {'error':>12}  unit"]
         for name, row in self.rows.items():
-            lines.append(f"{name:<34} {_fmt(row['value']):>30} {_fmt(row.get('truth', '')):>30} "
-                         f"{_fmt(row.get('error', '')):>26}  {row['unit']}")
+            vals = [np.atleast_1d(np.asarray(row.get(k, np.nan), float)).ravel() for k in ("value", "truth", "error")]
+            for i in range(len(vals[0])):
+                label = name if len(vals[0]) == 1 else f"{name}[{i}]"
+                cells = [f"{v[i]:.7g}" if i < len(v) and np.isfinite(v[i]) else "" for v in vals]
+                lines.append(f"{label:<28} {cells[0]:>14} {cells[1]:>14} {cells[2]:>12}  {row['unit']}")
         return "\n".join(lines)
 
 
 def _plain(v):
     a = np.asarray(v)
     return a.item() if a.ndim == 0 else a.tolist()
-
-
-def _fmt(v) -> str:
-    if isinstance(v, str):
-        return v
-    a = np.atleast_1d(np.asarray(v, float))
-    return " ".join(f"{x:.6g}" for x in a.ravel())
 
 
 def finish(args, name: str, table: ParamTable, extra: dict, folder: Path, checks: dict | None = None) -> int:

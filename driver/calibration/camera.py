@@ -1,0 +1,207 @@
+"""``gyrostar calibrate camera``: focal length, principal point and Brown–Conrady
+distortion from many identified star fields (robust bundle least squares,
+:mod:`gyrostar.calibration.intrinsics`).
+
+Input: a table of identified stars, ``.npz`` with ``field`` (N,), ``uv`` (N, 2) px
+[column, row] and ``ref`` (N, 3) ICRS unit vectors, or a CSV with the header
+``field,u,v,ra_deg,dec_deg``. The nominal camera (start point, sensor size) is a
+``gyrostar.camera`` preset (``--camera``).
+
+``--simulate``: random attitudes; the simulator's sky (:class:`gyrostar.mocks.sky.Sky`,
+Hipparcos to ``--mag-limit``) seen through the preset camera with an injected principal
+point offset and distortion gives the true centroids; Gaussian centroid noise
+(``--centroid-noise`` px per axis, the error of a centroid averaged over a few frames)
+and a fraction of misidentified stars (``--outliers``) are added.
+
+Principal-point precision: in a narrow field a principal-point shift is almost a pure
+attitude change; it is seen only through the second-order perspective term (≈ δc·x²,
+x ≤ tan(half field)), so σ(c) ≈ σ_centroid / (⟨x²⟩ √N_stars): 0.5 px needs tens of
+thousands of star observations at 0.02 px for the 8.8° xing2012 camera.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+HELP = "camera intrinsics (focal length, principal point, Brown-Conrady) from identified star fields"
+
+TRUE_OFFSETS = {"dcx_px": 3.2, "dcy_px": -2.1, "f_scale": 1.0008, "k1": 0.3, "k2": 4.0, "k3": 0.0,
+                "p1": 2.0e-4, "p2": -1.0e-4}
+
+
+def configure(parser) -> None:
+    from .report import add_common_args
+
+    add_common_args(parser, "identified-star table (.npz: field, uv, ref; or .csv: field,u,v,ra_deg,dec_deg)")
+    parser.add_argument("--camera", default="xing2012", help="nominal camera preset (default xing2012)")
+    parser.add_argument("--fields", type=int, default=2000, help="--simulate: star fields (default 2000)")
+    parser.add_argument("--mag-limit", type=float, default=7.0, help="--simulate: faintest V used (default 7.0)")
+    parser.add_argument("--centroid-noise", type=float, default=0.02,
+                        help="--simulate: centroid noise per axis, px (default 0.02)")
+    parser.add_argument("--outliers", type=float, default=0.01,
+                        help="--simulate: fraction of misidentified stars (default 0.01)")
+
+
+def load_table(path):
+    """StarFields from an .npz or CSV table (see the module docstring)."""
+    from pathlib import Path
+
+    from ..attitude import radec_to_vec
+    from ..errors import ConfigError
+    from .intrinsics import StarFields
+
+    path = Path(path)
+    if path.suffix == ".npz":
+        with np.load(path) as z:
+            missing = {"field", "uv", "ref"} - set(z.files)
+            if missing:
+                raise ConfigError(f"{path} lacks arrays {sorted(missing)}")
+            return StarFields(z["field"], z["uv"], z["ref"])
+    if path.suffix == ".csv":
+        try:
+            tab = np.genfromtxt(path, delimiter=",", names=True)
+        except ValueError as exc:
+            raise ConfigError(f"{path}: not a readable CSV table: {exc}") from exc
+        need = ("field", "u", "v", "ra_deg", "dec_deg")
+        if tab.dtype.names is None or any(n not in tab.dtype.names for n in need):
+            raise ConfigError(f"{path}: CSV header must hold {','.join(need)}")
+        ref = np.array([radec_to_vec(np.radians(a), np.radians(d)) for a, d in zip(tab["ra_deg"], tab["dec_deg"])])
+        return StarFields(tab["field"].astype(np.int64), np.column_stack([tab["u"], tab["v"]]), ref)
+    raise ConfigError(f"camera input must be .npz or .csv, got {path}")
+
+
+def true_camera(nominal):
+    """The simulated 'real' camera: the nominal preset with :data:`TRUE_OFFSETS` applied."""
+    import dataclasses
+
+    o = TRUE_OFFSETS
+    return dataclasses.replace(nominal, focal_length_m=nominal.focal_length_m * o["f_scale"],
+                               cx_px=nominal.cx_px + o["dcx_px"], cy_px=nominal.cy_px + o["dcy_px"],
+                               k1=o["k1"], k2=o["k2"], k3=o["k3"], p1=o["p1"], p2=o["p2"])
+
+
+def simulate(args, nominal):
+    """Identified-star table from the simulator's sky through the 'real' camera."""
+    import dataclasses
+
+    from ..catalog import load_catalog
+    from ..cli.output import progress
+    from ..mocks.sim_preset import load_preset
+    from ..mocks.sky import Sky
+    from ..mocks.trajectory import random_attitudes
+    from .intrinsics import StarFields
+
+    rng = np.random.default_rng(args.seed)
+    cam = true_camera(nominal)
+    preset = dataclasses.replace(load_preset(args.camera), camera=cam)
+    cat = load_catalog("hip2", args.mag_limit)
+    sky = Sky(cat, preset, seed=args.seed)
+    index = {int(i): k for k, i in enumerate(cat.ids)}
+    fl, uvl, refl = [], [], []
+    qs = random_attitudes(args.fields, rng)
+    with progress(args, "simulating star fields", args.fields) as step:
+        for q in qs:
+            truth = sky.expose(q).truth
+            sel = truth.in_field & (truth.vmag <= args.mag_limit)
+            if sel.sum() >= 4:
+                fl.append(np.full(sel.sum(), len(fl)))
+                uvl.append(truth.uv[sel])
+                refl.append(cat.vectors[[index[int(i)] for i in truth.ids[sel]]])
+            step()
+    field, uv_true, ref = np.concatenate(fl), np.concatenate(uvl), np.concatenate(refl)
+    uv = uv_true + args.centroid_noise * rng.standard_normal(uv_true.shape)
+    bad = rng.random(len(uv)) < args.outliers  # misidentified: the centroid of another star
+    uv[bad] = uv[rng.permutation(np.flatnonzero(bad))] if bad.sum() > 1 else uv[bad]
+    bad &= np.linalg.norm(uv - uv_true, axis=1) > 1.0
+    return StarFields(field, uv, ref), cam, bad
+
+
+def run(args) -> int:
+    from ..camera import camera_preset
+    from . import calfile, report
+    from .intrinsics import NAMES, fit, model_difference
+
+    source = report.check_source(args)
+    nominal = camera_preset(args.camera)
+    w, h = nominal.width_px, nominal.height_px
+    truth_cam, bad = None, None
+    if source == "simulate":
+        stars, truth_cam, bad = simulate(args, nominal)
+    elif source == "live":
+        from ..errors import NotAvailableError
+
+        raise NotAvailableError("camera calibration reads identified-star tables; record one with the tracker "
+                                "(gyrostar run --record) and pass it as INPUT")
+    else:
+        stars = load_table(args.input)
+    theta0 = nominal.as_array()[:8]
+    r_corner = np.hypot(w, h) / 2.0 / nominal.focal_length_px
+    f0 = nominal.focal_length_px
+    before = fit(stars, theta0, free=np.zeros(8, bool), reject_k=5.0)
+    res = fit(stars, theta0, prior_k2=1.0 / (f0 * r_corner**5), prior_k3=1.0 / (f0 * r_corner**7))
+    params = res.params(w, h)
+    folder = report.report_dir(args, "camera")
+    table = report.ParamTable()
+    tvec = truth_cam.as_array() if truth_cam is not None else None
+    units = {"f_px": "px", "cx_px": "px", "cy_px": "px"}
+    for i, name in enumerate(NAMES):
+        table.add(name, res.theta[i], units.get(name, "1"), None if tvec is None else tvec[i])
+        table.rows[name]["sigma"] = float(res.sigma[i])
+    extra = {"n_fields": int(stars.n_fields), "n_stars": int(len(stars.field)),
+             "n_rejected": int((~res.inlier).sum()), "residual_rms_before_px": before.rms_px,
+             "residual_rms_after_px": res.rms_px}
+    checks = None
+    if tvec is not None:
+        rms, mx = model_difference(params, tvec)
+        table.add("distortion_residual_px", rms, "px (RMS over the sensor vs the true model)", 0.0)
+        table.add("distortion_residual_max_px", mx, "px", 0.0)
+        table.add("focal_length_rel_error", (res.theta[0] - tvec[0]) / tvec[0], "1", 0.0)
+        extra["outliers_injected"] = int(bad.sum())
+        extra["outliers_caught"] = int((bad & ~res.inlier).sum())
+        checks = {"focal_length_rel": report.check((res.theta[0] - tvec[0]) / tvec[0], 5e-4, "(0.05 %)"),
+                  "principal_point_px": report.check(np.hypot(*(res.theta[1:3] - tvec[1:3])), 0.5, "px"),
+                  "distortion_residual_px": report.check(rms, 0.05, "px")}
+    cal = calfile.CameraCal(float(res.theta[0]), (float(res.theta[1]), float(res.theta[2])),
+                            *[float(v) for v in res.theta[3:8]], image_size_px=(int(w), int(h)),
+                            residual_rms_px=res.rms_px)
+    toml = args.toml or folder / "calibration.toml"
+    calfile.write_section(toml, "camera", cal, source=str(args.input) if args.input else source)
+    extra["toml"] = str(toml)
+    if not args.no_plots:
+        _plots(folder, stars, before, res, w, h)
+    return report.finish(args, "camera", table, extra, folder, checks)
+
+
+def _plots(folder, stars, before, after, w, h) -> None:
+    from .report import new_figure, save_figure
+
+    fig, axes = new_figure(1, 2, figsize=(12, 5.5))
+    for ax, fitres, title in ((axes[0], before, "nominal model"), (axes[1], after, "calibrated model")):
+        nb = 16
+        iu = np.clip((stars.uv[:, 0] / w * nb).astype(int), 0, nb - 1)
+        iv = np.clip((stars.uv[:, 1] / h * nb).astype(int), 0, nb - 1)
+        cell = iv * nb + iu
+        ok = fitres.inlier
+        cnt = np.bincount(cell[ok], minlength=nb * nb)
+        mu = np.bincount(cell[ok], fitres.residuals[ok, 0], nb * nb) / np.maximum(cnt, 1)
+        mv = np.bincount(cell[ok], fitres.residuals[ok, 1], nb * nb) / np.maximum(cnt, 1)
+        cu = (np.arange(nb * nb) % nb + 0.5) * w / nb
+        cv = (np.arange(nb * nb) // nb + 0.5) * h / nb
+        scale = max(np.hypot(mu, mv).max(), 1e-6)
+        ax.quiver(cu, cv, mu, mv, angles="xy", scale_units="xy", scale=scale / (w / nb))
+        ax.set_xlim(0, w)
+        ax.set_ylim(h, 0)
+        ax.set_aspect("equal")
+        ax.set_title(f"{title}: RMS {fitres.rms_px:.3f} px/axis (arrow = cell = {scale:.3g} px)")
+        ax.set_xlabel("column (px)")
+        ax.set_ylabel("row (px)")
+    save_figure(fig, folder / "camera_residuals.png")
+    fig, ax = new_figure(figsize=(7, 5))
+    r = np.hypot(stars.uv[:, 0] - after.theta[1], stars.uv[:, 1] - after.theta[2])
+    for fitres, label in ((before, "nominal"), (after, "calibrated")):
+        radial = ((stars.uv - after.theta[1:3]) * fitres.residuals).sum(axis=1) / np.maximum(r, 1e-9)
+        ax.plot(r[fitres.inlier], radial[fitres.inlier], ".", ms=1, alpha=0.4, label=label)
+    ax.set_xlabel("radius from principal point (px)")
+    ax.set_ylabel("radial residual (px)")
+    ax.legend()
+    save_figure(fig, folder / "camera_radial_residuals.png")
