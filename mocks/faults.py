@@ -1,0 +1,181 @@
+"""Fault injection for every mock: register buses (I2C/SPI) and byte streams (serial links).
+
+:class:`FaultyBus` wraps anything with smbus2.SMBus's or spidev.SpiDev's methods (a fake or a
+real bus) and, per transaction, can:
+
+* NACK — raise ``OSError(errno.EREMOTEIO)`` (121) for the next ``n`` transactions or while a
+  simulated-time window is open (the transaction never reaches the device);
+* stick — reads return a constant byte (a stuck SDA/MISO line) without reaching the device;
+* corrupt — flip a random bit in read bytes with a given probability;
+* disconnect — every transaction fails with ``OSError(errno.ENODEV)`` until reconnected.
+
+:class:`ByteFaults` mutates a byte stream on its way out: corrupt (bit flips), drop
+(bytes vanish), delay (each write is held back by a fixed delay plus uniform jitter);
+``disconnected`` makes the writer stop. Counters record what was injected.
+"""
+
+from __future__ import annotations
+
+import errno
+import random
+import threading
+import time
+
+TRANSACTIONS = ("read_byte", "write_byte", "read_byte_data", "write_byte_data", "read_word_data",
+                "read_i2c_block_data", "write_i2c_block_data", "i2c_rdwr", "xfer2", "xfer", "readbytes")
+READS = {"read_byte", "read_byte_data", "read_word_data", "read_i2c_block_data", "xfer2", "xfer", "readbytes"}
+
+
+class FaultyBus:
+    def __init__(self, inner, clock=None, seed: int = 0):
+        self.inner = inner
+        self.clock = clock
+        self.rng = random.Random(seed)
+        self.lock = threading.Lock()
+        self._nack_left = 0
+        self._nack_windows: list[tuple[float, float]] = []
+        self.stuck_byte: int | None = None
+        self.corrupt_p = 0.0
+        self.disconnected = False
+        self.injected = {"nack": 0, "stuck": 0, "corrupt": 0, "disconnect": 0}
+
+    # --- arming -------------------------------------------------------------------------------
+    def nack_next(self, n: int) -> None:
+        """NACK the next ``n`` transactions."""
+        self._nack_left = n
+
+    def nack_between(self, t0: float, t1: float) -> None:
+        """NACK every transaction while ``t0 <= clock.now() < t1`` (simulated seconds)."""
+        self._nack_windows.append((t0, t1))
+
+    def stick(self, value: int | None = 0xFF) -> None:
+        """Reads return ``value`` for every byte (``None`` to release)."""
+        self.stuck_byte = value
+
+    def corrupt(self, p: float) -> None:
+        self.corrupt_p = p
+
+    def disconnect(self) -> None:
+        self.disconnected = True
+
+    def reconnect(self) -> None:
+        self.disconnected = False
+
+    # --- interception -------------------------------------------------------------------------
+    def _gate(self) -> None:
+        with self.lock:
+            if self.disconnected:
+                self.injected["disconnect"] += 1
+                raise OSError(errno.ENODEV, "No such device (bus disconnected)")
+            if self._nack_left > 0:
+                self._nack_left -= 1
+                self.injected["nack"] += 1
+                raise OSError(errno.EREMOTEIO, "Remote I/O error (NACK)")
+            if self._nack_windows and self.clock is not None:
+                now = self.clock.now()
+                if any(t0 <= now < t1 for t0, t1 in self._nack_windows):
+                    self.injected["nack"] += 1
+                    raise OSError(errno.EREMOTEIO, "Remote I/O error (NACK)")
+
+    def _mangle(self, data):
+        if self.corrupt_p <= 0:
+            return data
+        out = list(data)
+        for i in range(len(out)):
+            if self.rng.random() < self.corrupt_p:
+                out[i] ^= 1 << self.rng.randrange(8)
+                self.injected["corrupt"] += 1
+        return out
+
+    def __getattr__(self, name):
+        attr = getattr(self.inner, name)
+        if name not in TRANSACTIONS:
+            return attr
+
+        def call(*args, **kwargs):
+            self._gate()
+            if self.stuck_byte is not None and name in READS | {"i2c_rdwr"}:
+                self.injected["stuck"] += 1
+                return self._stuck(name, args)
+            result = attr(*args, **kwargs)
+            if name == "i2c_rdwr" and self.corrupt_p > 0:
+                import ctypes
+
+                for msg in args:
+                    if msg.flags & 1:
+                        data = bytes(self._mangle(bytes(msg)))
+                        ctypes.memmove(msg.buf, data, msg.len)
+                return result
+            if name in ("read_byte", "read_byte_data"):
+                return self._mangle([result])[0]
+            if name in READS and result is not None:
+                if name in ("xfer2", "xfer"):
+                    return result[:1] + self._mangle(result[1:])
+                return self._mangle(result)
+            return result
+
+        return call
+
+    def _stuck(self, name, args):
+        v = self.stuck_byte
+        if name in ("read_byte", "read_byte_data"):
+            return v
+        if name == "read_word_data":
+            return v | v << 8
+        if name == "read_i2c_block_data":
+            return [v] * args[2]
+        if name in ("xfer2", "xfer"):
+            return [v] * len(args[0])
+        if name == "readbytes":
+            return [v] * args[0]
+        import ctypes
+
+        for msg in args:  # i2c_rdwr
+            if msg.flags & 1:
+                ctypes.memmove(msg.buf, bytes([v]) * msg.len, msg.len)
+        return None
+
+
+class ByteFaults:
+    """Mutations applied to bytes on a link, deterministic for a given seed."""
+
+    def __init__(self, seed: int = 0, corrupt_p: float = 0.0, drop_p: float = 0.0, delay_s: float = 0.0,
+                 jitter_s: float = 0.0):
+        self.rng = random.Random(seed)
+        self.corrupt_p = corrupt_p
+        self.drop_p = drop_p
+        self.delay_s = delay_s
+        self.jitter_s = jitter_s
+        self.disconnected = False
+        self.injected = {"corrupt": 0, "drop": 0, "delayed": 0}
+
+    def mangle(self, data: bytes) -> bytes:
+        if self.corrupt_p <= 0 and self.drop_p <= 0:
+            return data
+        out = bytearray()
+        for b in data:
+            if self.drop_p and self.rng.random() < self.drop_p:
+                self.injected["drop"] += 1
+                continue
+            if self.corrupt_p and self.rng.random() < self.corrupt_p:
+                b ^= 1 << self.rng.randrange(8)
+                self.injected["corrupt"] += 1
+            out.append(b)
+        return bytes(out)
+
+    def delay(self) -> float:
+        d = self.delay_s + (self.rng.random() * self.jitter_s if self.jitter_s else 0.0)
+        if d > 0:
+            self.injected["delayed"] += 1
+        return d
+
+    def write_through(self, write, data: bytes, sleep=time.sleep) -> None:
+        """Apply delay, then corruption/drops, then ``write`` the result (nothing if disconnected)."""
+        if self.disconnected:
+            return
+        d = self.delay()
+        if d > 0:
+            sleep(d)
+        data = self.mangle(data)
+        if data:
+            write(data)

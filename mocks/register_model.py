@@ -1,0 +1,34 @@
+"""What every gyro register model shares: its truth log and its wiring onto fake buses.
+
+A model keeps ``_popped`` (arrays of the global sample indices delivered through its FIFO
+data port, in order) and ``_t_next``/``_k_next``/``period`` (time and index of the next sample).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .fake_smbus import FakeSMBus
+from .fake_spidev import FakeSpiDev
+
+
+class RegisterModelBase:
+    default_address = 0x68
+
+    def popped_indices(self) -> np.ndarray:
+        """Global indices of every frame delivered through the FIFO data port, in order."""
+        return np.concatenate(self._popped) if self._popped else np.zeros(0, np.int64)
+
+    def sample_time(self, k) -> np.ndarray:
+        """Model time (s) of global sample(s) ``k``, valid since the last ODR (re)start."""
+        return self._t_next - self.period * (self._k_next - np.asarray(k, np.float64))
+
+    def smbus(self, address: int | None = None, bus_hz: float | None = 400e3) -> FakeSMBus:
+        """A fresh fake I2C adapter (smbus2.SMBus methods) with this model at ``address``."""
+        return FakeSMBus({address or self.default_address: self}, clock=self.clock, bus_hz=bus_hz)
+
+    def spidev(self, speed_hz: int = 5_000_000) -> FakeSpiDev:
+        """A fake spidev device (SPI mode 3) with this model on its chip select."""
+        spi = FakeSpiDev(self, clock=self.clock)
+        spi.max_speed_hz = speed_hz
+        return spi

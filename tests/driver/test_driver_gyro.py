@@ -1,0 +1,261 @@
+"""BMI088 / L3GD20H drivers against the register models, over I2C and SPI, with faults.
+
+Truth: the models log the global index of every frame they deliver; the rate source gives
+the value behind every index; the model gives every sample's time. The driver's output
+must match frame for frame, with jumps only at flagged gaps.
+"""
+
+import errno
+import math
+
+import numpy as np
+import pytest
+from gyrostar.clock import SimulatedClock
+from gyrostar.errors import DeviceError
+from gyrostar.gyro import FLAG_GAP, FLAG_SAT_X, FLAG_SATURATED, Bmi088Gyro, GyroSamples, L3gd20hGyro, bmi088, l3gd20h
+from gyrostar.mocks.bmi088_model import Bmi088GyroModel
+from gyrostar.mocks.fake_rates import ProfileRates
+from gyrostar.mocks.faults import FaultyBus
+from gyrostar.mocks.l3gd20h_model import L3gd20hModel
+from gyrostar.transport import I2CBus, I2CRegisters, SPIRegisters
+
+DPS = math.pi / 180
+
+
+def make(part="bmi088", wire="i2c", source=None, ppm=1500.0, faults=True):
+    clock = SimulatedClock(50.0)
+    source = source or ProfileRates(seed=7)
+    if part == "bmi088":
+        model = Bmi088GyroModel(clock, source, odr_error_ppm=ppm)
+    else:
+        model = L3gd20hModel(clock, source, odr_error_ppm=ppm)
+    raw = model.smbus() if wire == "i2c" else model.spidev()
+    bus = FaultyBus(raw, clock=clock) if faults else raw
+    if wire == "i2c":
+        regs = I2CRegisters(I2CBus(bus, name="i2c-sim"), 0x68 if part == "bmi088" else 0x6A,
+                            autoincrement=0 if part == "bmi088" else l3gd20h.I2C_AUTOINCREMENT)
+    else:
+        regs = bmi088.spi_registers(bus) if part == "bmi088" else l3gd20h.spi_registers(bus)
+    cls = Bmi088Gyro if part == "bmi088" else L3gd20hGyro
+    return clock, model, bus, cls(regs, clock=clock)
+
+
+def run(clock, model, gyro, out, seconds, step=0.025, events=True, rng=None):
+    t_end = clock.now() + seconds
+    while clock.now() < t_end:
+        clock.advance(step if rng is None else rng.uniform(0.6 * step, 1.4 * step))
+        gyro.read(out, event_time=model.watermark_time() if events else None)
+
+
+def check_against_truth(model, out, source, scale_rad, t_tol):
+    t, idx, rate, flags = out.view()
+    truth = model.popped_indices()
+    assert len(truth) == out.n, "every delivered frame appears once in the output"
+    offset = truth - idx
+    assert np.all(offset == offset[0]), "driver frame indices follow the model's truth indices"
+    steps = np.diff(truth)
+    gap_rows = np.flatnonzero(steps != 1) + 1
+    assert np.all(steps >= 1), "no duplicated or reordered frames"
+    assert set(gap_rows) == set(np.flatnonzero(flags & FLAG_GAP)), "every jump is flagged, nothing else"
+    assert out.gap_frames == int(np.sum(steps - 1)), "gap size counted exactly"
+    expect = source(truth, model.sample_time(truth))
+    assert np.max(np.abs(rate - expect)) <= 0.5 * scale_rad * 1.0001
+    settled = slice(min(100, out.n - 1), None)
+    assert np.max(np.abs(t[settled] - model.sample_time(truth)[settled])) < t_tol
+
+
+@pytest.mark.parametrize("wire", ["i2c", "spi"])
+def test_bmi088_configure_and_stream(wire):
+    clock, model, bus, gyro = make("bmi088", wire)
+    t0 = clock.now()
+    gyro.configure(odr_hz=400, range_dps=500, watermark=10)
+    assert clock.now() - t0 >= 0.030, "soft reset wait goes through the clock"
+    assert model.regs[0x0F] == 0x02 and model.regs[0x10] == 0x83  # bit 7 reads back set
+    assert model.regs[0x3D] == 10 and model.regs[0x15] == 0x40 and model.regs[0x18] == 0x04
+    gyro.start()
+    assert model.regs[0x3E] == 0x80  # stream mode, XYZ
+    out = GyroSamples(4000)
+    run(clock, model, gyro, out, 5.0)
+    assert out.n > 1900 and out.gaps == 0
+    check_against_truth(model, out, ProfileRates(seed=7), 500 / 32768 * DPS, t_tol=2e-6)
+    assert abs(gyro.timebase.period - model.period) < 1e-9  # ODR error (1500 ppm) tracked
+
+
+def test_bmi088_burst_reads_use_i2c_rdwr_and_no_spi_dummy():
+    clock, model, bus, gyro = make("bmi088", "i2c", faults=False)
+    calls = []
+    real = bus.i2c_rdwr
+    bus.i2c_rdwr = lambda *m: (calls.append([(x.flags, x.len) for x in m]), real(*m))[1]
+    gyro.configure(400, 2000, 20)
+    gyro.start()
+    clock.advance(0.1)
+    gyro.read(GyroSamples(200))
+    assert calls and calls[-1] == [(0, 1), (1, 6 * 40)]  # one write (reg) + one 240-byte read
+    clock, model, spi, gyro = make("bmi088", "spi", faults=False)
+    sent = []
+    real_x = spi.xfer2
+    spi.xfer2 = lambda v, *a: (sent.append(list(v)), real_x(v, *a))[1]
+    gyro.configure(400, 2000, 20)
+    gyro.start()
+    clock.advance(0.1)
+    gyro.read(GyroSamples(200))
+    assert sent[-1][0] == 0x3F | 0x80 and len(sent[-1]) == 1 + 6 * 40  # no dummy byte on the gyro die
+
+
+@pytest.mark.parametrize("wire", ["i2c", "spi"])
+def test_bmi088_overrun_gap_counted_and_flagged(wire):
+    clock, model, bus, gyro = make("bmi088", wire)
+    gyro.configure(400, 2000, 10)
+    gyro.start()
+    out = GyroSamples(6000)
+    run(clock, model, gyro, out, 2.0)
+    clock.advance(0.6)  # 240 frames produced, FIFO holds 100: overrun
+    run(clock, model, gyro, out, 2.0)
+    assert out.gaps >= 1 and out.gap_frames >= 140
+    check_against_truth(model, out, ProfileRates(seed=7), 2000 / 32768 * DPS, t_tol=2e-6)
+
+
+@pytest.mark.parametrize("wire", ["i2c", "spi"])
+def test_bmi088_nack_burst_loses_nothing(wire):
+    clock, model, bus, gyro = make("bmi088", wire)
+    gyro.configure(400, 2000, 10)
+    gyro.start()
+    out = GyroSamples(8000)
+    run(clock, model, gyro, out, 1.0)
+    # Short NACK burst: reads fail (DeviceError), the FIFO keeps the frames, nothing is lost.
+    bus.nack_next(6)
+    failures = 0
+    for _ in range(10):
+        clock.advance(0.025)
+        n_before, first_rows = out.n, out.rate[: out.n].copy()
+        try:
+            gyro.read(out, event_time=model.watermark_time())
+        except DeviceError as exc:
+            failures += 1
+            assert "NACK" in str(exc) and "0x68" in str(exc) or "spi" in str(exc)
+            assert exc.errno == errno.EREMOTEIO
+            assert out.n == n_before and np.array_equal(out.rate[:n_before], first_rows)
+    assert failures >= 3
+    # A long NACK window (0.5 s of simulated time): the FIFO overruns; the gap is flagged.
+    bus.nack_between(clock.now(), clock.now() + 0.5)
+    t_end = clock.now() + 2.0
+    while clock.now() < t_end:
+        clock.advance(0.025)
+        try:
+            gyro.read(out, event_time=model.watermark_time())
+        except DeviceError:
+            failures += 1
+    assert out.gaps in (1, 2)  # the overrun, and the frames the overrun clear discards
+    check_against_truth(model, out, ProfileRates(seed=7), 2000 / 32768 * DPS, t_tol=2e-6)
+
+
+def test_bmi088_poll_only_times_without_interrupt():
+    clock, model, bus, gyro = make("bmi088", "i2c")
+    gyro.configure(400, 2000, 10)
+    gyro.start()
+    out = GyroSamples(8000)
+    steps = np.random.default_rng(3).uniform(0.018, 0.032, 400)
+    for dt in steps:
+        clock.advance(dt)
+        gyro.read(out)
+    truth = model.popped_indices()
+    err = out.t[1000:out.n] - model.sample_time(truth)[1000:]
+    assert np.max(np.abs(err)) < 0.4 * model.period  # bounded anchors only: a fraction of a period
+
+
+def test_bmi088_saturation_flags():
+    src = ProfileRates(mean_dps=(400.0, 0.0, 0.0), amp_dps=(300.0, 10.0, 10.0), seed=2)
+    clock, model, bus, gyro = make("bmi088", "i2c", source=src)
+    gyro.configure(400, 500, 10)
+    gyro.start()
+    out = GyroSamples(2000)
+    run(clock, model, gyro, out, 2.0)
+    _, idx, rate, flags = out.view()
+    truth = model.popped_indices()
+    over = np.abs(src(truth, model.sample_time(truth))[:, 0]) >= 32767.5 * 500 / 32768 * DPS
+    assert over.any() and (~over).any()
+    assert np.array_equal((flags & FLAG_SAT_X) != 0, over)
+    assert not np.any(flags[~over] & FLAG_SATURATED)
+
+
+def test_bmi088_self_test_and_probe_errors():
+    clock, model, bus, gyro = make("bmi088", "i2c")
+    gyro.configure()
+    assert gyro.self_test() is True
+    model.bist_fail = True
+    gyro.configure()
+    assert gyro.self_test() is False
+    bus.stick(0xFF)
+    with pytest.raises(DeviceError, match="chip id 0xFF"):
+        gyro.probe()
+    bus.stick(None)
+    bus.disconnect()
+    with pytest.raises(DeviceError, match="errno 19"):
+        gyro.probe()
+    bus.reconnect()
+    gyro.probe()
+    nobody = Bmi088Gyro(I2CRegisters(I2CBus(model.smbus(0x68)), 0x69), clock=clock)
+    with pytest.raises(DeviceError, match="NACK.*0x69|0x69.*NACK"):
+        nobody.probe()
+
+
+def test_bmi088_access_during_reset_is_nacked():
+    clock, model, bus, gyro = make("bmi088", "i2c")
+    gyro.regs.write(0x14, bytes([0xB6]))
+    with pytest.raises(DeviceError, match="NACK"):
+        gyro.regs.read(0x00, 1)
+    clock.advance(0.030)
+    assert gyro.regs.read(0x00, 1)[0] == 0x0F
+
+
+def test_bmi088_rate_registers_latch_msb():
+    src = ProfileRates(mean_dps=(100.0, -50.0, 25.0), amp_dps=(0, 0, 0), bias_dps=(0, 0, 0),
+                       noise_dps_rt_hz=0.0)
+    clock, model, bus, gyro = make("bmi088", "spi", source=src)
+    gyro.configure(400, 2000, 10)
+    x, y, z = np.frombuffer(gyro.regs.read(0x02, 6), "<i2")
+    assert (x, y, z) == tuple(int(round(v * 16.384)) for v in (100.0, -50.0, 25.0))
+
+
+def test_stuck_fifo_status_is_a_device_error_and_keeps_rows():
+    clock, model, bus, gyro = make("bmi088", "i2c")
+    gyro.configure(400, 2000, 10)
+    gyro.start()
+    out = GyroSamples(2000)
+    run(clock, model, gyro, out, 0.5)
+    n = out.n
+    bus.stick(0xFF)
+    clock.advance(0.05)
+    with pytest.raises(DeviceError, match="implausible FIFO level"):
+        gyro.read(out)
+    assert out.n == n
+    bus.stick(None)
+    run(clock, model, gyro, out, 0.5)
+    check_against_truth(model, out, ProfileRates(seed=7), 2000 / 32768 * DPS, t_tol=2e-6)
+
+
+@pytest.mark.parametrize("wire", ["i2c", "spi"])
+def test_l3gd20h_same_interface(wire):
+    clock, model, bus, gyro = make("l3gd20h", wire)
+    gyro.configure(odr_hz=400, range_dps=500, watermark=8)
+    assert model.regs[0x20] == 0x8F and model.regs[0x23] == 0x90 and model.regs[0x24] == 0x40
+    gyro.start()
+    out = GyroSamples(6000)
+    rng = np.random.default_rng(5)  # polled (no interrupt line), at an irregular cadence
+    run(clock, model, gyro, out, 3.0, step=0.03, events=False, rng=rng)
+    clock.advance(0.3)  # 120 frames, FIFO has 32 levels: frames overwritten
+    run(clock, model, gyro, out, 2.0, step=0.03, events=False, rng=rng)
+    assert out.gaps == 1
+    check_against_truth(model, out, ProfileRates(seed=7), 17.5e-3 * DPS, t_tol=0.5 / 400)
+
+
+def test_bad_arguments_are_clear():
+    clock, model, bus, gyro = make("bmi088", "i2c")
+    with pytest.raises(ValueError, match="range"):
+        gyro.configure(400, 300, 10)
+    with pytest.raises(ValueError, match="ODR"):
+        gyro.configure(333, 2000, 10)
+    with pytest.raises(DeviceError, match="start"):
+        gyro.read(GyroSamples(10))
+    with pytest.raises(ValueError):
+        SPIRegisters(object()).read(0, 0)
