@@ -3,11 +3,13 @@
 Inputs are stacks of dark frames (DN) taken at several exposure times ``t_e`` (s). Per
 pixel the stack means follow ``mean(t) = offset + rate · t``; the dark current ``rate``
 (DN/s) and ``offset`` (DN) come from a per-pixel least-squares line over the exposures.
-Read noise is the temporal noise at zero exposure: the median over pixels of the
-temporal variance at each exposure (from frame-to-frame differences, which cancel any
-fixed pattern) is fitted as ``σ²(t) = σ_r² + c·t`` and ``σ_r`` is its intercept. Hot
-pixels are those whose dark current exceeds the median by more than ``k`` robust
-standard deviations (1.4826·MAD) and by at least ``min_excess`` DN/s.
+Hot pixels are those whose dark current exceeds the median by more than ``k`` robust
+standard deviations (1.4826·MAD) and is above ``hot_factor`` × the median (so the tail of
+an ordinary dark-signal non-uniformity is not called hot). Read noise is the temporal
+noise at zero exposure: the mean over the other pixels of the temporal variance at each
+exposure (from frame-to-frame differences, which cancel any fixed pattern; a mean, since
+the median of a few-frame χ² variance is biased low) is fitted as ``σ²(t) = σ_r² + c·t``
+and ``σ_r`` is its intercept (DN, still including the ADC's 1/12 DN² quantisation).
 
 Products go to a FITS file (astropy): primary HDU = dark-current map (DN/s), ``OFFSET``
 image (DN), ``TNOISE`` image (temporal σ at the shortest exposure, DN), ``HOTPIX``
@@ -62,7 +64,7 @@ def stack(frames: np.ndarray, exposure: float) -> DarkStack:
     return DarkStack(float(exposure), f.mean(axis=0), (d**2).mean(axis=0) / 2.0, int(f.shape[0]))
 
 
-def solve(stacks: list[DarkStack], k_sigma: float = 8.0, min_excess: float = 0.0) -> DarkResult:
+def solve(stacks: list[DarkStack], k_sigma: float = 8.0, hot_factor: float = 5.0) -> DarkResult:
     """Dark-current and offset maps, read noise and hot pixels from ≥ 2 exposure times."""
     stacks = sorted(stacks, key=lambda s: s.exposure)
     t = np.array([s.exposure for s in stacks])
@@ -78,13 +80,14 @@ def solve(stacks: list[DarkStack], k_sigma: float = 8.0, min_excess: float = 0.0
     sxx = (w * (t - tm) ** 2).sum()
     rate = np.tensordot(w * (t - tm), means - ym, axes=1) / sxx
     offset = ym - rate * tm
-    med_var = np.array([np.median(s.tvar) for s in stacks])
-    a = np.column_stack([np.ones_like(t), t])
-    coef, *_ = np.linalg.lstsq(a * w[:, None] ** 0.5, med_var * w**0.5, rcond=None)
-    read_noise = float(np.sqrt(max(coef[0], 0.0)))
     med = np.median(rate)
     mad = 1.4826 * np.median(np.abs(rate - med))
-    threshold = float(med + max(k_sigma * mad, min_excess))
+    threshold = float(max(med + k_sigma * mad, hot_factor * med))
+    normal = rate <= threshold
+    mean_var = np.array([s.tvar[normal].mean() for s in stacks])
+    a = np.column_stack([np.ones_like(t), t])
+    coef, *_ = np.linalg.lstsq(a * w[:, None] ** 0.5, mean_var * w**0.5, rcond=None)
+    read_noise = float(np.sqrt(max(coef[0], 0.0)))
     rows, cols = np.nonzero(rate > threshold)
     order = np.argsort(-rate[rows, cols])
     hot = np.column_stack([cols[order], rows[order]]).astype(np.int64)

@@ -1,0 +1,147 @@
+"""``gyrostar calibrate dark``: dark-current map, hot pixels and read noise from dark frames
+at several exposures (:mod:`gyrostar.calibration.dark_frames`), saved as FITS.
+
+Input: a folder of FITS dark frames (``EXPTIME`` header, s) or an ``.npz`` with
+``frames`` (M, H, W) DN and ``exposure`` (M,) s. The calibration TOML gets the FITS path,
+the read noise and the hot-pixel list (the driver masks them in centroiding; the
+firmware can be told to skip them).
+
+``--simulate``: the simulator's detector (:class:`gyrostar.mocks.sky.Sky` with an empty
+sky, lens capped) of the ``--preset`` renders ``--frames`` dark frames at each of the
+``--exposures``; truth is its fixed pattern (dark rate, hot pixels) and read noise. The
+default exposures keep hot pixels below ADC saturation (10-bit, 5 e⁻/DN).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+HELP = "dark frames at several exposures -> dark-current map, hot pixels, read noise (FITS)"
+
+
+def configure(parser) -> None:
+    from .report import add_common_args
+
+    add_common_args(parser, "folder of FITS dark frames (EXPTIME header) or .npz (frames, exposure)")
+    parser.add_argument("--preset", default="xing2012", help="--simulate: simulator preset (default xing2012)")
+    parser.add_argument("--exposures", default="0.005,0.03,0.055,0.08",
+                        help="--simulate: exposure times, s, comma separated")
+    parser.add_argument("--frames", type=int, default=8, help="--simulate: frames per exposure (default 8)")
+    parser.add_argument("--k-sigma", type=float, default=8.0,
+                        help="hot pixel: dark current above median + K robust sigma (default 8)")
+    parser.add_argument("--hot-factor", type=float, default=5.0,
+                        help="hot pixel: and above this multiple of the median dark current (default 5)")
+    parser.add_argument("--temperature", type=float, default=None, help="sensor temperature, C (recorded)")
+
+
+def simulate(args):
+    """Dark stacks rendered by the simulator, and the truth (rate DN/s map, hot mask, read noise DN)."""
+    import dataclasses
+
+    from ..catalog import StarCatalog
+    from ..cli.output import progress
+    from ..errors import ConfigError
+    from ..mocks.sim_preset import load_preset
+    from ..mocks.sky import Sky
+    from .dark_frames import stack
+
+    try:
+        exposures = [float(x) for x in args.exposures.split(",")]
+    except ValueError as exc:
+        raise ConfigError(f"--exposures must be comma-separated seconds: {exc}") from exc
+    base = load_preset(args.preset)
+    empty = StarCatalog("none", np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0), 2025.0)
+    stacks = []
+    q = np.array([0.0, 0.0, 0.0, 1.0])
+    with progress(args, "rendering dark frames", len(exposures) * args.frames) as step:
+        for e, t_exp in enumerate(exposures):
+            preset = dataclasses.replace(
+                base, detector=dataclasses.replace(base.detector, exposure_s=t_exp),
+                photometry=dataclasses.replace(base.photometry, sky_mag_arcsec2=60.0))
+            sky = Sky(empty, preset, seed=args.seed)
+            frames = []
+            for k in range(args.frames):
+                img, _ = sky.render_frame(q, frame=1000 * e + k)
+                frames.append(img)
+                step()
+            stacks.append(stack(np.stack(frames), t_exp))
+    det = base.detector
+    _, dark_e = sky.fixed_pattern
+    rate_true = dark_e.astype(np.float64) / preset.detector.exposure_s / det.gain_e_per_adu
+    hot_true = np.isclose(dark_e / preset.detector.exposure_s, det.hot_pixel_dark_e_s, rtol=1e-4)
+    return stacks, {"rate": rate_true, "hot": hot_true, "read_noise": det.read_noise_e / det.gain_e_per_adu,
+                    "offset": det.bias_adu}
+
+
+def run(args) -> int:
+    from . import calfile, report
+    from .dark_frames import load_frames, solve, write_fits
+
+    source = report.check_source(args)
+    truth = None
+    if source == "simulate":
+        stacks, truth = simulate(args)
+    elif source == "live":
+        from ..errors import NotAvailableError
+
+        raise NotAvailableError("live dark capture needs the head client (gyrostar.head) full-frame readout; "
+                                "capture FITS frames with the lens capped and pass the folder as INPUT")
+    else:
+        stacks = load_frames(args.input)
+    res = solve(stacks, k_sigma=args.k_sigma, hot_factor=args.hot_factor)
+    # ADC quantisation (1/12 DN²) is part of the measured temporal noise, not of the read noise
+    read_noise = float(np.sqrt(max(res.read_noise**2 - 1.0 / 12.0, 0.0)))
+    folder = report.report_dir(args, "dark")
+    fits_path = write_fits(folder / "dark.fits", res, args.temperature)
+    table = report.ParamTable()
+    extra = {"exposures_s": res.exposures, "frames": res.frames, "fits": str(fits_path),
+             "n_hot": int(len(res.hot))}
+    checks = None
+    if truth is None:
+        table.add("read_noise_dn", read_noise, "DN")
+        table.add("dark_current_median_dn_per_s", res.rate_median, "DN/s")
+        table.add("hot_pixels", len(res.hot), "count")
+    else:
+        normal = ~truth["hot"]
+        table.add("read_noise_dn", read_noise, "DN", truth["read_noise"])
+        table.add("dark_current_median_dn_per_s", res.rate_median, "DN/s", float(np.median(truth["rate"])))
+        map_err = float(np.sqrt(np.mean((res.rate - truth["rate"])[normal] ** 2)))
+        table.add("dark_current_map_rms_error_dn_per_s", map_err, "DN/s (normal pixels)", 0.0)
+        table.add("offset_median_dn", float(np.median(res.offset)), "DN", truth["offset"])
+        found = np.zeros_like(truth["hot"])
+        found[res.hot[:, 1], res.hot[:, 0]] = True
+        table.add("hot_pixels", int(found.sum()), "count", int(truth["hot"].sum()))
+        hot = truth["hot"]
+        rel = (res.rate[hot] - truth["rate"][hot]) / truth["rate"][hot]
+        table.add("hot_pixel_rate_rel_error_rms", float(np.sqrt(np.mean(rel**2))) if hot.any() else 0.0, "1", 0.0)
+        extra["hot_missed"] = int((truth["hot"] & ~found).sum())
+        extra["hot_false"] = int((found & ~truth["hot"]).sum())
+        checks = {"read_noise_rel": report.check(read_noise / truth["read_noise"] - 1.0, 0.05, "(5 %)"),
+                  "hot_missed": report.check(extra["hot_missed"], 0, "pixels"),
+                  "hot_false": report.check(extra["hot_false"], 0, "pixels")}
+    cal = calfile.DarkCal(str(fits_path), read_noise, res.rate_median, float(np.median(res.offset)),
+                          [(int(c), int(r)) for c, r in res.hot], args.temperature)
+    toml = args.toml or folder / "calibration.toml"
+    calfile.write_section(toml, "dark", cal, source=str(args.input) if args.input else source)
+    extra["toml"] = str(toml)
+    if not args.no_plots:
+        _plots(folder, res)
+    return report.finish(args, "dark", table, extra, folder, checks)
+
+
+def _plots(folder, res) -> None:
+    from .report import new_figure, save_figure
+
+    fig, axes = new_figure(1, 2, figsize=(12, 5))
+    lo, hi = np.percentile(res.rate, [1, 99])
+    im = axes[0].imshow(res.rate, vmin=lo, vmax=hi, cmap="magma", origin="upper")
+    axes[0].plot(res.hot[:, 0], res.hot[:, 1], "o", mfc="none", mec="cyan", ms=6, label="hot")
+    axes[0].set_title("dark current (DN/s)")
+    axes[0].legend(loc="upper right")
+    fig.colorbar(im, ax=axes[0])
+    axes[1].hist(res.rate.ravel(), bins=200, log=True)
+    axes[1].axvline(res.hot_threshold, color="r", label=f"hot threshold {res.hot_threshold:.0f} DN/s")
+    axes[1].set_xlabel("dark current (DN/s)")
+    axes[1].set_ylabel("pixels")
+    axes[1].legend()
+    save_figure(fig, folder / "dark_current.png")
