@@ -1,0 +1,125 @@
+"""Attitude multiplicative EKF (Lefferts, Markley & Shuster 1982): quaternion + gyro drift.
+
+Global state: ``q`` (4,) ICRS → body, scalar last (``gyrostar.attitude``), and the gyro
+drift ``b`` (3,) rad/s (``ω_mea = ω + b + η``). Error state (6,): ``a`` the small rotation
+with ``q_true = δq(a) ⊗ q_est`` (body axes, rad; covariance equal to that of
+``quat_error_angles``) and ``Δb = b_true − b_est``. Error dynamics
+``ȧ = −[ω̂×] a − Δb``, ``Δḃ = w_u``; discrete over Δt:
+
+    Φ = | exp(−[ω̂×]Δt)   −I Δt |    Q = | σ_v² Δt + σ_u² Δt³/3   −σ_u² Δt²/2 |
+        | 0               I     |        | −σ_u² Δt²/2             σ_u² Δt     |
+
+(σ_v rate white noise density rad/s/√Hz, σ_u drift random-walk density rad/s/√s).
+A star measurement is the body unit vector ``b = A(q) r`` of a catalog vector r with
+isotropic error σ (rad): ``H = [[b̂×]  0]``; the update is applied one star at a time
+and reset into ``q`` (``q ← δq(a) ⊗ q``, ``b ← b + Δb``) after each image.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from ..attitude import quat_mult, quat_normalize, quat_to_dcm, rotvec_to_quat
+
+
+@njit(cache=True)
+def mekf_init(q0, b0, sigma_att, sigma_bias):
+    """(q, b, P (6, 6)) with diagonal initial covariance (rad, rad/s)."""
+    P = np.zeros((6, 6))
+    for i in range(3):
+        P[i, i] = sigma_att * sigma_att
+        P[3 + i, 3 + i] = sigma_bias * sigma_bias
+    return quat_normalize(q0.copy()), b0.copy(), P
+
+
+@njit(cache=True)
+def mekf_predict(q, b, P, omega_m, dt, sigma_v, sigma_u):
+    """One gyro sample: q, b, P updated in place (q by the exact step for ω̂ = ω_m − b)."""
+    w = omega_m - b
+    qn = quat_normalize(quat_mult(rotvec_to_quat(w * dt), q))
+    q[:] = qn
+    # exp(−[ω×]Δt) = transpose of the rotation by ωΔt
+    th = np.sqrt(w @ w) * dt
+    wx = np.zeros((3, 3))
+    wx[0, 1] = -w[2]
+    wx[0, 2] = w[1]
+    wx[1, 0] = w[2]
+    wx[1, 2] = -w[0]
+    wx[2, 0] = -w[1]
+    wx[2, 1] = w[0]
+    if th < 1e-8:
+        e = np.eye(3) - wx * dt
+    else:
+        k = wx * dt / th
+        e = np.eye(3) - np.sin(th) * k + (1.0 - np.cos(th)) * (k @ k)
+    phi = np.eye(6)
+    phi[:3, :3] = e
+    for i in range(3):
+        phi[i, 3 + i] = -dt
+    Pn = phi @ P @ phi.T
+    qv = sigma_v * sigma_v * dt + sigma_u * sigma_u * dt ** 3 / 3.0
+    qc = -sigma_u * sigma_u * dt * dt / 2.0
+    qb = sigma_u * sigma_u * dt
+    for i in range(3):
+        Pn[i, i] += qv
+        Pn[i, 3 + i] += qc
+        Pn[3 + i, i] += qc
+        Pn[3 + i, 3 + i] += qb
+    P[:, :] = 0.5 * (Pn + Pn.T)
+
+
+@njit(cache=True)
+def mekf_update(q, b, P, body_vecs, ref_vecs, sigmas, gate, accepted):
+    """Update with identified stars: measured body unit vectors (n, 3), catalog ICRS
+    vectors (n, 3), per-star σ (rad). Stars failing the χ² gate (2 dof on the tangent-plane
+    innovation) are skipped; ``accepted`` (n,) uint8 is written. Returns the count used.
+    """
+    dx = np.zeros(6)
+    n_ok = 0
+    a = quat_to_dcm(q)
+    for i in range(body_vecs.shape[0]):
+        accepted[i] = 0
+        r = ref_vecs[i]
+        bh = a @ r
+        # predicted vector after the error-state corrections made so far in this image
+        corr = dx[:3]
+        bh = bh - np.cross(corr, bh)
+        bh /= np.sqrt(bh @ bh)
+        z = body_vecs[i] / np.sqrt(body_vecs[i] @ body_vecs[i])
+        nu = z - bh
+        H = np.zeros((3, 6))
+        H[0, 1] = -bh[2]
+        H[0, 2] = bh[1]
+        H[1, 0] = bh[2]
+        H[1, 2] = -bh[0]
+        H[2, 0] = -bh[1]
+        H[2, 1] = bh[0]
+        # the measurement is 2-D: project on the tangent plane (two orthonormal axes ⟂ bh)
+        t1 = np.cross(bh, np.array([1.0, 0.0, 0.0]))
+        if t1 @ t1 < 0.1:
+            t1 = np.cross(bh, np.array([0.0, 1.0, 0.0]))
+        t1 /= np.sqrt(t1 @ t1)
+        t2 = np.cross(bh, t1)
+        T = np.empty((2, 3))
+        T[0] = t1
+        T[1] = t2
+        H2 = T @ H
+        nu2 = T @ nu
+        S = H2 @ P @ H2.T
+        S[0, 0] += sigmas[i] * sigmas[i]
+        S[1, 1] += sigmas[i] * sigmas[i]
+        Si = np.linalg.inv(S)
+        d2 = nu2 @ Si @ nu2
+        if d2 > gate:
+            continue
+        K = P @ H2.T @ Si
+        dx += K @ nu2  # nu2 is already taken at the corrected estimate
+        IKH = np.eye(6) - K @ H2
+        P[:, :] = IKH @ P @ IKH.T + (sigmas[i] * sigmas[i]) * (K @ K.T)
+        accepted[i] = 1
+        n_ok += 1
+    # reset: fold the error state into the global state
+    q[:] = quat_normalize(quat_mult(rotvec_to_quat(dx[:3]), q))
+    b[:] = b + dx[3:]
+    return n_ok
