@@ -1,0 +1,216 @@
+"""The simulated sky seen through a camera: the exposure API that emulators and evaluations call.
+
+``Sky(catalog, preset, seed)`` binds a :class:`~gyrostar.catalog.StarCatalog`, a simulator
+preset (:mod:`gyrostar.mocks.sim_preset`: camera, optics, detector) and a sensor seed
+(fixed-pattern noise). One exposure is described by
+
+* ``q_start`` — attitude (ICRS → body, [x, y, z, w]) at exposure start;
+* ``omega`` — body rate over the exposure (rad/s, body axes): (3,) constant, or (m, 3)
+  piecewise constant over m equal segments (e.g. the 400 Hz true rates), or
+  ``quats`` — (m + 1, 4) attitudes at equal times from start to end instead (turned into
+  the piecewise-constant rates that join them exactly);
+* ``frame`` — frame counter (the noise of frame k is reproducible from (seed, k)).
+
+Entry points:
+
+* ``render_frame(q_start, omega, frame=0, noise=True) -> (image uint16 (H, W), truth)``
+* ``render_windows(spans, q_start, omega, frame=0, noise=True) -> (pixels uint16 (m,), truth)``
+  with ``spans`` int32 (n, 4) ``[window_id, row, col_start, col_stop)`` sorted by window
+  then row; the pixels of every span concatenated in order, identical to
+  ``image[row, col_start:col_stop]`` of ``render_frame`` at the same seed and frame.
+* ``expose(q_start, omega) -> Exposure``: the geometry only (star paths and truth), which
+  both renderers use, for callers that render several readouts of one exposure.
+
+``truth`` is a :class:`StarTruth`: per star near the field (catalog order, brightest
+first) its exposure-averaged true centroid ``uv`` [col, row] (px), ``vmag``, catalog
+``ids``, signal ``electrons``, and ``in_field`` (the averaged centroid lies on the sensor),
+plus the attitude at start, mid and end of the exposure.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+from gyrostar.attitude import quat_conj, quat_mult, quat_to_dcm
+from gyrostar.catalog import StarCatalog
+from gyrostar.errors import ConfigError
+
+from . import pixel_noise, render
+from .sim_preset import SimPreset, load_preset
+from .trajectory import Constant, Piecewise, exposure_substeps, integrate
+
+
+@dataclasses.dataclass(frozen=True)
+class StarTruth:
+    """Truth for one exposure (arrays over the stars near the field, catalog order)."""
+
+    ids: np.ndarray          # int64 (n,)
+    vmag: np.ndarray         # float64 (n,)
+    uv: np.ndarray           # float64 (n, 2): exposure-averaged true centroid [col, row] px
+    in_field: np.ndarray     # bool (n,)
+    electrons: np.ndarray    # float64 (n,): signal electrons collected in the exposure
+    q_start: np.ndarray      # (4,) ICRS→body at exposure start
+    q_mid: np.ndarray        # (4,) at mid-exposure
+    q_end: np.ndarray        # (4,) at exposure end
+    exposure_s: float
+
+
+@dataclasses.dataclass(frozen=True)
+class Exposure:
+    """Geometry of one exposure: star paths at sub-step midpoints and pixel boxes."""
+
+    paths: np.ndarray        # (n, n_sub, 2) [col, row] px
+    boxes: np.ndarray        # int64 (n, 4) [r0, r1, c0, c1)
+    truth: StarTruth
+
+
+def _as_rates(q_start, omega, quats, exposure_s) -> np.ndarray:
+    if quats is not None:
+        if omega is not None:
+            raise ConfigError("give the exposure's omega or its quats, not both")
+        qs = np.asarray(quats, dtype=np.float64)
+        if qs.ndim != 2 or qs.shape[1] != 4 or qs.shape[0] < 2:
+            raise ConfigError(f"quats must be (m+1, 4) with m >= 1, got {qs.shape}")
+        if not np.allclose(qs[0], q_start) and not np.allclose(qs[0], -q_start):
+            raise ConfigError("quats[0] must equal q_start")
+        m = qs.shape[0] - 1
+        dt = exposure_s / m
+        rates = np.empty((m, 3))
+        for i in range(m):
+            dq = quat_mult(qs[i + 1], quat_conj(qs[i]))
+            if dq[3] < 0:
+                dq = -dq
+            ang = 2.0 * math.atan2(np.linalg.norm(dq[:3]), dq[3])
+            n = np.linalg.norm(dq[:3])
+            rates[i] = dq[:3] / n * ang / dt if n > 0 else 0.0
+        return rates
+    om = np.zeros(3) if omega is None else np.asarray(omega, dtype=np.float64)
+    return om
+
+
+class Sky:
+    """A catalog seen through a simulator preset; see the module docstring."""
+
+    def __init__(self, catalog: StarCatalog, preset: SimPreset | str = "xing2012", seed: int = 0):
+        self.catalog = catalog
+        self.preset = load_preset(preset) if isinstance(preset, str) else preset
+        self.camera = self.preset.camera
+        self.params = self.camera.as_array()
+        self.det = self.preset.detector_array()
+        self.seed = int(seed) & 0x7FFFFFFFFFFFFFFF
+        self.electrons = np.asarray(self.preset.star_electrons(catalog.vmag), dtype=np.float64)
+        self._fpn = None
+        self._sig = None
+        f = self.camera.focal_length_px
+        half_diag = math.hypot(self.camera.width_px, self.camera.height_px) / 2.0 + 20.0
+        self._field_radius = math.atan(half_diag / f)
+
+    @property
+    def fixed_pattern(self) -> tuple[np.ndarray, np.ndarray]:
+        """(PRNU gain, dark electrons per exposure), float32 (H, W): same for every frame."""
+        if self._fpn is None:
+            self._fpn = pixel_noise.fixed_pattern(self.seed, self.camera.height_px, self.camera.width_px, self.det)
+        return self._fpn
+
+    def expose(self, q_start, omega=None, quats=None) -> Exposure:
+        """Star paths and truth for one exposure (no pixels)."""
+        q_start = np.asarray(q_start, dtype=np.float64)
+        if q_start.shape != (4,) or not np.isfinite(q_start).all() or abs(np.linalg.norm(q_start) - 1) > 1e-6:
+            raise ConfigError("q_start must be a unit quaternion [x, y, z, w]")
+        t_exp = self.preset.detector.exposure_s
+        rates = _as_rates(q_start, omega, quats, t_exp)
+        w_max = float(np.max(np.linalg.norm(np.atleast_2d(rates), axis=1)))
+        f = self.camera.focal_length_px
+        half = math.hypot(self.camera.width_px, self.camera.height_px) / 2.0
+        # image speed bound: |ω|·(F + r²/F) px/s at radius r from the principal point
+        path_px = w_max * t_exp * (f + half * half / f)
+        n_sub = int(min(render.MAX_SUBSTEPS, max(1, math.ceil(path_px / render.MAX_STEP_PX))))
+        q_sub = exposure_substeps(q_start, rates, t_exp, n_sub)
+        q_mid = exposure_substeps(q_start, rates, t_exp, 1)[0]
+        q_fin = _end_attitude(q_start, rates, t_exp)
+        # stars near the field: within the field radius + the rotation of the exposure
+        bore = quat_to_dcm(q_mid)[2]
+        reach = self._field_radius + w_max * t_exp
+        sel = np.flatnonzero(self.catalog.vectors @ bore > math.cos(min(reach, math.pi)))
+        vecs = np.ascontiguousarray(self.catalog.vectors[sel])
+        paths = render.star_paths(self.params, vecs, q_sub)
+        boxes = render.star_boxes(paths, self.preset.optics.psf_sigma_px, self.camera.width_px,
+                                  self.camera.height_px)
+        uv = _exposure_average(self.params, vecs, q_start, rates, t_exp, n_sub)
+        w, h = self.camera.width_px, self.camera.height_px
+        in_field = (uv[:, 0] >= -0.5) & (uv[:, 0] < w - 0.5) & (uv[:, 1] >= -0.5) & (uv[:, 1] < h - 0.5)
+        truth = StarTruth(self.catalog.ids[sel], self.catalog.vmag[sel], uv, in_field, self.electrons[sel],
+                          q_start.copy(), q_mid, q_fin, t_exp)
+        return Exposure(paths, boxes, truth)
+
+    def signal_frame(self, exp: Exposure) -> np.ndarray:
+        """Mean photo-signal of the stars (e⁻) over the whole sensor, float64 (H, W)."""
+        sig = np.zeros((self.camera.height_px, self.camera.width_px))
+        render.add_stars_full(sig, exp.paths, exp.truth.electrons, exp.boxes, self.preset.optics.psf_sigma_px)
+        return sig
+
+    def render_frame(self, q_start, omega=None, frame: int = 0, noise: bool = True, quats=None):
+        """Whole frame: (uint16 (H, W) ADU, StarTruth)."""
+        exp = self.expose(q_start, omega, quats)
+        gain, dark = self.fixed_pattern
+        sig = self._signal_buffer()
+        render.add_stars_full(sig, exp.paths, exp.truth.electrons, exp.boxes, self.preset.optics.psf_sigma_px)
+        try:
+            img = pixel_noise.digitise_frame(sig, gain, dark, self.seed, int(frame), self.det, bool(noise),
+                                             pixel_noise.normal_table())
+        finally:
+            render.clear_boxes(sig, exp.boxes)
+        return img, exp.truth
+
+    def _signal_buffer(self) -> np.ndarray:
+        # zero-filled (H, W) float64 reused between frames (cleared box by box after use)
+        if self._sig is None:
+            self._sig = np.zeros((self.camera.height_px, self.camera.width_px))
+        return self._sig
+
+    def render_windows(self, spans, q_start, omega=None, frame: int = 0, noise: bool = True, quats=None):
+        """Span pixels: (uint16 (m,) ADU in span order, StarTruth)."""
+        spans = render.check_spans(spans, self.camera.width_px, self.camera.height_px)
+        exp = self.expose(q_start, omega, quats)
+        return self.readout_windows(exp, spans, frame, noise), exp.truth
+
+    def readout_windows(self, exp: Exposure, spans: np.ndarray, frame: int = 0, noise: bool = True) -> np.ndarray:
+        """Span pixels of an already computed exposure (``spans`` checked by the caller)."""
+        npx = int(np.sum(spans[:, 3].astype(np.int64) - spans[:, 2]))
+        sig = np.zeros(npx)
+        render.add_stars_spans(sig, spans, exp.paths, exp.truth.electrons, exp.boxes,
+                               self.preset.optics.psf_sigma_px)
+        gain, dark = self.fixed_pattern
+        return pixel_noise.digitise_spans(sig, spans, gain, dark, self.seed, int(frame), self.det, bool(noise),
+                                          pixel_noise.normal_table())
+
+
+def _profile(rates, t_exp):
+    om = np.atleast_2d(rates)
+    m = om.shape[0]
+    if m == 1:
+        return Constant(tuple(om[0])), 1
+    return Piecewise(tuple(np.arange(m) * t_exp / m), tuple(map(tuple, om))), m
+
+
+def _end_attitude(q_start, rates, t_exp) -> np.ndarray:
+    prof, m = _profile(rates, t_exp)
+    grid = np.arange(m + 1) * t_exp / m
+    return integrate(q_start, prof, grid, max_step_s=t_exp)[-1]
+
+
+def _exposure_average(params, vecs, q_start, rates, t_exp, n_sub) -> np.ndarray:
+    """Exposure-averaged image position of each star (composite Simpson, 4·n_sub + 1 points)."""
+    n_pts = 4 * max(n_sub, 2)
+    t = np.arange(n_pts + 1) * t_exp / n_pts
+    prof, m = _profile(rates, t_exp)
+    grid, inverse = np.unique(np.concatenate([t, np.arange(1, m) * t_exp / m]), return_inverse=True)
+    qs = integrate(q_start, prof, grid, max_step_s=t_exp)[inverse[: n_pts + 1]]
+    paths = render.star_paths(params, vecs, qs)  # (n, n_pts+1, 2)
+    wts = np.ones(n_pts + 1)
+    wts[1:-1:2] = 4.0
+    wts[2:-1:2] = 2.0
+    wts /= wts.sum()
+    return np.einsum("skd,k->sd", paths, wts)

@@ -1,0 +1,203 @@
+"""Attitude truth: quaternion trajectories from body-rate profiles, and random attitudes.
+
+Conventions of :mod:`gyrostar.attitude` (q = [x, y, z, w] maps ICRS → body; ω body rate
+in body axes, rad/s). A :class:`RateProfile` gives ω(t) (vectorised, t in s from the
+profile start); :func:`integrate` propagates q with the 4th-order commutator-free Magnus
+method (two exact constant-rate rotations per step, rates at the Gauss points):
+
+    q_{n+1} = δq(h(α₁ω₁ + α₂ω₂)) ⊗ δq(h(α₂ω₁ + α₁ω₂)) ⊗ q_n,  α₁,₂ = ¼ ∓ √3/6
+
+which is exact for constant rates and for rates that are linear in time about a fixed
+axis, and O(h⁴) otherwise (h ≤ 1 ms by default: error ≪ 1e-12 rad for these profiles).
+
+Profiles: ``constant``, ``ramp`` (linear between two rates over an interval, constant
+outside), ``piecewise`` (constant segments), ``jitter`` (a base profile plus a sinusoid
+per axis), and :func:`paper000` (sim1..sim4 of Xing et al. 2012, at 100 Hz).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+from gyrostar.attitude import quat_mult, quat_normalize, rotvec_to_quat
+from gyrostar.errors import ConfigError
+from numba import njit
+
+_A1 = 0.25 - math.sqrt(3.0) / 6.0
+_A2 = 0.25 + math.sqrt(3.0) / 6.0
+_G1 = 0.5 - math.sqrt(3.0) / 6.0
+_G2 = 0.5 + math.sqrt(3.0) / 6.0
+DEG = math.pi / 180.0
+
+
+class RateProfile:
+    """Body rate ω(t) in rad/s (body axes); subclasses implement :meth:`rate`."""
+
+    duration_s: float = math.inf
+
+    def rate(self, t: np.ndarray) -> np.ndarray:
+        """ω at times ``t`` (s), shape (n, 3)."""
+        raise NotImplementedError
+
+
+@dataclasses.dataclass(frozen=True)
+class Constant(RateProfile):
+    omega: tuple[float, float, float]
+    duration_s: float = math.inf
+
+    def rate(self, t):
+        return np.broadcast_to(np.asarray(self.omega, dtype=np.float64), (np.size(t), 3)).copy()
+
+
+@dataclasses.dataclass(frozen=True)
+class Ramp(RateProfile):
+    """Linear from ``omega0`` at ``t0`` to ``omega1`` at ``t1``, constant outside."""
+
+    omega0: tuple[float, float, float]
+    omega1: tuple[float, float, float]
+    t0: float
+    t1: float
+    duration_s: float = math.inf
+
+    def __post_init__(self):
+        if not self.t1 > self.t0:
+            raise ConfigError("ramp needs t1 > t0")
+
+    def rate(self, t):
+        f = np.clip((np.asarray(t, dtype=np.float64) - self.t0) / (self.t1 - self.t0), 0.0, 1.0)[:, None]
+        return (1.0 - f) * np.asarray(self.omega0) + f * np.asarray(self.omega1)
+
+
+@dataclasses.dataclass(frozen=True)
+class Piecewise(RateProfile):
+    """Constant ``omegas[i]`` (rad/s) on ``[times[i], times[i+1])``; the last holds on."""
+
+    times: tuple[float, ...]
+    omegas: tuple[tuple[float, float, float], ...]
+    duration_s: float = math.inf
+
+    def __post_init__(self):
+        if len(self.times) != len(self.omegas) or len(self.times) == 0 or np.any(np.diff(self.times) <= 0):
+            raise ConfigError("piecewise profile needs increasing times, one rate per time")
+
+    def rate(self, t):
+        i = np.clip(np.searchsorted(np.asarray(self.times), np.asarray(t), side="right") - 1, 0, len(self.times) - 1)
+        return np.asarray(self.omegas, dtype=np.float64)[i]
+
+
+@dataclasses.dataclass(frozen=True)
+class Jitter(RateProfile):
+    """``base`` plus ``amplitude[i]·sin(2π f[i] t + phase[i])`` per axis (rad/s, Hz, rad)."""
+
+    base: RateProfile
+    amplitude: tuple[float, float, float]
+    frequency_hz: tuple[float, float, float]
+    phase: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    @property
+    def duration_s(self):
+        return self.base.duration_s
+
+    def rate(self, t):
+        t = np.asarray(t, dtype=np.float64)[:, None]
+        return self.base.rate(t[:, 0]) + np.asarray(self.amplitude) * np.sin(
+            2.0 * np.pi * np.asarray(self.frequency_hz) * t + np.asarray(self.phase))
+
+
+@njit(cache=True)
+def _cf4_steps(q0, w1, w2, h):
+    n = w1.shape[0]
+    out = np.empty((n + 1, 4))
+    out[0] = quat_normalize(q0)
+    q = out[0].copy()
+    for i in range(n):
+        first = rotvec_to_quat((_A2 * w1[i] + _A1 * w2[i]) * h[i])
+        second = rotvec_to_quat((_A1 * w1[i] + _A2 * w2[i]) * h[i])
+        q = quat_normalize(quat_mult(second, quat_mult(first, q)))
+        out[i + 1] = q
+    return out
+
+
+def integrate(q0: np.ndarray, profile: RateProfile, times: np.ndarray, max_step_s: float = 1e-3) -> np.ndarray:
+    """Attitudes (n, 4) at ``times`` (s, increasing, times[0] is the epoch of ``q0``)."""
+    times = np.asarray(times, dtype=np.float64)
+    if times.ndim != 1 or times.size == 0 or np.any(np.diff(times) < 0):
+        raise ConfigError("integrate needs a non-empty increasing 1-D array of times")
+    q0 = np.asarray(q0, dtype=np.float64)
+    if q0.shape != (4,) or not np.isfinite(q0).all() or abs(np.linalg.norm(q0) - 1.0) > 1e-6:
+        raise ConfigError("q0 must be a unit quaternion [x, y, z, w]")
+    # fine grid: every requested time plus sub-steps of at most max_step_s
+    gaps = np.diff(times)
+    nsub = np.maximum(1, np.ceil(gaps / max_step_s).astype(np.int64))
+    fine = [times[:1]]
+    for t, g, k in zip(times[:-1], gaps, nsub):
+        fine.append(t + g * np.arange(1, k + 1) / k)
+    grid = np.concatenate(fine)
+    h = np.diff(grid)
+    t1 = grid[:-1] + _G1 * h
+    t2 = grid[:-1] + _G2 * h
+    qs = _cf4_steps(q0, profile.rate(t1), profile.rate(t2), h)
+    idx = np.concatenate([[0], np.cumsum(nsub)])
+    return qs[idx]
+
+
+@dataclasses.dataclass(frozen=True)
+class Trajectory:
+    """Truth samples: times (s), attitudes (n, 4) ICRS→body, body rates (n, 3) rad/s."""
+
+    t: np.ndarray
+    q: np.ndarray
+    omega: np.ndarray
+    profile: RateProfile
+
+
+def sample(q0: np.ndarray, profile: RateProfile, rate_hz: float, n: int) -> Trajectory:
+    """``n`` samples at ``rate_hz`` starting at t = 0 with attitude ``q0``."""
+    if n < 1 or rate_hz <= 0:
+        raise ConfigError("sample needs n >= 1 and rate_hz > 0")
+    t = np.arange(n) / float(rate_hz)
+    return Trajectory(t, integrate(q0, profile, t), profile.rate(t), profile)
+
+
+PAPER000_RATE_HZ = 100.0
+
+
+def paper000(name: str) -> tuple[RateProfile, int]:
+    """Profile and sample count (at 100 Hz) of paper 000's simulations sim1..sim4."""
+    if name == "sim1":  # 0 -> [8,0,0] deg/s over 800 samples
+        return Ramp((0.0, 0.0, 0.0), (8 * DEG, 0.0, 0.0), 0.0, 799 / PAPER000_RATE_HZ, 8.0), 800
+    if name == "sim2":
+        return Constant((0.01 * DEG,) * 3, 3.0), 300
+    if name == "sim3":
+        return Constant((5 * DEG,) * 3, 3.0), 300
+    if name == "sim4":  # [5,5,5] -> 0 deg/s over 500 samples
+        return Ramp((5 * DEG,) * 3, (0.0, 0.0, 0.0), 0.0, 499 / PAPER000_RATE_HZ, 5.0), 500
+    raise ConfigError(f"unknown paper-000 simulation '{name}' (known: sim1, sim2, sim3, sim4)")
+
+
+def random_attitudes(n: int, rng: np.random.Generator) -> np.ndarray:
+    """``n`` uniformly random attitudes (Haar measure = uniform boresight and uniform roll)."""
+    q = rng.standard_normal((n, 4))
+    q /= np.linalg.norm(q, axis=1)[:, None]
+    q[q[:, 3] < 0] *= -1.0
+    return q
+
+
+def exposure_substeps(q_start: np.ndarray, omega: np.ndarray, exposure_s: float, n_sub: int) -> np.ndarray:
+    """Attitudes (n_sub, 4) at the midpoints of ``n_sub`` equal sub-steps of an exposure.
+
+    ``omega``: (3,) constant body rate, or (m, 3) piecewise-constant rates over ``m`` equal
+    segments of the exposure (rad/s).
+    """
+    om = np.atleast_2d(np.asarray(omega, dtype=np.float64))
+    if om.shape[1] != 3 or not np.isfinite(om).all():
+        raise ConfigError(f"exposure rates must be (3,) or (m, 3) finite rad/s, got shape {np.shape(omega)}")
+    m = om.shape[0]
+    prof = Constant(tuple(om[0])) if m == 1 else Piecewise(tuple(np.arange(m) * exposure_s / m), tuple(map(tuple, om)))
+    t_mid = (np.arange(n_sub) + 0.5) * exposure_s / n_sub
+    bounds = np.arange(1, m) * exposure_s / m  # grid points at segment changes keep it exact
+    grid, inverse = np.unique(np.concatenate([[0.0], t_mid, bounds]), return_inverse=True)
+    qs = integrate(q_start, prof, grid, max_step_s=exposure_s)
+    return qs[inverse[1:n_sub + 1]]
