@@ -1,0 +1,6 @@
+"""Camera-head client: request/response with retries, streamed frames, MCU↔host time sync."""
+
+from .client import Capture, HeadClient, HeadTimeoutError
+from .timesync import ClockSync
+
+__all__ = ["HeadClient", "HeadTimeoutError", "Capture", "ClockSync"]

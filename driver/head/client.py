@@ -1,0 +1,249 @@
+"""Head client: request/response over a packet link, built on :mod:`gyrostar.protocol`.
+
+Every request gets a fresh 16-bit sequence number; the reply must carry the same
+sequence and the request's type | 0x80 (or be an ERROR frame, which raises the matching
+:class:`~gyrostar.protocol.errors.FirmwareError` subclass). Corrupt frames and stale
+replies (other sequence numbers, e.g. a late answer to an earlier attempt) are dropped and
+counted; a request without a valid reply within ``timeout`` is sent again, at most
+``retries`` times, then :class:`HeadTimeoutError` is raised.
+
+Full frames are streamed: FULL_FRAME chunk requests are kept ``depth`` deep in flight and
+the replies matched by sequence number, so the link is never idle between chunks.
+
+Times: captures report MCU microseconds; the client keeps a :class:`~.timesync.ClockSync`
+fed by TIME_SYNC exchanges (``sync()``, and automatically every ``sync_every_s``), and
+gives each capture's exposure mid-time in host monotonic seconds.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+from ..errors import DeviceError
+from ..protocol import MsgType, PixelFormat, Plane
+from ..protocol.defs import LIMITS, REPLY_FLAG
+from ..protocol.errors import FrameError
+from ..protocol.framing import decode_frame, encode_frame
+from ..protocol.payloads import decode_reply, encode_request, encode_spans
+from .timesync import ClockSync
+
+
+class HeadTimeoutError(DeviceError):
+    """The head did not give a valid reply in time, after every retry."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Capture:
+    """One exposure: MCU times (µs), its mid-time in host monotonic seconds, and the windows."""
+
+    capture_no: int
+    sensor_frame: int
+    t_start_us: int
+    t_end_us: int
+    exposure_us: int
+    gain_x16: int
+    n_windows: int
+    n_pixels: int
+    plane: int
+    t_mid_host: float        # exposure mid-time, host monotonic s (nan if never synchronised)
+    windows: list | None = None  # list of protocol.payloads.WindowPixels when fetched
+
+
+class HeadClient:
+    def __init__(self, link, timeout: float = 0.5, retries: int = 2, sync: ClockSync | None = None,
+                 sync_every_s: float = 1.0, depth: int = 4):
+        self.link = link
+        self.timeout = timeout
+        self.retries = retries
+        self.sync_state = sync or ClockSync()
+        self.sync_every_s = sync_every_s
+        self.depth = depth
+        self._seq = 0
+        self._last_sync = -1e300
+        self.info: dict | None = None
+        self.stats = {"requests": 0, "retries": 0, "corrupt": 0, "stale": 0}
+
+    # --- plumbing ---------------------------------------------------------------------------
+    def _next_seq(self) -> int:
+        self._seq = (self._seq + 1) & 0xFFFF
+        return self._seq
+
+    def _send(self, msg_type: int, payload: bytes) -> tuple[int, float]:
+        seq = self._next_seq()
+        t = self.link.send(encode_frame(msg_type, seq, payload))
+        self.stats["requests"] += 1
+        return seq, t
+
+    def _await(self, pending: dict, deadline: float):
+        """Next reply matching one of ``pending`` {seq: type} before ``deadline``: (frame, t_rx) or None."""
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return None
+            got = self.link.recv(left)
+            if got is None:
+                return None
+            t_rx, packet = got
+            try:
+                frame = decode_frame(packet)
+            except FrameError:
+                self.stats["corrupt"] += 1
+                continue
+            want = pending.get(frame.seq)
+            if want is None or frame.type not in (want | REPLY_FLAG, MsgType.ERROR):
+                self.stats["stale"] += 1
+                continue
+            return frame, t_rx
+
+    def request(self, msg_type: int, payload: bytes = b"", timeout: float | None = None,
+                retries: int | None = None):
+        """Send one request and return ``(fields, t_send, t_recv)`` (host monotonic s)."""
+        timeout = self.timeout if timeout is None else timeout
+        retries = self.retries if retries is None else retries
+        for attempt in range(retries + 1):
+            if attempt:
+                self.stats["retries"] += 1
+            seq, t_send = self._send(msg_type, payload)
+            got = self._await({seq: int(msg_type)}, time.monotonic() + timeout)
+            if got is not None:
+                frame, t_rx = got
+                return decode_reply(frame, expect=msg_type), t_send, t_rx
+        raise HeadTimeoutError(
+            f"head on {getattr(self.link, 'url', '?')}: no valid reply to {MsgType(msg_type).name} after "
+            f"{retries + 1} attempt(s) of {timeout * 1e3:.0f} ms ({self.stats['corrupt']} corrupt and "
+            f"{self.stats['stale']} stale frames so far)")
+
+    # --- commands -----------------------------------------------------------------------------
+    def ping(self, echo: bytes = b"") -> float:
+        """Round trip time (s) of a PING; checks the echo."""
+        fields, t0, t1 = self.request(MsgType.PING, bytes(echo))
+        if fields["echo"] != bytes(echo):
+            raise DeviceError(f"PING echo differs: sent {len(echo)} bytes, got {len(fields['echo'])}")
+        return t1 - t0
+
+    def get_info(self) -> dict:
+        self.info = self.request(MsgType.GET_INFO)[0]
+        return self.info
+
+    def set_exposure(self, exposure_us: int) -> int:
+        us = self.request(MsgType.SET_EXPOSURE, encode_request(MsgType.SET_EXPOSURE,
+                                                               exposure_us=exposure_us))[0]["exposure_us"]
+        self._exposure_s = us * 1e-6
+        return us
+
+    def set_gain(self, gain_x16: int) -> int:
+        return self.request(MsgType.SET_GAIN, encode_request(MsgType.SET_GAIN, gain_x16=gain_x16))[0]["gain_x16"]
+
+    def set_windows(self, spans) -> dict:
+        """Replace the window set with row spans (N×4 ``[window_id, row, col_start, col_stop)``)."""
+        return self.request(MsgType.SET_WINDOWS, encode_spans(spans))[0]
+
+    def sync(self, n: int = 8) -> ClockSync:
+        """``n`` TIME_SYNC exchanges into the clock model."""
+        for _ in range(n):
+            self._sync_once()
+        return self.sync_state
+
+    def _sync_once(self) -> None:
+        seq, t1 = self._send(MsgType.TIME_SYNC, encode_request(MsgType.TIME_SYNC, host_us=0))
+        got = self._await({seq: int(MsgType.TIME_SYNC)}, time.monotonic() + self.timeout)
+        if got is None:
+            return  # a lost exchange is just not used
+        frame, t4 = got
+        f = decode_reply(frame, expect=MsgType.TIME_SYNC)
+        self.sync_state.add(t1, f["mcu_rx_us"], f["mcu_tx_us"], t4)
+        self._last_sync = time.monotonic()
+
+    def maybe_sync(self, n: int = 2) -> None:
+        if time.monotonic() - self._last_sync >= self.sync_every_s:
+            self.sync(n)
+
+    def capture(self, fetch: bool = True, pixel_format: int = PixelFormat.PACKED10, dark: bool = False) -> Capture:
+        """Expose (CAPTURE, or DARK), then fetch every window's pixels (WINDOW_DATA pages)."""
+        self.maybe_sync()
+        msg = MsgType.DARK if dark else MsgType.CAPTURE
+        # A lost reply means another exposure on retry: the new capture_no tells them apart.
+        f, _, _ = self.request(msg, timeout=self.timeout + self._exposure_s)
+        self._exposure_s = f["exposure_us"] * 1e-6
+        mid = 0.5 * (f["t_start_us"] + f["t_end_us"])
+        t_mid = self.sync_state.mcu_to_host(mid) if self.sync_state.ready else float("nan")
+        windows = self.window_data(pixel_format, f["capture_no"]) if fetch else None
+        return Capture(f["capture_no"], f["sensor_frame"], f["t_start_us"], f["t_end_us"], f["exposure_us"],
+                       f["gain_x16"], f["n_windows"], f["n_pixels"], f["plane"], t_mid, windows)
+
+    _exposure_s = LIMITS["exposure_default_us"] * 1e-6
+
+    def window_data(self, pixel_format: int = PixelFormat.PACKED10, capture_no: int | None = None) -> list:
+        """All windows of the last capture (as many WINDOW_DATA pages as needed)."""
+        out, start = [], 0
+        while True:
+            f = self.request(MsgType.WINDOW_DATA, encode_request(MsgType.WINDOW_DATA, start=start,
+                                                                 pixel_format=pixel_format))[0]
+            if capture_no is not None and f["capture_no"] != capture_no:
+                raise DeviceError(f"WINDOW_DATA belongs to capture {f['capture_no']}, expected {capture_no}")
+            if f["count"] == 0:
+                raise DeviceError(f"WINDOW_DATA page at window {start} is empty")
+            out.extend(f["windows"])
+            start += f["count"]
+            if start >= f["total"]:
+                return out
+
+    def full_frame(self, plane: int = Plane.LIGHT, pixel_format: int = PixelFormat.PACKED10,
+                   chunk: int | None = None) -> tuple[np.ndarray, int]:
+        """The whole sensor, streamed in FULL_FRAME chunks kept ``depth`` deep in flight.
+
+        Returns ``(image uint16 (H, W), sensor_frame)``; raises :class:`DeviceError` when the
+        chunks come from different sensor frames twice in a row.
+        """
+        info = self.info or self.get_info()
+        w, h = info["width"], info["height"]
+        chunk = chunk or info["frame_chunk_max"]
+        for _ in range(2):
+            img, frames = self._stream_frame(w, h, chunk, plane, pixel_format)
+            if len(frames) == 1:
+                return img.reshape(h, w), frames.pop()
+        raise DeviceError(f"full frame: chunks came from sensor frames {sorted(frames)[:4]}… (frame kept changing)")
+
+    def _stream_frame(self, w, h, chunk, plane, pixel_format):
+        total = w * h
+        img = np.empty(total, np.uint16)
+        todo = list(range(0, total, chunk))
+        attempts = dict.fromkeys(todo, 0)
+        inflight: dict[int, int] = {}  # seq -> offset
+        frames = set()
+        while todo or inflight:
+            while todo and len(inflight) < self.depth:
+                off = todo.pop(0)
+                n = min(chunk, total - off)
+                payload = encode_request(MsgType.FULL_FRAME, offset=off, count=n, pixel_format=pixel_format,
+                                         plane=plane)
+                seq, _ = self._send(MsgType.FULL_FRAME, payload)
+                inflight[seq] = off
+            got = self._await(dict.fromkeys(inflight, int(MsgType.FULL_FRAME)), time.monotonic() + self.timeout)
+            if got is None:  # every chunk still in flight is re-requested (bounded)
+                for off in inflight.values():
+                    attempts[off] += 1
+                    if attempts[off] > self.retries:
+                        raise HeadTimeoutError(f"full frame: chunk at pixel {off} unanswered after "
+                                               f"{self.retries + 1} attempts")
+                    self.stats["retries"] += 1
+                    todo.insert(0, off)
+                inflight.clear()
+                continue
+            frame, _ = got
+            off = inflight.pop(frame.seq)
+            f = decode_reply(frame, expect=MsgType.FULL_FRAME)
+            if f["offset"] != off:
+                raise DeviceError(f"FULL_FRAME reply for pixel {f['offset']}, asked {off}")
+            img[off:off + f["count"]] = f["pixels"]
+            frames.add(f["sensor_frame"])
+        return img, frames
+
+    def telemetry(self) -> dict:
+        return self.request(MsgType.TELEMETRY)[0]
+
+    def reset(self) -> None:
+        self.request(MsgType.RESET)

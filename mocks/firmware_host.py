@@ -1,0 +1,133 @@
+"""Start the firmware's host program (``firmware/build/host/gyrostar-head``) on a real pty.
+
+:class:`FirmwareHost` writes the sensor pixel file the program maps (layout in
+``firmware/port/posix/hal_posix.h``: 64-byte "GSPX" header, then u16 planes, with a sequence
+lock: ``seq`` odd while a frame is being written), starts the program, waits for its
+``gyrostar-head: pty <path>`` line and gives that path (``path``/``url``) for
+:func:`serial.serial_for_url` or :class:`gyrostar.transport.SerialLink`. ``write_frame``
+publishes a new sensor frame (e.g. rendered by :class:`gyrostar.mocks.sky.Sky`). The
+program's MCU clock is CLOCK_MONOTONIC in µs, the same clock as ``time.monotonic``.
+"""
+
+from __future__ import annotations
+
+import mmap
+import os
+import struct
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from gyrostar.errors import DeviceError, NotAvailableError
+from gyrostar.paths import repo_root
+
+HEADER = 64
+OFF_SEQ, OFF_FRAME, OFF_TIME, OFF_TEMP = 16, 20, 24, 32
+
+
+def binary_path() -> Path:
+    root = repo_root()
+    return (root or Path(".")) / "firmware" / "build" / "host" / "gyrostar-head"
+
+
+class PixelFile:
+    """The memory-mapped sensor file shared with the host program."""
+
+    def __init__(self, path: Path, width: int, height: int, planes: int = 1, temperature_cdeg: int = 2500):
+        self.path, self.width, self.height, self.planes = Path(path), width, height, planes
+        size = HEADER + 2 * width * height * planes
+        head = struct.pack("<4sHHHHHHIIQh", b"GSPX", 1, HEADER, width, height, planes, 10, 0, 0, 0,
+                           temperature_cdeg)
+        with open(self.path, "wb") as f:
+            f.write(head.ljust(HEADER, b"\0"))
+            f.truncate(size)
+        self._f = open(self.path, "r+b")
+        self.map = mmap.mmap(self._f.fileno(), size)
+        self.frame = 0
+
+    def write_frame(self, light: np.ndarray, dark: np.ndarray | None = None) -> int:
+        """Publish one frame (uint16 (H, W)); returns its frame counter."""
+        seq = struct.unpack_from("<I", self.map, OFF_SEQ)[0] & ~1
+        struct.pack_into("<I", self.map, OFF_SEQ, (seq + 1) & 0xFFFFFFFF)  # odd: being written
+        n = self.width * self.height
+        light = np.ascontiguousarray(light, "<u2").ravel()
+        if light.size != n:
+            raise ValueError(f"frame of {light.size} pixels for a {self.width}x{self.height} sensor")
+        self.map[HEADER:HEADER + 2 * n] = light.tobytes()
+        if dark is not None and self.planes > 1:
+            self.map[HEADER + 2 * n:HEADER + 4 * n] = np.ascontiguousarray(dark, "<u2").tobytes()
+        self.frame += 1
+        struct.pack_into("<IQ", self.map, OFF_FRAME, self.frame, int(time.monotonic() * 1e6))
+        struct.pack_into("<I", self.map, OFF_SEQ, (seq + 2) & 0xFFFFFFFF)  # even: stable
+        return self.frame
+
+    def close(self) -> None:
+        try:
+            self.map.close()
+        except BufferError:
+            pass
+        self._f.close()
+
+
+class FirmwareHost:
+    """The host build of the firmware, serving its UART on a pty."""
+
+    def __init__(self, width: int = 1024, height: int = 1024, planes: int = 1, workdir: str | None = None,
+                 binary: Path | None = None):
+        self.binary = Path(binary or binary_path())
+        if not self.binary.exists():
+            raise NotAvailableError(f"firmware host program not built: {self.binary} (run `make -C firmware host`)")
+        self._tmp = tempfile.TemporaryDirectory(prefix="gyrostar-head-", dir=workdir)
+        self.pixels = PixelFile(Path(self._tmp.name) / "sensor.gspx", width, height, planes)
+        self.proc: subprocess.Popen | None = None
+        self.path: str | None = None
+
+    @property
+    def url(self) -> str:
+        return self.path
+
+    def start(self, timeout: float = 5.0) -> str:
+        self.proc = subprocess.Popen(
+            [str(self.binary), "--sensor", str(self.pixels.path), "--width", str(self.pixels.width),
+             "--height", str(self.pixels.height), "--planes", str(self.pixels.planes)],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        t_end = time.monotonic() + timeout
+        line = ""
+        while time.monotonic() < t_end:
+            line = self.proc.stdout.readline()
+            if line.startswith("gyrostar-head: pty "):
+                self.path = line.split("pty ", 1)[1].strip()
+                return self.path
+            if self.proc.poll() is not None:
+                break
+        err = self.proc.stderr.read() if self.proc.poll() is not None else ""
+        self.stop()
+        raise DeviceError(f"firmware host program did not report its pty within {timeout} s: {line!r} {err!r}")
+
+    def stop(self) -> None:
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(timeout=2)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        self.proc = None
+
+    def close(self) -> None:
+        self.stop()
+        self.pixels.close()
+        self._tmp.cleanup()
+
+    def __enter__(self):
+        self.start()
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def is_built() -> bool:
+    return binary_path().exists() and os.access(binary_path(), os.X_OK)

@@ -1,0 +1,421 @@
+"""Python camera-head emulator: the head's protocol on a real pseudo-terminal, backed by the simulator.
+
+:class:`HeadEmulator` answers every request of :mod:`gyrostar.protocol` as the firmware does
+(same checks in the same order, same error codes and details; corrupt frames are dropped
+and counted, never answered). CAPTURE really takes the exposure time, stamps start and end
+with the emulated MCU clock and renders *only the requested windows* with
+:meth:`gyrostar.mocks.sky.Sky.render_windows` at the scene's attitude and rate at that time;
+FULL_FRAME renders the whole frame once per sensor frame. The MCU clock is the host
+monotonic clock with an offset (µs) and a rate error (ppm), so time sync has a truth to
+be measured against (:meth:`mcu_offset_us_at`).
+
+:meth:`start` opens a pty (raw mode, slave kept open) and serves it from a thread; connect
+with ``serial.serial_for_url(emulator.path)`` or :class:`gyrostar.transport.SerialLink`.
+Replies pass through an optional :class:`~gyrostar.mocks.faults.ByteFaults` (corrupt, drop,
+delay/jitter; ``disconnect()`` closes the pty master).
+"""
+
+from __future__ import annotations
+
+import os
+import select
+import struct
+import threading
+import time
+import tty
+
+import numpy as np
+from cobs import cobs
+from gyrostar.protocol import MsgType
+from gyrostar.protocol.defs import (
+    ERROR_TEXT,
+    LIMITS,
+    MAX_PAYLOAD,
+    PING_MAX,
+    REPLY_FLAG,
+    REQUEST_LAYOUT,
+    VERSION,
+    ErrorCode,
+    PixelFormat,
+    Plane,
+)
+from gyrostar.protocol.errors import CrcError, FrameError, LengthMismatchError
+from gyrostar.protocol.framing import decode_frame, encode_frame
+from gyrostar.protocol.payloads import WindowPixels, encode_pixels, encode_reply, encode_windows_tail, pixel_bytes
+
+FW_VERSION = (0, 9, 0)
+PORT_ID_EMULATOR = 2
+_WIN_HEADER = 8
+
+
+class _Reject(Exception):
+    def __init__(self, code: ErrorCode, detail: int = 0):
+        super().__init__(ERROR_TEXT[code])
+        self.code = code
+        self.detail = int(detail)
+
+
+class ConstantRateScene:
+    """Attitude truth for the emulator: ``q0`` (ICRS→body) at host time ``t0``, constant body rate."""
+
+    def __init__(self, q0, omega=(0.0, 0.0, 0.0), t0: float | None = None):
+        from .trajectory import Constant
+
+        self.omega = np.asarray(omega, float)
+        self._profile = Constant(tuple(self.omega))
+        self._t, self._q = (time.monotonic() if t0 is None else t0), np.asarray(q0, float)
+
+    def at(self, t_host: float):
+        """``(q, omega)`` at host time ``t_host`` (s, not before the previous call)."""
+        from .trajectory import integrate
+
+        if t_host > self._t:
+            self._q = integrate(self._q, self._profile, np.array([self._t, t_host]), max_step_s=0.01)[-1]
+            self._t = t_host
+        return self._q.copy(), self.omega
+
+
+class HeadEmulator:
+    def __init__(self, sky, scene, mcu_offset_us: int = 123_456_789, drift_ppm: float = 0.0, faults=None,
+                 noise: bool = True):
+        self.sky = sky
+        self.scene = scene
+        self.width = sky.camera.width_px
+        self.height = sky.camera.height_px
+        self.mcu_offset_us = int(mcu_offset_us)
+        self.drift_ppm = drift_ppm
+        self.faults = faults
+        self.noise = noise
+        self._skies = {}
+        self._t_boot = time.monotonic()
+        self.master = self.slave = None
+        self.path = None
+        self._thread = None
+        self._stop = threading.Event()
+        self.rendered_pixels = 0   # pixels rendered for window captures (only the windows)
+        self.full_renders = 0
+        self._reset_state()
+
+    # --- clocks -------------------------------------------------------------------------------
+    def mcu_us(self, t_host: float | None = None) -> int:
+        t = time.monotonic() if t_host is None else t_host
+        return self.mcu_offset_us + int(round(t * 1e6 * (1 + self.drift_ppm * 1e-6)))
+
+    def mcu_offset_us_at(self, t_host: float) -> float:
+        """Truth: MCU − host offset (µs) at host time ``t_host``."""
+        return self.mcu_offset_us + t_host * 1e6 * self.drift_ppm * 1e-6
+
+    # --- state --------------------------------------------------------------------------------
+    def _reset_state(self) -> None:
+        self.exposure_us = LIMITS["exposure_default_us"]
+        self.gain_x16 = LIMITS["gain_default_x16"]
+        self.spans = np.zeros((0, 4), np.int32)
+        self.window_ids: list[int] = []
+        self.window_slices: list[slice] = []
+        self.capture_no = 0
+        self.has_capture = False
+        self.pixels = None
+        self.sums = []
+        self.sensor_frame = 0
+        self._full = None
+        self.cnt = dict(rx_frames=0, crc_errors=0, framing_errors=0, overruns=0, rejected=0, last_error=0)
+        self._boot_us = self.mcu_us()
+
+    def _sky_for(self, exposure_us: int):
+        sky = self._skies.get(exposure_us)
+        if sky is None:
+            from .sky import Sky
+
+            base = self.sky
+            sky = Sky(base.catalog, base.preset.with_exposure(exposure_us * 1e-6), seed=base.seed)
+            self._skies = {exposure_us: sky}
+        return sky
+
+    # --- frame handling -----------------------------------------------------------------------
+    def handle(self, encoded: bytes, rx_us: int) -> bytes | None:
+        """Reply bytes (with delimiter) for one encoded frame (without delimiter), or None."""
+        try:
+            fr = decode_frame(encoded, check_version=False)
+        except LengthMismatchError:
+            raw = cobs.decode(bytes(encoded))
+            _, typ, seq, length = struct.unpack_from("<BBHH", raw)
+            self.cnt["rx_frames"] += 1
+            return self._reject(typ, seq, ErrorCode.FRAME_LENGTH, length)
+        except CrcError:
+            self.cnt["crc_errors"] += 1
+            return None
+        except FrameError:
+            self.cnt["framing_errors"] += 1
+            return None
+        self.cnt["rx_frames"] += 1
+        if fr.version != VERSION:
+            return self._reject(fr.type, fr.seq, ErrorCode.BAD_VERSION, fr.version)
+        try:
+            payload = self._dispatch(fr.type, fr.payload, rx_us)
+        except _Reject as r:
+            return self._reject(fr.type, fr.seq, r.code, r.detail)
+        out = encode_frame(fr.type | REPLY_FLAG, fr.seq, payload)
+        if fr.type == MsgType.RESET:
+            self._reset_state()
+        return out
+
+    def _reject(self, typ, seq, code, detail) -> bytes:
+        self.cnt["rejected"] += 1
+        self.cnt["last_error"] = int(code)
+        return encode_frame(MsgType.ERROR, seq, encode_reply(MsgType.ERROR, code=int(code), request_type=typ,
+                                                             detail=int(detail) & 0xFFFFFFFF))
+
+    def _need(self, typ, n):
+        size = struct.calcsize("<" + REQUEST_LAYOUT[typ][0])
+        if n != size:
+            raise _Reject(ErrorCode.PAYLOAD_LENGTH, n)
+
+    def _fields(self, typ, q):
+        fmt, names = REQUEST_LAYOUT[typ]
+        return dict(zip(names, struct.unpack_from("<" + fmt, q)))
+
+    def _dispatch(self, typ: int, q: bytes, rx_us: int) -> bytes:
+        n = len(q)
+        if typ == MsgType.PING:
+            if n > PING_MAX:
+                raise _Reject(ErrorCode.PAYLOAD_LENGTH, n)
+            return q
+        if typ == MsgType.GET_INFO:
+            self._need(typ, n)
+            return encode_reply(MsgType.GET_INFO, proto_version=VERSION, fw_major=FW_VERSION[0],
+                                fw_minor=FW_VERSION[1], fw_patch=FW_VERSION[2], width=self.width,
+                                height=self.height, bits=10, port=PORT_ID_EMULATOR,
+                                max_windows=LIMITS["max_windows"], max_spans=LIMITS["max_spans"],
+                                max_window_pixels=LIMITS["max_window_pixels"], pixel_budget=LIMITS["pixel_budget"],
+                                max_payload=MAX_PAYLOAD, frame_chunk_max=LIMITS["frame_chunk_max"],
+                                exposure_min_us=LIMITS["exposure_min_us"], exposure_max_us=LIMITS["exposure_max_us"],
+                                gain_min_x16=LIMITS["gain_min_x16"], gain_max_x16=LIMITS["gain_max_x16"], planes=1)
+        if typ == MsgType.SET_EXPOSURE:
+            self._need(typ, n)
+            us = self._fields(typ, q)["exposure_us"]
+            if not LIMITS["exposure_min_us"] <= us <= LIMITS["exposure_max_us"]:
+                raise _Reject(ErrorCode.EXPOSURE_RANGE, us)
+            self.exposure_us = us
+            return encode_reply(typ, exposure_us=us)
+        if typ == MsgType.SET_GAIN:
+            self._need(typ, n)
+            g = self._fields(typ, q)["gain_x16"]
+            if not LIMITS["gain_min_x16"] <= g <= LIMITS["gain_max_x16"]:
+                raise _Reject(ErrorCode.GAIN_RANGE, g)
+            self.gain_x16 = g
+            return encode_reply(typ, gain_x16=g)
+        if typ == MsgType.SET_WINDOWS:
+            return self._set_windows(q)
+        if typ in (MsgType.CAPTURE, MsgType.DARK):
+            self._need(typ, n)
+            if not self.window_ids:
+                raise _Reject(ErrorCode.NO_WINDOWS)
+            if typ == MsgType.DARK:
+                raise _Reject(ErrorCode.DARK_UNAVAILABLE)
+            return self._capture()
+        if typ == MsgType.WINDOW_DATA:
+            return self._window_data(q)
+        if typ == MsgType.FULL_FRAME:
+            return self._full_frame(q)
+        if typ == MsgType.TIME_SYNC:
+            self._need(typ, n)
+            host_us = self._fields(typ, q)["host_us"]
+            return encode_reply(typ, host_us=host_us, mcu_rx_us=rx_us, mcu_tx_us=self.mcu_us())
+        if typ == MsgType.TELEMETRY:
+            self._need(typ, n)
+            c = self.cnt
+            return encode_reply(typ, uptime_us=self.mcu_us() - self._boot_us, temperature_cdeg=2500,
+                                last_error=c["last_error"], captures=self.capture_no, rx_frames=c["rx_frames"],
+                                crc_errors=c["crc_errors"], framing_errors=c["framing_errors"],
+                                overruns=c["overruns"], rejected=c["rejected"])
+        if typ == MsgType.RESET:
+            self._need(typ, n)
+            return b""
+        raise _Reject(ErrorCode.UNKNOWN_TYPE)
+
+    def _set_windows(self, q: bytes) -> bytes:
+        n = len(q)
+        if n < 4:
+            raise _Reject(ErrorCode.PAYLOAD_LENGTH, n)
+        count, reserved = struct.unpack_from("<HH", q)
+        if reserved:
+            raise _Reject(ErrorCode.RESERVED_NONZERO, reserved)
+        if count > LIMITS["max_spans"]:
+            raise _Reject(ErrorCode.SPAN_COUNT, count)
+        if n != 4 + 8 * count:
+            raise _Reject(ErrorCode.SPANS_LENGTH, count)
+        spans = np.frombuffer(q[4:], "<u2").reshape(-1, 4).astype(np.int32)
+        ids, slices, total, in_win, start = [], [], 0, 0, 0
+        for i, (wid, row, c0, c1) in enumerate(spans.tolist()):
+            if row >= self.height or c1 > self.width:
+                raise _Reject(ErrorCode.SPAN_OUTSIDE, i)
+            if c0 >= c1:
+                raise _Reject(ErrorCode.SPAN_EMPTY, i)
+            if i and (wid < spans[i - 1, 0] or (wid == spans[i - 1, 0] and row <= spans[i - 1, 1])):
+                raise _Reject(ErrorCode.SPAN_ORDER, i)
+            if not i or wid != spans[i - 1, 0]:
+                if len(ids) + 1 > LIMITS["max_windows"]:
+                    raise _Reject(ErrorCode.WINDOW_COUNT, i)
+                if ids:
+                    slices.append(slice(start, total))
+                ids.append(wid)
+                start, in_win = total, 0
+            in_win += c1 - c0
+            total += c1 - c0
+            if in_win > LIMITS["max_window_pixels"]:
+                raise _Reject(ErrorCode.WINDOW_TOO_LARGE, i)
+            if total > LIMITS["pixel_budget"]:
+                raise _Reject(ErrorCode.PIXEL_BUDGET, i)
+        if ids:
+            slices.append(slice(start, total))
+        self.spans, self.window_ids, self.window_slices = spans, ids, slices
+        self.has_capture = False
+        return encode_reply(MsgType.SET_WINDOWS, n_windows=len(ids), n_spans=count, n_pixels=total)
+
+    def _capture(self) -> bytes:
+        t0_host = time.monotonic()
+        t0 = self.mcu_us(t0_host)
+        q_start, omega = self.scene.at(t0_host)
+        sky = self._sky_for(self.exposure_us)
+        self.sensor_frame += 1
+        pixels, _ = sky.render_windows(self.spans, q_start, omega, frame=self.sensor_frame, noise=self.noise)
+        self.rendered_pixels += len(pixels)
+        # the exposure takes its time: the reply leaves after the exposure end
+        remaining = t0_host + self.exposure_us * 1e-6 - time.monotonic()
+        if remaining > 0:
+            time.sleep(remaining)
+        t1 = self.mcu_us()
+        self.pixels = np.minimum(pixels, 0x3FF).astype(np.uint16)
+        self.sums = [int(self.pixels[s].sum()) for s in self.window_slices]
+        self.has_capture = True
+        self.capture_no += 1
+        return encode_reply(MsgType.CAPTURE, capture_no=self.capture_no, sensor_frame=self.sensor_frame,
+                            t_start_us=t0, t_end_us=t1, exposure_us=self.exposure_us, gain_x16=self.gain_x16,
+                            n_windows=len(self.window_ids), n_pixels=len(self.pixels), plane=Plane.LIGHT)
+
+    def _window_data(self, q: bytes) -> bytes:
+        self._need(MsgType.WINDOW_DATA, len(q))
+        f = self._fields(MsgType.WINDOW_DATA, q)
+        if f["reserved"]:
+            raise _Reject(ErrorCode.RESERVED_NONZERO, f["reserved"])
+        fmt = f["pixel_format"]
+        if fmt > PixelFormat.PACKED10:
+            raise _Reject(ErrorCode.PIXEL_FORMAT, fmt)
+        if not self.has_capture:
+            raise _Reject(ErrorCode.NO_CAPTURE)
+        start = f["start"]
+        if start >= len(self.window_ids):
+            raise _Reject(ErrorCode.WINDOW_INDEX, start)
+        fixed = len(encode_reply(MsgType.WINDOW_DATA, capture_no=0, start=0, count=0, total=0, pixel_format=0))
+        size, wins = fixed, []
+        for wi in range(start, len(self.window_ids)):
+            px = self.pixels[self.window_slices[wi]]
+            need = _WIN_HEADER + pixel_bytes(len(px), fmt)
+            if size + need > MAX_PAYLOAD:
+                break
+            wins.append(WindowPixels(self.window_ids[wi], self.sums[wi], px))
+            size += need
+        head = encode_reply(MsgType.WINDOW_DATA, capture_no=self.capture_no, start=start, count=len(wins),
+                            total=len(self.window_ids), pixel_format=fmt)
+        return head + encode_windows_tail(wins, fmt)
+
+    def _full_frame(self, q: bytes) -> bytes:
+        self._need(MsgType.FULL_FRAME, len(q))
+        f = self._fields(MsgType.FULL_FRAME, q)
+        fmt, plane, count, off = f["pixel_format"], f["plane"], f["count"], f["offset"]
+        if fmt > PixelFormat.PACKED10:
+            raise _Reject(ErrorCode.PIXEL_FORMAT, fmt)
+        if plane > Plane.DARK:
+            raise _Reject(ErrorCode.BAD_PLANE, plane)
+        if plane == Plane.DARK:
+            raise _Reject(ErrorCode.DARK_UNAVAILABLE)
+        if count == 0 or count > LIMITS["frame_chunk_max"]:
+            raise _Reject(ErrorCode.CHUNK_SIZE, count)
+        if off + count > self.width * self.height:
+            raise _Reject(ErrorCode.FRAME_RANGE, off)
+        if self._full is None or self._full[0] != self.sensor_frame:
+            q_start, omega = self.scene.at(time.monotonic())
+            img, _ = self._sky_for(self.exposure_us).render_frame(q_start, omega, frame=self.sensor_frame,
+                                                                 noise=self.noise)
+            self.full_renders += 1
+            self._full = (self.sensor_frame, np.minimum(img.ravel(), 0x3FF).astype(np.uint16))
+        px = self._full[1][off:off + count]
+        return encode_reply(MsgType.FULL_FRAME, sensor_frame=self.sensor_frame, offset=off, count=count,
+                            pixel_format=fmt, plane=plane) + encode_pixels(px, fmt)
+
+    # --- pty service --------------------------------------------------------------------------
+    def start(self) -> str:
+        """Open a pty, serve it from a thread; returns the slave path."""
+        self.master, self.slave = os.openpty()
+        tty.setraw(self.slave)
+        self.path = os.ttyname(self.slave)
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._serve, name="head-emulator", daemon=True)
+        self._thread.start()
+        return self.path
+
+    def _write(self, data: bytes) -> None:
+        view = memoryview(data)
+        while view:
+            try:
+                k = os.write(self.master, view)
+            except BlockingIOError:
+                select.select([], [self.master], [], 0.05)
+                continue
+            view = view[k:]
+
+    def _serve(self) -> None:
+        buf = bytearray()
+        while not self._stop.is_set():
+            try:
+                r, _, _ = select.select([self.master], [], [], 0.05)
+                if not r:
+                    continue
+                data = os.read(self.master, 65536)
+            except OSError:
+                return
+            if not data:
+                return
+            buf += data
+            while True:
+                end = buf.find(0)
+                if end < 0:
+                    if len(buf) > 2 * (MAX_PAYLOAD + 16):
+                        buf.clear()
+                        self.cnt["overruns"] += 1
+                    break
+                frame, buf = bytes(buf[:end]), buf[end + 1:]
+                if not frame:
+                    continue
+                reply = self.handle(frame, self.mcu_us())
+                if reply is not None:
+                    try:
+                        if self.faults is not None:
+                            self.faults.write_through(self._write, reply)
+                        else:
+                            self._write(reply)
+                    except OSError:
+                        return
+
+    def disconnect(self) -> None:
+        """The head goes away: the pty master closes (the client's reads fail)."""
+        self._stop.set()
+        for fd in (self.master, self.slave):
+            if fd is not None:
+                try:
+                    os.close(fd)
+                except OSError:
+                    pass
+        self.master = self.slave = None
+
+    def stop(self) -> None:
+        self.disconnect()
+        if self._thread is not None:
+            self._thread.join(timeout=1.0)
+
+    def __enter__(self):
+        self.start()
+        return self
+
+    def __exit__(self, *exc):
+        self.stop()
