@@ -1,0 +1,16 @@
+"""Star identification (SPEC §2, paper 001).
+
+* :mod:`.index` — catalog index: stars, navigation stars, star pairs with a Mortari
+  k-vector (:mod:`.kvector`), neighbour tables, voxel cone queries; cached files.
+* :mod:`.pyramid` — Pyramid lost-in-space identification (Mortari et al. 2004).
+* :mod:`.grid` — grid patterns (Padgett & Kreutz-Delgado 1997) and the lost-in-space
+  grid baseline with its pattern database.
+* :mod:`.extended` — extended grid tracking (paper 001) and the extended-image triangle
+  baseline.
+* :mod:`.verify` — QUEST residual verification shared by every method.
+* :mod:`.tracker` — lost-in-space → tracking → lost state machine.
+* :mod:`.synth` — synthetic centroid fields for Monte Carlo; :mod:`.eval_starid` — the
+  ``gyrostar eval starid`` target.
+
+Heavy modules are imported on use: ``from gyrostar.starid.pyramid import Pyramid``.
+"""

@@ -1,0 +1,246 @@
+"""Catalog index for star identification: navigation stars, star pairs with a k-vector,
+per-star neighbour tables and a voxel grid for cone queries. Built once, cached as a file.
+
+* Stars: the catalog to ``mag_limit`` less the fainter member of every pair closer than
+  ``DOUBLE_SEP_DEG`` (unresolved doubles); all of them can label an image once the
+  attitude is known.
+* Navigation stars (``is_nav``): those stars, optionally thinned so that they are spread
+  evenly over the sky — walking from the brightest down, a star is kept only if fewer
+  than ``per_field`` kept stars lie within ``thin_radius`` of it (0 keeps all).
+* Star pairs: every pair of navigation stars closer than ``max_sep`` (rad, the sensor's
+  diagonal field), sorted by their angle θ (rad) with a k-vector on θ
+  (:mod:`gyrostar.starid.kvector`).
+* Neighbour table: for each star the partners of its pairs (CSR ``nb_start``/``nb_idx``).
+* Voxels: the cube [-1, 1]³ cut into cells of side ``vox_h``; each cell lists its stars,
+  so a cone of radius ρ around a direction visits only the cells around it.
+
+Everything is ICRS. ``load_index(catalog, max_sep_deg, per_field=..)`` builds or reads
+``<cache_dir("starid")>/index_<catalog>_m<mag>_e<epoch>_f<sep>_n<per_field>_v<version>.npz``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+from numba import njit
+
+from ..errors import ConfigError
+from ..paths import cache_dir
+from . import kvector
+
+INDEX_VERSION = 5
+DOUBLE_SEP_DEG = 0.03  # 108″: closer pairs are one spot for any preset sensor (≥ 3 px)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class StarIndex:
+    """Navigation stars (sorted by V) with pair, neighbour and voxel tables. Angles in rad."""
+
+    catalog: str
+    mag_limit: float
+    epoch: float
+    max_sep: float
+    per_field: int
+    is_nav: np.ndarray       # bool (n,) navigation star (in the pair table)
+    ids: np.ndarray          # int64 (n,) catalog ids (HIP / Gaia source id)
+    vectors: np.ndarray      # float64 (n, 3) ICRS unit vectors
+    vmag: np.ndarray         # float64 (n,) V
+    pair_theta: np.ndarray   # float64 (p,) ascending
+    pair_a: np.ndarray       # int32 (p,) navigation-star index
+    pair_b: np.ndarray       # int32 (p,)
+    kv: np.ndarray           # int64 (p,) k-vector on pair_theta
+    kv_m: float
+    kv_q: float
+    nb_start: np.ndarray     # int64 (n+1,) CSR into nb_idx
+    nb_idx: np.ndarray       # int32 (2p,) partners, per star
+    vox_h: float
+    vox_g: int
+    vox_start: np.ndarray    # int64 (g³+1,)
+    vox_stars: np.ndarray    # int32 (n,)
+
+    def __len__(self) -> int:
+        return int(self.ids.shape[0])
+
+    @property
+    def n_pairs(self) -> int:
+        return int(self.pair_theta.shape[0])
+
+    def neighbours(self, i: int) -> np.ndarray:
+        """Navigation-star indexes within ``max_sep`` of star ``i``."""
+        return self.nb_idx[self.nb_start[i]:self.nb_start[i + 1]]
+
+    def cone(self, center: np.ndarray, radius: float, mag_max: float = np.inf) -> np.ndarray:
+        """Indexes of the stars within ``radius`` (rad) of ``center`` (ICRS) and V ≤ ``mag_max``."""
+        c = np.asarray(center, dtype=np.float64)
+        return cone_query(self.vectors, self.vmag, self.vox_start, self.vox_stars, self.vox_h,
+                          self.vox_g, c / np.linalg.norm(c), float(radius), float(mag_max))
+
+
+def select_navigation_stars(vectors: np.ndarray, per_field: int, thin_radius: float,
+                            double_sep: float = 0.0) -> np.ndarray:
+    """Indexes (ascending) of the navigation stars of a catalog sorted by V.
+
+    A star with a brighter star closer than ``double_sep`` (rad) is dropped (an unresolved
+    double: the sensor sees one spot, centred near the brighter). Then, brightest first,
+    a star is kept only while fewer than ``per_field`` kept stars lie within
+    ``thin_radius`` (``per_field`` 0: no thinning).
+    """
+    from scipy.spatial import cKDTree
+
+    n = vectors.shape[0]
+    alive = np.ones(n, dtype=bool)
+    if double_sep > 0.0:
+        close = cKDTree(vectors).query_pairs(2.0 * math.sin(double_sep / 2.0), output_type="ndarray")
+        if close.size:
+            alive[np.max(close, axis=1)] = False
+    if per_field <= 0:
+        return np.flatnonzero(alive)
+    chord = 2.0 * math.sin(thin_radius / 2.0)
+    near = cKDTree(vectors).query_ball_point(vectors, chord, workers=1)
+    kept = np.zeros(n, dtype=bool)
+    for i in range(n):
+        if not alive[i]:
+            continue
+        nb = near[i]
+        if np.count_nonzero(kept[nb]) < per_field:
+            kept[i] = True
+    return np.flatnonzero(kept)
+
+
+def star_pairs(vectors: np.ndarray, max_sep: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """All pairs closer than ``max_sep`` (rad): ``(theta ascending, a, b)``."""
+    from scipy.spatial import cKDTree
+
+    chord = 2.0 * math.sin(max_sep / 2.0)
+    pairs = cKDTree(vectors).query_pairs(chord, output_type="ndarray")
+    a = pairs[:, 0].astype(np.int32)
+    b = pairs[:, 1].astype(np.int32)
+    dots = np.einsum("ij,ij->i", vectors[a], vectors[b])
+    theta = np.arccos(np.clip(dots, -1.0, 1.0))
+    order = np.argsort(theta, kind="stable")
+    return theta[order], a[order], b[order]
+
+
+def neighbour_table(n: int, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """CSR (start, idx) of each star's pair partners."""
+    src = np.concatenate([a, b])
+    dst = np.concatenate([b, a])
+    order = np.argsort(src, kind="stable")
+    start = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(np.bincount(src, minlength=n), out=start[1:])
+    return start, np.ascontiguousarray(dst[order], dtype=np.int32)
+
+
+def voxel_grid(vectors: np.ndarray, h: float) -> tuple[int, np.ndarray, np.ndarray]:
+    """Voxel CSR of unit vectors: ``(g, start (g³+1,), stars)``."""
+    g = int(math.ceil(2.0 / h)) + 1
+    cell = _voxel_cells(vectors, h, g)
+    order = np.argsort(cell, kind="stable")
+    start = np.zeros(g ** 3 + 1, dtype=np.int64)
+    np.cumsum(np.bincount(cell, minlength=g ** 3), out=start[1:])
+    return g, start, order.astype(np.int32)
+
+
+def _voxel_cells(vectors, h, g):
+    ijk = np.clip(np.floor((vectors + 1.0) / h).astype(np.int64), 0, g - 1)
+    return (ijk[:, 0] * g + ijk[:, 1]) * g + ijk[:, 2]
+
+
+@njit(cache=True)
+def cone_query(vectors, vmag, vox_start, vox_stars, h, g, center, radius, mag_max):
+    """Star indexes within ``radius`` of unit ``center`` with vmag ≤ ``mag_max`` (ascending V)."""
+    chord = 2.0 * np.sin(radius / 2.0)
+    cosr = np.cos(radius)
+    lo = np.empty(3, dtype=np.int64)
+    hi = np.empty(3, dtype=np.int64)
+    for d in range(3):
+        lo[d] = max(0, int(np.floor((center[d] - chord + 1.0) / h)))
+        hi[d] = min(g - 1, int(np.floor((center[d] + chord + 1.0) / h)))
+    cap = 64
+    out = np.empty(cap, dtype=np.int64)
+    n = 0
+    for i in range(lo[0], hi[0] + 1):
+        for j in range(lo[1], hi[1] + 1):
+            for k in range(lo[2], hi[2] + 1):
+                c = (i * g + j) * g + k
+                for p in range(vox_start[c], vox_start[c + 1]):
+                    s = vox_stars[p]
+                    if vmag[s] > mag_max:
+                        continue
+                    v = vectors[s]
+                    if v[0] * center[0] + v[1] * center[1] + v[2] * center[2] >= cosr:
+                        if n == cap:
+                            cap *= 2
+                            bigger = np.empty(cap, dtype=np.int64)
+                            bigger[:n] = out[:n]
+                            out = bigger
+                        out[n] = s
+                        n += 1
+    res = np.sort(out[:n])
+    return res
+
+
+def build_index(catalog, max_sep_deg: float, per_field: int = 0, thin_radius_deg: float | None = None,
+                vox_h: float = 0.05, double_sep_deg: float = DOUBLE_SEP_DEG) -> StarIndex:
+    """Build the index of a :class:`gyrostar.catalog.StarCatalog` (no cache)."""
+    if not (math.isfinite(max_sep_deg) and 0.0 < max_sep_deg < 60.0):
+        raise ConfigError(f"index max_sep_deg must be in (0, 60), got {max_sep_deg!r}")
+    if per_field < 0:
+        raise ConfigError(f"index per_field must be ≥ 0, got {per_field!r}")
+    max_sep = math.radians(max_sep_deg)
+    thin = math.radians(thin_radius_deg) if thin_radius_deg is not None else max_sep / 2.0
+    keep = select_navigation_stars(catalog.vectors, 0, thin, math.radians(double_sep_deg))
+    vec = np.ascontiguousarray(catalog.vectors[keep])
+    nav = select_navigation_stars(vec, per_field, thin)
+    theta, a, b = star_pairs(vec[nav], max_sep)
+    a = nav[a].astype(np.int32)
+    b = nav[b].astype(np.int32)
+    if theta.shape[0] < 2:
+        raise ConfigError(f"catalog {catalog.name} has fewer than 2 star pairs within {max_sep_deg}°")
+    kv, m, q = kvector.build(theta)
+    nb_start, nb_idx = neighbour_table(vec.shape[0], a, b)
+    g, vstart, vstars = voxel_grid(vec, vox_h)
+    mag_limit = float(catalog.vmag[-1]) if len(catalog.vmag) else 0.0
+    is_nav = np.zeros(vec.shape[0], dtype=bool)
+    is_nav[nav] = True
+    return StarIndex(catalog.name, mag_limit, float(catalog.epoch), max_sep, int(per_field), is_nav,
+                     np.ascontiguousarray(catalog.ids[keep]), vec, np.ascontiguousarray(catalog.vmag[keep]),
+                     theta, a, b, kv, m, q, nb_start, nb_idx, float(vox_h), g, vstart, vstars)
+
+
+def index_path(catalog: str, mag_limit: float, epoch: float, max_sep_deg: float, per_field: int) -> Path:
+    """Cache file of an index."""
+    return cache_dir("starid") / (f"index_{catalog}_m{mag_limit:.3f}_e{epoch:.3f}_f{max_sep_deg:.4f}"
+                                  f"_n{per_field}_v{INDEX_VERSION}.npz")
+
+
+def load_index(catalog: str = "hip2", mag_limit: float = 6.5, max_sep_deg: float = 14.2,
+               per_field: int = 0, epoch: float = 2025.0) -> StarIndex:
+    """The index of ``catalog`` to ``mag_limit`` for pairs within ``max_sep_deg``, cached."""
+    from ..catalog import load_catalog
+
+    path = index_path(catalog, float(mag_limit), float(epoch), float(max_sep_deg), int(per_field))
+    if path.exists():
+        try:
+            with np.load(path) as z:
+                f = {k: z[k] for k in z.files}
+            return StarIndex(catalog, float(f["mag_limit"]), float(f["epoch"]), float(f["max_sep"]),
+                             int(f["per_field"]), f["is_nav"], f["ids"], f["vectors"], f["vmag"], f["pair_theta"],
+                             f["pair_a"], f["pair_b"], f["kv"], float(f["kv_m"]), float(f["kv_q"]),
+                             f["nb_start"], f["nb_idx"], float(f["vox_h"]), int(f["vox_g"]),
+                             f["vox_start"], f["vox_stars"])
+        except (OSError, KeyError, ValueError):
+            path.unlink(missing_ok=True)  # corrupt cache: rebuild below
+    cat = load_catalog(catalog, float(mag_limit), float(epoch))
+    idx = build_index(cat, float(max_sep_deg), int(per_field))
+    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".npz")
+    os.close(fd)
+    arrays = {f.name: getattr(idx, f.name) for f in dataclasses.fields(idx) if f.name != "catalog"}
+    np.savez(tmp, **arrays)
+    os.replace(tmp, path)
+    return idx

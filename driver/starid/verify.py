@@ -1,0 +1,99 @@
+"""Verification of an identification by QUEST residuals: a wrong match is never kept silently.
+
+Given measured body unit vectors ``b`` (n, 3), navigation-star vectors ``ref`` and a match
+``match`` (n,) (navigation-star index, -1 for none), :func:`verify_matches` solves QUEST on
+the matched pairs, measures each residual angle ∠(b_i, A(q) r_i) (rad) and, while the
+worst exceeds ``tol``, drops it and solves again. At least two stars must survive, and
+(for two stars) their measured and catalog separations must agree within ``tol``.
+The result is ``(q, match, n_ok, max_residual)``; ``n_ok < 2`` means rejected (``match``
+then all -1). Same conventions as :func:`gyrostar.core.quest.quest` (q ICRS → body).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from ..attitude import quat_to_dcm
+from ..core.quest import quest
+
+
+@njit(cache=True)
+def residuals(q, b, ref, match):
+    """Residual angle (rad) of each matched star (0 for unmatched)."""
+    a = quat_to_dcm(q)
+    res = np.zeros(b.shape[0])
+    for i in range(b.shape[0]):
+        s = match[i]
+        if s < 0:
+            continue
+        p = a @ ref[s]
+        d = b[i, 0] * p[0] + b[i, 1] * p[1] + b[i, 2] * p[2]
+        res[i] = np.arccos(min(1.0, max(-1.0, d)))
+    return res
+
+
+@njit(cache=True)
+def solve(b, ref, match):
+    """QUEST attitude (ICRS → body) on the matched pairs (equal weights)."""
+    m = 0
+    for i in range(match.shape[0]):
+        if match[i] >= 0:
+            m += 1
+    bb = np.empty((m, 3))
+    rr = np.empty((m, 3))
+    k = 0
+    for i in range(match.shape[0]):
+        if match[i] >= 0:
+            bb[k] = b[i]
+            rr[k] = ref[match[i]]
+            k += 1
+    q, _ = quest(bb, rr, np.ones(m))
+    return q
+
+
+@njit(cache=True)
+def verify_matches(b, ref, match, tol):
+    """QUEST + residual test with iterative rejection. Returns ``(q, match, n_ok, max_res)``."""
+    out = match.copy()
+    q = np.array([0.0, 0.0, 0.0, 1.0])
+    # a catalog star may explain one measured star only
+    for i in range(out.shape[0]):
+        for j in range(i + 1, out.shape[0]):
+            if out[i] >= 0 and out[i] == out[j]:
+                out[i] = -1
+                out[j] = -1
+    while True:
+        n = 0
+        for i in range(out.shape[0]):
+            if out[i] >= 0:
+                n += 1
+        if n < 2:
+            out[:] = -1
+            return q, out, 0, np.inf
+        q = solve(b, ref, out)
+        res = residuals(q, b, ref, out)
+        worst = -1
+        wres = 0.0
+        for i in range(out.shape[0]):
+            if out[i] >= 0 and res[i] > wres:
+                wres = res[i]
+                worst = i
+        if wres <= tol:
+            if n == 2:
+                # two stars: only their separation is a real check
+                i0 = -1
+                i1 = -1
+                for i in range(out.shape[0]):
+                    if out[i] >= 0:
+                        if i0 < 0:
+                            i0 = i
+                        else:
+                            i1 = i
+                tb = np.arccos(min(1.0, max(-1.0, b[i0] @ b[i1])))
+                tr = np.arccos(min(1.0, max(-1.0, ref[out[i0]] @ ref[out[i1]])))
+                if abs(tb - tr) > tol:
+                    out[:] = -1
+                    return q, out, 0, np.inf
+            return q, out, n, wres
+        out[worst] = -1
