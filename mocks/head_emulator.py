@@ -366,13 +366,14 @@ class HeadEmulator:
 
     def _serve(self) -> None:
         buf = bytearray()
+        fd = self.master
         while not self._stop.is_set():
             try:
-                r, _, _ = select.select([self.master], [], [], 0.05)
-                if not r:
+                r, _, _ = select.select([fd], [], [], 0.05)
+                if not r or self._stop.is_set():
                     continue
-                data = os.read(self.master, 65536)
-            except OSError:
+                data = os.read(fd, 65536)
+            except (OSError, ValueError):
                 return
             if not data:
                 return

@@ -1,0 +1,271 @@
+"""One head-client suite, run against the Python head emulator and the firmware host program.
+
+Both legs are real byte streams: each backend serves a pseudo-terminal, the client opens it
+with pyserial (SerialLink). Truth: the sensor image each backend reads windows from.
+"""
+
+import struct
+import time
+
+import numpy as np
+import pytest
+from cobs import cobs
+from gyrostar.attitude import quat_from_boresight
+from gyrostar.head import HeadClient
+from gyrostar.protocol import MsgType, PixelFormat, crc32c, encode_frame
+from gyrostar.protocol import errors as perr
+from gyrostar.protocol.defs import LIMITS, PING_MAX
+from gyrostar.protocol.payloads import encode_request, encode_spans
+from gyrostar.transport import SerialLink
+
+Q0 = quat_from_boresight(np.radians(83.8), np.radians(-5.4), 0.0)  # Orion: bright stars in view
+
+
+@pytest.fixture(scope="module")
+def sky():
+    from gyrostar.catalog import load_catalog
+    from gyrostar.mocks.sky import Sky
+
+    return Sky(load_catalog("hip2", 7.5), "xing2012", seed=3)
+
+
+class EmulatorLeg:
+    name = "emulator"
+
+    def __init__(self, sky):
+        from gyrostar.mocks.head_emulator import ConstantRateScene, HeadEmulator
+
+        self.em = HeadEmulator(sky, ConstantRateScene(Q0), mcu_offset_us=987_654_321, drift_ppm=0.0, noise=False)
+        self._images = {}
+        self.image = self.expected(LIMITS["exposure_default_us"])
+        self.path = self.em.start()
+
+    def expected(self, exposure_us):
+        """The noiseless frame of the static scene at this exposure (what the emulator renders)."""
+        if exposure_us not in self._images:
+            from gyrostar.mocks.sky import Sky
+
+            s = Sky(self.em.sky.catalog, self.em.sky.preset.with_exposure(exposure_us * 1e-6), seed=self.em.sky.seed)
+            self._images[exposure_us] = np.minimum(s.render_frame(Q0, np.zeros(3), noise=False)[0], 0x3FF)
+        return self._images[exposure_us]
+
+    def true_offset_us(self, t):
+        return self.em.mcu_offset_us_at(t)
+
+    def close(self):
+        self.em.stop()
+
+
+class FirmwareLeg:
+    name = "firmware"
+
+    def __init__(self, sky):
+        from gyrostar.mocks.firmware_host import FirmwareHost
+
+        self.fw = FirmwareHost(sky.camera.width_px, sky.camera.height_px, planes=1)
+        img, _ = sky.render_frame(Q0, np.zeros(3), frame=1, noise=True)
+        self.fw.pixels.write_frame(img)
+        self.image = np.minimum(img, 0x3FF)
+        self.path = self.fw.start()
+
+    def expected(self, exposure_us):
+        return self.image  # the pixel file holds one frame whatever the exposure
+
+    def true_offset_us(self, t):
+        return 0.0  # the host program's MCU clock is CLOCK_MONOTONIC, as time.monotonic
+
+    def close(self):
+        self.fw.close()
+
+
+def _firmware_built():
+    from gyrostar.mocks.firmware_host import is_built
+
+    return is_built()
+
+
+@pytest.fixture(scope="module", params=["emulator", "firmware"])
+def leg(request, sky):
+    if request.param == "firmware" and not _firmware_built():
+        pytest.skip("firmware host program not built (make -C firmware host)")
+    backend = EmulatorLeg(sky) if request.param == "emulator" else FirmwareLeg(sky)
+    yield backend
+    backend.close()
+
+
+@pytest.fixture
+def head(leg):
+    link = SerialLink(leg.path)
+    client = HeadClient(link, timeout=1.0, retries=1)
+    client.reset()
+    yield client
+    link.close()
+
+
+def spans_grid(n_windows=10, rows=12, width=16, row0=300):
+    return np.array([[w, row0 + r, 60 * w + 5, 60 * w + 5 + width] for w in range(n_windows) for r in range(rows)],
+                    np.int32)
+
+
+def test_ping_echo_and_limits(head):
+    for echo in (b"", b"\x00\x01\x00", bytes(range(256))[:PING_MAX]):
+        assert head.ping(echo) < 0.5
+    with pytest.raises(perr.PayloadLengthError) as exc:
+        head.request(MsgType.PING, bytes(PING_MAX + 1))
+    assert exc.value.detail == PING_MAX + 1 and "PING" in str(exc.value)
+
+
+def test_get_info_matches_sensor(head, leg):
+    info = head.get_info()
+    assert (info["width"], info["height"]) == leg.image.shape[::-1]
+    assert info["proto_version"] == 1 and info["bits"] == 10 and info["planes"] == 1
+    for key in ("max_windows", "max_spans", "max_window_pixels", "pixel_budget", "frame_chunk_max"):
+        assert info[key] == LIMITS[key]
+
+
+def test_exposure_and_gain(head):
+    assert head.set_exposure(5000) == 5000
+    assert head.set_gain(32) == 32
+    with pytest.raises(perr.ExposureRangeError) as exc:
+        head.set_exposure(LIMITS["exposure_max_us"] + 1)
+    assert exc.value.detail == LIMITS["exposure_max_us"] + 1
+    with pytest.raises(perr.GainRangeError):
+        head.set_gain(LIMITS["gain_min_x16"] - 1)
+    assert head.set_exposure(LIMITS["exposure_min_us"]) == LIMITS["exposure_min_us"]
+
+
+def test_windows_capture_pixels_and_times(head, leg):
+    spans = spans_grid()
+    rep = head.set_windows(spans)
+    assert rep == {"n_windows": 10, "n_spans": len(spans), "n_pixels": int((spans[:, 3] - spans[:, 2]).sum())}
+    head.set_exposure(20_000)
+    head.sync(16)
+    for fmt in (PixelFormat.PACKED10, PixelFormat.U16):
+        t_before = time.monotonic()
+        cap = head.capture(pixel_format=fmt)
+        t_after = time.monotonic()
+        assert cap.exposure_us == 20_000 and cap.t_end_us - cap.t_start_us >= 20_000
+        assert t_after - t_before >= 0.020  # the exposure takes its time
+        assert t_before - 0.002 < cap.t_mid_host < t_after  # mid-time mapped into host time
+        assert [w.window_id for w in cap.windows] == list(range(10))
+        image = leg.expected(cap.exposure_us)
+        for w in cap.windows:
+            rows = spans[spans[:, 0] == w.window_id]
+            expect = np.concatenate([image[r, c0:c1] for _, r, c0, c1 in rows])
+            assert np.array_equal(w.pixels, expect)
+            assert w.sum == int(expect.sum())
+
+
+def test_window_pages_when_one_payload_is_not_enough(head, leg):
+    spans = spans_grid(n_windows=8, rows=32, width=32, row0=100)  # 8 × 1024 px = whole pixel budget
+    head.set_windows(spans)
+    cap = head.capture(pixel_format=PixelFormat.U16)  # 2 KiB per window: several pages
+    assert len(cap.windows) == 8 and head.stats["requests"] >= 4
+    got = np.concatenate([w.pixels for w in cap.windows])
+    assert np.array_equal(got, np.concatenate([leg.image[r, c0:c1] for _, r, c0, c1 in spans]))
+
+
+@pytest.mark.parametrize("bad, error, detail", [
+    ([[0, 2000, 0, 10]], perr.SpanOutsideError, 0),
+    ([[0, 5, 0, 10], [0, 6, 10, 10]], perr.SpanEmptyError, 1),
+    ([[1, 5, 0, 10], [0, 6, 0, 10]], perr.SpanOrderError, 1),
+    ([[0, 5, 0, 10], [0, 5, 20, 30]], perr.SpanOrderError, 1),
+    ([[0, r, 0, 100] for r in range(21)], perr.WindowTooLargeError, 20),
+    ([[w, 0, 0, 1] for w in range(65)], perr.WindowCountError, 64),
+    ([[w, r, 0, 1000] for w in range(9) for r in range(2)], perr.PixelBudgetError, 8),
+])
+def test_window_rejections(head, bad, error, detail):
+    head.set_windows(spans_grid(2, 2))
+    with pytest.raises(error) as exc:
+        head.set_windows(np.array(bad))
+    assert exc.value.detail == detail and exc.value.code.name in str(exc.value)
+    assert head.set_windows(spans_grid(2, 2))["n_windows"] == 2  # a rejected set changed nothing
+
+
+def test_request_rejections(head):
+    with pytest.raises(perr.NoWindowsError):
+        head.capture()
+    head.set_windows(spans_grid(2, 2))
+    with pytest.raises(perr.NoCaptureError):
+        head.window_data()
+    head.capture(fetch=False)
+    with pytest.raises(perr.PixelFormatError):
+        head.request(MsgType.WINDOW_DATA, encode_request(MsgType.WINDOW_DATA, start=0, pixel_format=7))
+    with pytest.raises(perr.WindowIndexError):
+        head.request(MsgType.WINDOW_DATA, encode_request(MsgType.WINDOW_DATA, start=2, pixel_format=0))
+    with pytest.raises(perr.DarkUnavailableError):
+        head.capture(dark=True)
+    with pytest.raises(perr.SpanCountError):
+        head.request(MsgType.SET_WINDOWS, encode_request(MsgType.SET_WINDOWS, n_spans=LIMITS["max_spans"] + 1))
+    with pytest.raises(perr.SpansLengthError):
+        head.request(MsgType.SET_WINDOWS, encode_spans(spans_grid(1, 2))[:-8])
+    with pytest.raises(perr.PayloadLengthError):
+        head.request(MsgType.TELEMETRY, b"\x00")
+    ff = dict(offset=0, count=16, pixel_format=0, plane=0)
+    for change, error in ((dict(count=0), perr.ChunkSizeError), (dict(count=LIMITS["frame_chunk_max"] + 1),
+                                                                   perr.ChunkSizeError),
+                          (dict(offset=1024 * 1024 - 8), perr.FrameRangeError), (dict(plane=2), perr.BadPlaneError),
+                          (dict(plane=1), perr.DarkUnavailableError), (dict(pixel_format=2), perr.PixelFormatError)):
+        with pytest.raises(error):
+            head.request(MsgType.FULL_FRAME, encode_request(MsgType.FULL_FRAME, **{**ff, **change}))
+
+
+def _raw_frame(version, msg_type, seq, length, payload):
+    raw = struct.pack("<BBHH", version, msg_type, seq, length) + payload
+    return cobs.encode(raw + struct.pack("<I", crc32c(raw))) + b"\x00"
+
+
+def _reply_to(head, data, seq):
+    head.link.send(data)
+    t_end = time.monotonic() + 1.0
+    while time.monotonic() < t_end:
+        got = head.link.recv(t_end - time.monotonic())
+        if got is None:
+            return None
+        from gyrostar.protocol import decode_frame
+
+        frame = decode_frame(got[1])
+        if frame.seq == seq:
+            return frame
+    return None
+
+
+def test_link_level_rejections_and_corrupt_frames(head):
+    from gyrostar.protocol.payloads import decode_reply
+
+    for data, error in ((_raw_frame(2, MsgType.PING, 900, 0, b""), perr.BadVersionError),
+                        (_raw_frame(1, MsgType.PING, 900, 5, b"ab"), perr.FrameLengthError),
+                        (_raw_frame(1, 0x42, 900, 0, b""), perr.UnknownTypeError)):
+        frame = _reply_to(head, data, 900)
+        with pytest.raises(error):
+            decode_reply(frame)
+    before = head.telemetry()
+    good = bytearray(encode_frame(MsgType.PING, 901, b"abc"))
+    good[3] ^= 0x10  # a flipped bit: the CRC fails, no reply
+    assert _reply_to(head, bytes(good), 901) is None
+    after = head.telemetry()
+    assert after["crc_errors"] == before["crc_errors"] + 1 and after["rejected"] == before["rejected"]
+
+
+def test_full_frame_streamed(head, leg):
+    img, _ = head.full_frame(pixel_format=PixelFormat.PACKED10)
+    assert np.array_equal(img, leg.image)
+
+
+def test_time_sync_offset(head, leg):
+    head.sync(32)
+    est = head.sync_state.offset_at(time.monotonic())
+    assert abs(est - leg.true_offset_us(time.monotonic())) < 200.0  # pty + reader thread, no injected jitter
+
+
+def test_telemetry_and_reset(head):
+    head.set_exposure(777)
+    head.set_windows(spans_grid(1, 1))
+    head.capture(fetch=False)
+    tm = head.telemetry()
+    assert tm["captures"] == 1 and tm["rx_frames"] >= 4
+    head.reset()
+    with pytest.raises(perr.NoWindowsError):
+        head.capture()
+    head.set_windows(spans_grid(1, 1))
+    assert head.capture(fetch=False).exposure_us == LIMITS["exposure_default_us"]
