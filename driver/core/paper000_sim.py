@@ -1,0 +1,372 @@
+"""Paper 000's simulations (Xing et al. 2012, sim1..sim4) on the simulator, three ways.
+
+One Mv 5 star (``xing2012`` preset: F = 100 mm, D = 80 mm, T = 0.85, 10 ms exposures at
+100 Hz, 1024² × 15 µm) is tracked frame by frame by
+
+* (A) ``fixed_window`` — the traditional method: a k×k window centred on the last
+  centroid, thresholded centre of gravity;
+* (B) ``gyro_window`` — paper 000 §2: the union of k×k squares along the trajectory
+  predicted from the last centroid and the raw gyro rates of the exposure, CoG;
+* (C) ``ekf`` — paper 000 §3: the spot EKF (predicted at every 400 Hz gyro sample) sets
+  the trajectory window from its estimate and drift-corrected rates, and is updated with
+  the window's centroid at mid-exposure (the centroid of a smeared spot is the
+  exposure-averaged position), then re-propagated to the present.
+
+The windows are read out by the simulator (``gyrostar.mocks.sky.Sky.readout_windows``)
+from the true attitude (``gyrostar.mocks.trajectory``). Gyro samples are the mean true
+rate over each 2.5 ms interval (so attitude truth and gyro agree exactly) plus the
+drift and white noise of ``gyrostar.mocks.gyro_truth`` when available, else of eq. 3.1
+with the noise density given. The rotation carries a star across the 8.8° field in
+about a second at 8 °/s: when the tracked star nears the edge, a new Mv 5 star entering
+on the far side is acquired (all three methods start from the same acquisition
+centroid on a 16×16 window; the EKF keeps its drift estimate through the reset path).
+
+A frame is *lost* by a method when its centroid is missing or more than ``lost_px``
+from the truth (exposure-averaged centroid). Errors are px, per axis.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from ..attitude import quat_conj, quat_from_boresight, quat_mult, quat_to_dcm
+from ..errors import ConfigError
+from .centroid import background_far, centroid_variance, cog, iwcog, iwcog_variance, suppress_isolated
+from .crlb import mortensen_crlb_px
+from .motion import MODEL_FIRST_ORDER, MODEL_PINHOLE, predict_trajectory, substeps_for
+from .spot_ekf import (
+    CHI2_2DOF_999,
+    spot_ekf_init,
+    spot_ekf_propagate,
+    spot_ekf_reset,
+    spot_ekf_update,
+)
+from .windows import concat_windows, fixed_window, trajectory_window
+
+DEG = math.pi / 180.0
+SCENARIOS = ("sim1", "sim2", "sim3", "sim4")
+
+
+@dataclasses.dataclass(frozen=True)
+class Paper000Config:
+    """Settings of one run (units in the names)."""
+
+    scenario: str = "sim2"
+    max_rate_dps: float | None = None      # sim1 only: rate at the end of the ramp (paper: 8)
+    seed: int = 0
+    vmag: float = 5.0
+    window_k: int = 6                      # paper: 6×6 squares
+    fixed_k: int = 6                       # traditional window side
+    gyro_hz: float = 400.0
+    drift_dps: tuple[float, float, float] = (0.02, -0.02, 0.02)  # paper: 0.02 °/s
+    gyro_noise_dps_rthz: float = 0.003     # white rate noise density used when gyro_truth is absent
+    bias_rw_dps_rts: float = 1e-5          # drift random-walk density the EKF assumes
+    centroid: str = "iwcog"                # C's centroid: "iwcog" or "cog"
+    model: str = "pinhole"                 # C's motion model: "pinhole" or "first_order"
+    threshold_sigma: float = 3.0
+    iwcog_sigma_px: float = 1.0
+    lost_px: float = 1.0
+    isolated_neighbours: int = 1           # drop above-threshold pixels with fewer such neighbours (0: off)
+    spike_ratio: float = 4.0               # drop pixels brighter than this × their brightest neighbour (0: off)
+    start_xy_px: tuple[float, float] = (150.0, 100.0)
+    edge_px: float = 430.0                 # hand over when the star is this far from the centre
+
+    def validate(self) -> None:
+        if self.scenario not in SCENARIOS:
+            raise ConfigError(f"unknown scenario '{self.scenario}' (known: {', '.join(SCENARIOS)})")
+        if self.max_rate_dps is not None and not 0 < self.max_rate_dps <= 60:
+            raise ConfigError("--max-rate-dps must be in (0, 60] °/s")
+        if self.centroid not in ("iwcog", "cog"):
+            raise ConfigError("centroid must be 'iwcog' or 'cog'")
+        if self.model not in ("pinhole", "first_order"):
+            raise ConfigError("model must be 'pinhole' or 'first_order'")
+        if not 2 <= self.window_k <= 32 or not 2 <= self.fixed_k <= 64:
+            raise ConfigError("window sizes must be 2..32 (trajectory) and 2..64 (fixed) px")
+
+
+def _profile(cfg: Paper000Config):
+    from ..mocks import trajectory
+
+    profile, n = trajectory.paper000(cfg.scenario)
+    if cfg.max_rate_dps is not None:
+        if cfg.scenario != "sim1":
+            raise ConfigError("--max-rate-dps applies to the sim1 ramp only")
+        profile = trajectory.Ramp((0.0, 0.0, 0.0), (cfg.max_rate_dps * DEG, 0.0, 0.0), 0.0,
+                                  (n - 1) / trajectory.PAPER000_RATE_HZ, n / trajectory.PAPER000_RATE_HZ)
+    return profile, n
+
+
+def _interval_rates(qs: np.ndarray, dt: float) -> np.ndarray:
+    """Constant body rates (m, 3) that carry qs[i] exactly to qs[i+1] in dt (rad/s)."""
+    out = np.empty((qs.shape[0] - 1, 3))
+    for i in range(out.shape[0]):
+        dq = quat_mult(qs[i + 1], quat_conj(qs[i]))
+        if dq[3] < 0:
+            dq = -dq
+        n = np.linalg.norm(dq[:3])
+        ang = 2.0 * math.atan2(n, dq[3])
+        out[i] = dq[:3] / n * ang / dt if n > 0 else 0.0
+    return out
+
+
+def _gyro(true_rates: np.ndarray, dt: float, cfg: Paper000Config, rng: np.random.Generator):
+    """Measured rates (m, 3) and the true drift (3,) rad/s."""
+    drift = np.asarray(cfg.drift_dps) * DEG
+    try:
+        from ..mocks import gyro_truth  # noqa: F401
+    except ImportError:
+        gyro_truth = None
+    if gyro_truth is not None and hasattr(gyro_truth, "measure_paper000"):
+        meas, drift = gyro_truth.measure_paper000(true_rates, dt, drift, cfg.seed)
+        return np.ascontiguousarray(meas), np.asarray(drift)
+    sigma = cfg.gyro_noise_dps_rthz * DEG / math.sqrt(dt)
+    return true_rates + drift + rng.standard_normal(true_rates.shape) * sigma, drift
+
+
+def _project(q, s, f, cx, cy):
+    b = quat_to_dcm(q) @ s
+    return np.array([cx + f * b[0] / b[2], cy + f * b[1] / b[2]])
+
+
+def _plan_stars(qs_frames, f, cx, cy, cfg, mean_rates):
+    """Star vectors (ICRS) and, per frame, which star is tracked (hand over near the edge)."""
+    def direction(xy, q):
+        v = np.array([xy[0], xy[1], f])
+        return quat_to_dcm(q).T @ (v / np.linalg.norm(v))
+
+    stars = [direction(cfg.start_xy_px, qs_frames[0])]
+    which = np.zeros(len(qs_frames), dtype=np.int64)
+    for k in range(len(qs_frames)):
+        uv = _project(qs_frames[k], stars[-1], f, cx, cy) - (cx, cy)
+        w = mean_rates[k]
+        vel = np.array([w[2] * uv[1] - w[1] * f, -w[2] * uv[0] + w[0] * f])
+        if np.hypot(*uv) > cfg.edge_px and vel @ uv > 0:
+            d = vel / np.linalg.norm(vel)
+            stars.append(direction(-d * (cfg.edge_px - 40.0), qs_frames[k]))
+        which[k] = len(stars) - 1
+    return np.array(stars), which
+
+
+def run_paper000(cfg: Paper000Config, progress=None) -> dict:
+    """Run one scenario; returns per-frame arrays and the summary figures (see module doc)."""
+    cfg.validate()
+    from ..catalog import StarCatalog
+    from ..mocks import trajectory
+    from ..mocks.sky import Sky
+
+    rng = np.random.default_rng(cfg.seed)
+    from ..mocks.sim_preset import load_preset
+
+    preset = load_preset("xing2012")
+    cam = preset.camera
+    f, cx, cy = cam.focal_length_px, cam.cx_px, cam.cy_px
+    W, H = cam.width_px, cam.height_px
+    t_exp = preset.detector.exposure_s
+    frame_dt = 1.0 / trajectory.PAPER000_RATE_HZ
+    spf = int(round(cfg.gyro_hz * frame_dt))  # gyro samples per frame
+    if abs(spf / cfg.gyro_hz - frame_dt) > 1e-9 or abs(t_exp - frame_dt) > 1e-9:
+        raise ConfigError("the paper-000 runs need an exposure equal to the frame period and an integer "
+                          "number of gyro samples per frame")
+    half = spf // 2
+    dt = 1.0 / cfg.gyro_hz
+    profile, n_frames = _profile(cfg)
+    q0 = quat_from_boresight(1.2, 0.4, 0.3)
+    t = np.arange(n_frames * spf + 1) * dt
+    qs = trajectory.integrate(q0, profile, t)
+    true_rates = _interval_rates(qs, dt)
+    meas, drift = _gyro(true_rates, dt, cfg, rng)
+    frame_rates = true_rates.reshape(n_frames, spf, 3).mean(axis=1)
+    stars, which = _plan_stars(qs[:-1:spf], f, cx, cy, cfg, frame_rates)
+    cat = StarCatalog("paper000", np.arange(len(stars), dtype=np.int64), stars,
+                      np.full(len(stars), cfg.vmag), 2016.0)
+    sky = Sky(cat, preset, seed=cfg.seed)
+    e_per_dn = preset.detector.gain_e_per_adu
+    model = MODEL_PINHOLE if cfg.model == "pinhole" else MODEL_FIRST_ORDER
+    sig_rate = cfg.gyro_noise_dps_rthz * DEG / math.sqrt(dt)
+    sig_brw = cfg.bias_rw_dps_rts * DEG
+    k_tr, k_fx = cfg.window_k, cfg.fixed_k
+
+    err = {m: np.full((n_frames, 2), np.nan) for m in ("fixed_window", "gyro_window", "ekf")}
+    lost = {m: np.zeros(n_frames, dtype=bool) for m in err}
+    acq = np.zeros(n_frames, dtype=bool)
+    bias_est = np.full((n_frames, 3), np.nan)
+    win_px = {m: np.zeros(n_frames, dtype=np.int64) for m in err}
+    ekf_sigma = np.full((n_frames, 2), np.nan)
+    nis_log = np.full(n_frames, np.nan)
+    X = P = None
+    a_uv = b_uv = None
+    bg = bg_sig = np.nan
+    rejects = 0
+    n_resets = 0
+    for k in range(n_frames):
+        j0 = k * spf
+        exp = sky.expose(qs[j0], quats=qs[j0:j0 + spf + 1])
+        sid = int(np.flatnonzero(exp.truth.ids == which[k])[0])
+        truth_uv = exp.truth.uv[sid]
+        truth_mid = _project(exp.truth.q_mid, stars[which[k]], f, cx, cy)
+        if k == 0 or which[k] != which[k - 1]:
+            # acquisition: a 16×16 window on the catalog-predicted position
+            acq[k] = True
+            spans = fixed_window(truth_uv[0], truth_uv[1], 16, H, W, 0)
+            pix = sky.readout_windows(exp, spans, k).astype(np.float64)
+            bg, bg_sig, _ = background_far(spans, pix, truth_uv.reshape(1, 2), 4.0)
+            u, v, _, _ = cog(spans, pix, bg, bg + cfg.threshold_sigma * bg_sig)
+            if not np.isfinite(u):
+                raise ConfigError("acquisition failed: the star is not detectable in this preset")
+            a_uv = np.array([u, v])
+            b_uv = a_uv.copy()
+            if X is None:
+                X, P = spot_ekf_init(u - cx, v - cy, np.zeros(3), 0.5, 0.05 * DEG)
+            else:
+                spot_ekf_reset(X, P, u - cx, v - cy, 0.25, 0.25)
+                n_resets += 1
+            # bring the EKF from mid-exposure to the end of this frame
+            spot_ekf_propagate(X, P, meas[j0 + half:j0 + spf], dt, f, sig_rate, sig_brw, model)
+            bias_est[k] = X[2:]
+            if progress:
+                progress()
+            continue
+        g_frame = meas[j0:j0 + spf]
+        # (C) EKF: trajectory over the exposure from the estimate at exposure start
+        nsub = substeps_for(g_frame, dt, f, 0.5)
+        traj_c = predict_trajectory(X[0], X[1], g_frame, dt, X[2:].copy(), f, model, nsub)
+        traj_c[:, 0] += cx
+        traj_c[:, 1] += cy
+        spans_c = trajectory_window(traj_c, k_tr, H, W, 2)
+        # (B) from B's last centroid (mid of the previous exposure) with raw rates
+        g_b = meas[j0 - spf + half:j0 + spf]
+        nsub_b = substeps_for(g_b, dt, f, 0.5)
+        traj_b = predict_trajectory(b_uv[0] - cx, b_uv[1] - cy, g_b, dt, np.zeros(3), f, MODEL_FIRST_ORDER,
+                                    nsub_b)[(spf - half) * nsub_b:]
+        traj_b[:, 0] += cx
+        traj_b[:, 1] += cy
+        spans_b = trajectory_window(traj_b, k_tr, H, W, 1)
+        # (A) fixed square on A's last centroid
+        spans_a = fixed_window(a_uv[0], a_uv[1], k_fx, H, W, 0)
+        spans = concat_windows([spans_a, spans_b, spans_c])
+        pix = sky.readout_windows(exp, spans, k).astype(np.float64)
+        off = 0
+        parts = {}
+        for wid, name in ((0, "fixed_window"), (1, "gyro_window"), (2, "ekf")):
+            sel = spans[:, 0] == wid
+            s = np.ascontiguousarray(spans[sel])
+            npx = int(np.sum(s[:, 3] - s[:, 2]))
+            parts[name] = (s, pix[off:off + npx])
+            off += npx
+            win_px[name][k] = npx
+        # background: pixels of the gyro windows far from the predicted path, slowly averaged
+        for name, traj in (("gyro_window", traj_b), ("ekf", traj_c)):
+            s, p = parts[name]
+            m, sd, cnt = background_far(s, p, traj, 3.5)
+            if cnt >= 8:
+                bg = 0.95 * bg + 0.05 * m
+                bg_sig = 0.95 * bg_sig + 0.05 * sd
+        thr = bg + cfg.threshold_sigma * bg_sig
+        if cfg.isolated_neighbours > 0 or cfg.spike_ratio > 0:
+            for name in parts:
+                s, p = parts[name]
+                parts[name] = (s, suppress_isolated(s, p, bg, thr, cfg.isolated_neighbours, cfg.spike_ratio))
+        # (A)
+        s, p = parts["fixed_window"]
+        u, v, _, npix = cog(s, p, bg, thr)
+        if npix > 0:
+            a_uv = np.array([u, v])
+            err["fixed_window"][k] = a_uv - truth_uv
+        lost["fixed_window"][k] = npix == 0 or np.hypot(*(a_uv - truth_uv)) > cfg.lost_px
+        # (B)
+        s, p = parts["gyro_window"]
+        u, v, _, npix = cog(s, p, bg, thr)
+        if npix > 0:
+            b_uv = np.array([u, v])
+            err["gyro_window"][k] = b_uv - truth_uv
+        else:  # dead-reckon the last centroid to this exposure's mid-point
+            b_uv = traj_b[len(traj_b) // 2].copy()
+        lost["gyro_window"][k] = npix == 0 or np.hypot(*(b_uv - truth_uv)) > cfg.lost_px
+        # (C): propagate to mid-exposure, update there, re-propagate to the frame end
+        spot_ekf_propagate(X, P, g_frame[:half], dt, f, sig_rate, sig_brw, model)
+        s, p = parts["ekf"]
+        mean_xy = traj_c.mean(axis=0)
+        if cfg.centroid == "iwcog":
+            offsets = np.ascontiguousarray(traj_c[::max(1, nsub)] - mean_xy)
+            u, v, flux, _ = iwcog(s, p, bg, mean_xy[0], mean_xy[1], offsets, cfg.iwcog_sigma_px, 30, 1e-4)
+            ok = np.isfinite(u) and flux > cfg.threshold_sigma * bg_sig
+            if ok:
+                vu, vv = iwcog_variance(s, p, bg, u, v, offsets, cfg.iwcog_sigma_px, bg_sig, e_per_dn)
+        else:
+            u, v, flux, npix = cog(s, p, bg, thr)
+            ok = npix > 0
+            if ok:
+                vu, vv = centroid_variance(s, p, bg, thr, u, v, bg_sig, e_per_dn)
+        if ok:
+            accepted, nis = spot_ekf_update(X, P, u - cx, v - cy, vu, vv, CHI2_2DOF_999)
+            nis_log[k] = nis
+            if accepted:
+                rejects = 0
+            else:
+                rejects += 1
+                if rejects >= 3:  # persistent disagreement: trust the image, keep the drift
+                    spot_ekf_reset(X, P, u - cx, v - cy, vu, vv)
+                    n_resets += 1
+                    rejects = 0
+        est = X[:2] + (cx, cy)
+        err["ekf"][k] = est - truth_mid
+        ekf_sigma[k] = np.sqrt([P[0, 0], P[1, 1]])
+        lost["ekf"][k] = np.hypot(*(est - truth_mid)) > cfg.lost_px
+        spot_ekf_propagate(X, P, g_frame[half:], dt, f, sig_rate, sig_brw, model)
+        bias_est[k] = X[2:]
+        if progress:
+            progress()
+    return _summarise(cfg, preset, err, lost, acq, bias_est, drift, frame_rates, win_px, ekf_sigma, nis_log,
+                      n_resets, meas, true_rates, spf)
+
+
+def _summarise(cfg, preset, err, lost, acq, bias_est, drift, frame_rates, win_px, ekf_sigma, nis_log,
+               n_resets, meas, true_rates, spf) -> dict:
+    rate_dps = np.linalg.norm(frame_rates, axis=1) / DEG
+    use = ~acq
+    rms, rms_axes, lost_frac, max_rate = {}, {}, {}, {}
+    for m, e in err.items():
+        ok = use & ~lost[m] & np.isfinite(e[:, 0])
+        ea = e[ok]
+        rms_axes[m] = np.sqrt(np.mean(ea ** 2, axis=0)) if len(ea) else np.array([np.nan, np.nan])
+        rms[m] = float(np.sqrt(np.mean(ea ** 2))) if len(ea) else float("nan")
+        lost_frac[m] = float(np.mean(lost[m][use]))
+        bad = np.flatnonzero(use & lost[m])
+        max_rate[m] = float(rate_dps[use].max()) if len(bad) == 0 else float(
+            rate_dps[use & (rate_dps < rate_dps[bad].min())].max(initial=0.0))
+    berr = (bias_est - drift) / DEG
+    rel = np.abs(berr[:, :2]) / np.maximum(np.abs(drift[:2] / DEG), 1e-12)
+    within = np.all(rel <= 0.1, axis=1)
+    conv_s = float("nan")
+    idx = np.flatnonzero(~within)
+    if within[-1]:
+        conv_s = float((idx[-1] + 1) / 100.0) if len(idx) else 0.0
+    n_e = float(preset.star_electrons(cfg.vmag))
+    det = preset.detector
+    bg_e = preset.sky_electrons_per_px() + det.dark_current_e_s * det.exposure_s
+    crlb = mortensen_crlb_px(n_e, preset.optics.psf_sigma_px, 1.0, bg_e, det.read_noise_e)
+    return {
+        "scenario": cfg.scenario,
+        "frames": int(len(rate_dps)),
+        "max_rate_dps_profile": float(rate_dps.max()),
+        "rms_px": rms,
+        "rms_px_axes": {m: [float(x) for x in v] for m, v in rms_axes.items()},
+        "lost_fraction": {m: lost_frac[m] for m in ("fixed_window", "gyro_window")},
+        "lost_fraction_ekf": lost_frac["ekf"],
+        "max_rate_tracked_dps": max_rate,
+        "bias_error_dps": [float(x) for x in berr[-1]],
+        "bias_true_dps": [float(x) for x in drift / DEG],
+        "bias_xy_within_10pct_after_s": conv_s,
+        "crlb_px": float(crlb),
+        "ekf_to_crlb": float(rms["ekf"] / crlb),
+        "mean_window_px": {m: float(np.mean(v[use])) for m, v in win_px.items()},
+        "ekf_resets": int(n_resets),
+        "acquisitions": int(acq.sum()),
+        "settings": dataclasses.asdict(cfg),
+        "_series": {"err": err, "lost": lost, "acq": acq, "bias_est": bias_est, "drift": drift,
+                    "rate_dps": frame_rates / DEG, "ekf_sigma": ekf_sigma, "nis": nis_log,
+                    "meas_dps": meas / DEG, "spf": spf},
+    }
