@@ -169,7 +169,8 @@ def joint_update(X, P, active, z, r_var, gate, accepted, nis):
     for s in range(active.shape[0]):
         accepted[s] = 0
         nis[s] = np.nan
-        if active[s] == 0 or not (np.isfinite(z[s, 0]) and np.isfinite(z[s, 1])):
+        if active[s] == 0 or not (np.isfinite(z[s, 0]) and np.isfinite(z[s, 1]) and np.isfinite(r_var[s, 0])
+                                  and np.isfinite(r_var[s, 1])):
             continue
         i = 2 * s
         nu0 = z[s, 0] - X[i]

@@ -19,7 +19,8 @@ drift and white noise of ``gyrostar.mocks.gyro_truth`` when available, else of e
 with the noise density given. The rotation carries a star across the 8.8° field in
 about a second at 8 °/s: when the tracked star nears the edge, a new Mv 5 star entering
 on the far side is acquired (all three methods start from the same acquisition
-centroid on a 16×16 window; the EKF keeps its drift estimate through the reset path).
+centroid on a window of 2k-px squares along the path predicted from the catalog position,
+known to ~0.5 px, and the gyro; the EKF keeps its drift estimate through the reset path).
 
 A frame is *lost* by a method when its centroid is missing or more than ``lost_px``
 from the truth (exposure-averaged centroid). Errors are px, per axis.
@@ -208,12 +209,21 @@ def run_paper000(cfg: Paper000Config, progress=None) -> dict:
         truth_uv = exp.truth.uv[sid]
         truth_mid = _project(exp.truth.q_mid, stars[which[k]], f, cx, cy)
         if k == 0 or which[k] != which[k - 1]:
-            # acquisition: a 16×16 window on the catalog-predicted position
-            acq[k] = True
-            spans = fixed_window(truth_uv[0], truth_uv[1], 16, H, W, 0)
+            # acquisition: squares of 2k px along the path predicted from the catalog position
+            # at exposure start (attitude known to ~0.5 px) and the frame's gyro rates
+            p0 = _project(qs[j0], stars[which[k]], f, cx, cy) + rng.normal(0.0, 0.5, 2) - (cx, cy)
+            nsub = substeps_for(meas[j0:j0 + spf], dt, f, 0.5)
+            traj = predict_trajectory(p0[0], p0[1], meas[j0:j0 + spf], dt, np.zeros(3), f, MODEL_PINHOLE, nsub)
+            traj[:, 0] += cx
+            traj[:, 1] += cy
+            spans = trajectory_window(traj, 2 * k_tr, H, W, 0)
             pix = sky.readout_windows(exp, spans, k).astype(np.float64)
-            bg, bg_sig, _ = background_far(spans, pix, truth_uv.reshape(1, 2), 4.0)
-            u, v, _, _ = cog(spans, pix, bg, bg + cfg.threshold_sigma * bg_sig)
+            m, sd, cnt = background_far(spans, pix, traj, 4.0)
+            if k == 0 or cnt >= 8:
+                bg, bg_sig = m, sd
+            thr = bg + cfg.threshold_sigma * bg_sig
+            pix = suppress_isolated(spans, pix, bg, thr, cfg.isolated_neighbours, cfg.spike_ratio)
+            u, v, _, _ = cog(spans, pix, bg, thr)
             if not np.isfinite(u):
                 raise ConfigError("acquisition failed: the star is not detectable in this preset")
             a_uv = np.array([u, v])
@@ -222,7 +232,6 @@ def run_paper000(cfg: Paper000Config, progress=None) -> dict:
                 X, P = spot_ekf_init(u - cx, v - cy, np.zeros(3), 0.5, 0.05 * DEG)
             else:
                 spot_ekf_reset(X, P, u - cx, v - cy, 0.25, 0.25)
-                n_resets += 1
             # bring the EKF from mid-exposure to the end of this frame
             spot_ekf_propagate(X, P, meas[j0 + half:j0 + spf], dt, f, sig_rate, sig_brw, model)
             bias_est[k] = X[2:]

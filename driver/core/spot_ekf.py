@@ -146,10 +146,11 @@ def spot_ekf_update(X, P, zx, zy, r_var_x, r_var_y, gate):
     """Image update with centroid (zx, zy) px, H = [I₂ 0]; returns (accepted, NIS).
 
     The update is skipped (state untouched) when the normalised innovation squared
-    exceeds ``gate`` (χ², 2 dof; e.g. ``CHI2_2DOF_999``) or the measurement is not finite.
+    exceeds ``gate`` (χ², 2 dof; e.g. ``CHI2_2DOF_999``) or the measurement or its variance
+    is not finite.
     Joseph-form covariance update.
     """
-    if not (np.isfinite(zx) and np.isfinite(zy)):
+    if not (np.isfinite(zx) and np.isfinite(zy) and np.isfinite(r_var_x) and np.isfinite(r_var_y)):
         return False, np.inf
     nu0 = zx - X[0]
     nu1 = zy - X[1]
