@@ -136,6 +136,34 @@ class FaultyBus:
         return None
 
 
+def precise_wait(dt: float) -> None:
+    """Wait ``dt`` s: sleep for the bulk, spin for the last 2 ms (``time.sleep`` alone
+    overshoots sub-millisecond delays by ~60 µs, which would bias injected jitter)."""
+    end = time.perf_counter() + dt
+    if dt > 0.002:
+        time.sleep(dt - 0.002)
+    while time.perf_counter() < end:
+        pass
+
+
+class JitteredLink:
+    """A packet link whose sends are held back by :class:`ByteFaults` after being timestamped
+    (jitter on the host→head direction, as a real link adds it after the host's clock read)."""
+
+    def __init__(self, link, faults: ByteFaults):
+        self.link = link
+        self.faults = faults
+        self.url = getattr(link, "url", "?")
+
+    def send(self, data: bytes) -> float:
+        t = time.monotonic()
+        self.faults.write_through(self.link.send, data)
+        return t
+
+    def __getattr__(self, name):
+        return getattr(self.link, name)
+
+
 class ByteFaults:
     """Mutations applied to bytes on a link, deterministic for a given seed."""
 
@@ -169,13 +197,13 @@ class ByteFaults:
             self.injected["delayed"] += 1
         return d
 
-    def write_through(self, write, data: bytes, sleep=time.sleep) -> None:
+    def write_through(self, write, data: bytes, sleep=None) -> None:
         """Apply delay, then corruption/drops, then ``write`` the result (nothing if disconnected)."""
         if self.disconnected:
             return
         d = self.delay()
         if d > 0:
-            sleep(d)
+            (sleep or precise_wait)(d)
         data = self.mangle(data)
         if data:
             write(data)

@@ -284,7 +284,9 @@ class HeadEmulator:
         remaining = t0_host + self.exposure_us * 1e-6 - time.monotonic()
         if remaining > 0:
             time.sleep(remaining)
-        t1 = self.mcu_us()
+        t1_host = time.monotonic()
+        t1 = self.mcu_us(t1_host)
+        self.last_exposure_host = (t0_host, t1_host)  # truth for tests: exposure start/end, host s
         self.pixels = np.minimum(pixels, 0x3FF).astype(np.uint16)
         self.sums = [int(self.pixels[s].sum()) for s in self.window_slices]
         self.has_capture = True

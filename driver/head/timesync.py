@@ -6,10 +6,10 @@ monotonic, s) and MCU receive ``rx`` and transmit ``tx`` (MCU µs). As in NTP,
     offset θ = ((rx − t1) + (tx − t4)) / 2      (MCU − host, µs, at host time (t1 + t4)/2)
     delay  δ = (t4 − t1) − (tx − rx)            (round-trip link time, µs)
 
-Link jitter and queueing only ever add delay, and an exchange with little extra delay has
-little asymmetry, so :class:`ClockSync` keeps the last ``window`` exchanges, selects those
-whose delay is within ``slack_us`` of the smallest (at least ``min_points``), and fits
-``θ(t) = offset + drift·(t − t_ref)`` by least squares: the offset (µs) and the drift
+Link jitter and queueing only ever add delay, and an exchange whose delay exceeds the
+smallest by ``e`` has an offset error of at most ``e/2``, so :class:`ClockSync` keeps the
+last ``window`` exchanges and fits ``θ(t) = offset + drift·(t − t_ref)`` by weighted least
+squares with weights ``1/(e² + slack_us²)``: the offset (µs) and the drift
 (MCU rate error against the host, dimensionless, ×1e6 for ppm) are estimated continuously
 as exchanges arrive. :meth:`mcu_to_host` maps MCU µs (e.g. an exposure mid-time) into
 host monotonic seconds.
@@ -25,10 +25,9 @@ from ..errors import DeviceError
 
 
 class ClockSync:
-    def __init__(self, window: int = 64, slack_us: float = 20.0, min_points: int = 4, min_span_s: float = 0.5):
+    def __init__(self, window: int = 256, slack_us: float = 20.0, min_span_s: float = 0.5):
         self.window = window
         self.slack_us = slack_us
-        self.min_points = min_points
         self.min_span_s = min_span_s
         self._ex: deque = deque(maxlen=window)  # (t_mid_s, theta_us, delay_us)
         self.offset_us = 0.0      # θ at t_ref
@@ -59,20 +58,16 @@ class ClockSync:
     def _fit(self) -> None:
         ex = np.array(self._ex)
         t, theta, delay = ex[:, 0], ex[:, 1], ex[:, 2]
-        keep = delay <= delay.min() + self.slack_us
-        if keep.sum() < self.min_points:
-            keep = np.zeros(len(delay), bool)
-            keep[np.argsort(delay)[: self.min_points]] = True
-        ts, th = t[keep], theta[keep]
-        self.t_ref = float(ts.mean())
-        if len(ts) >= 2 and ts.max() - ts.min() >= self.min_span_s:
-            dt = ts - self.t_ref
-            drift_us_per_s = float(np.dot(dt, th - th.mean()) / np.dot(dt, dt))
-            self.drift = drift_us_per_s * 1e-6
-            self.offset_us = float(th.mean())
-        else:
-            self.offset_us = float(th.mean()) if len(ts) else 0.0
-            # keep the previous drift estimate; a short baseline cannot resolve it
+        extra = delay - delay.min()
+        w = 1.0 / (extra * extra + self.slack_us * self.slack_us)
+        sw = w.sum()
+        self.t_ref = float(np.dot(w, t) / sw)
+        th_mean = float(np.dot(w, theta) / sw)
+        dt = t - self.t_ref
+        if t.max() - t.min() >= self.min_span_s:
+            self.drift = float(np.dot(w * dt, theta - th_mean) / np.dot(w * dt, dt)) * 1e-6
+        # else: keep the previous drift estimate; a short baseline cannot resolve it
+        self.offset_us = th_mean
 
     def offset_at(self, t_host: float) -> float:
         """Estimated MCU − host offset (µs) at host time ``t_host`` (s)."""
