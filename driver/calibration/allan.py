@@ -11,7 +11,16 @@ quantization          3 Q² / τ²                   -1         Q   (rad)
 angle random walk     N² / τ                      -1/2       N   (rad/√s = rad/s/√Hz)
 bias instability      (2 ln2 / π) B²              0          B   (rad/s)
 rate random walk      K² τ / 3                    +1/2       K   (rad/s/√s)
+Markov (correlated)   2σ²T_c/τ·[1 − T_c/(2τ)·     +½ → −½    σ (rad/s), T_c (s)
+                      (3 − 4e^{−τ/T_c} + e^{−2τ/T_c})]
 ====================  ==========================  =========  ===========================
+
+The bias-instability term is either the flicker floor B (flat, the IEEE reading) or, when
+the bias wanders as exponentially correlated (first-order Gauss–Markov) noise, the
+Markov term of annex C, whose Allan deviation peaks at 0.617 σ at τ ≈ 1.89 T_c.
+``model="auto"`` fits both and keeps the one with the smaller weighted χ². ``N`` is the
+IEEE coefficient (two-sided PSD ``S = N²``): a one-sided noise density ``n`` (°/s/√Hz, as
+datasheets and the simulator state it, ``σ_sample = n·√(fs/2)``) gives ``N = n/√2``.
 
 :func:`fit_noise_terms` fits all four at once by non-negative weighted least squares on
 σ²(τ) (weights from each point's confidence), which keeps the bias-instability floor free
@@ -34,7 +43,8 @@ BI_FACTOR = np.sqrt(2.0 * np.log(2.0) / np.pi)  # 0.6643: flat floor = BI_FACTOR
 @dataclass
 class AllanCurve:
     """Overlapping Allan deviation of one axis: ``tau`` (s), ``adev`` (rad/s), ``err``
-    (1-σ error of ``adev`` from allantools), ``n`` (number of terms averaged)."""
+    (1-σ error of ``adev`` from the equivalent degrees of freedom, :func:`edf_white`),
+    ``n`` (number of overlapping terms averaged)."""
 
     tau: np.ndarray
     adev: np.ndarray
@@ -44,16 +54,28 @@ class AllanCurve:
 
 @dataclass
 class NoiseTerms:
-    """IEEE 952 coefficients (SI): Q rad, N rad/√s, B rad/s, K rad/s/√s."""
+    """IEEE 952 coefficients (SI): Q rad, N rad/√s, K rad/s/√s, and the bias-instability
+    term: ``model == "flicker"`` → floor B rad/s; ``"markov"`` → σ rad/s with correlation
+    time ``markov_tau`` s. ``bias_instability`` is B or σ accordingly; ``chi2`` the fit's
+    weighted χ² per point."""
 
     quantization: float
     arw: float
     bias_instability: float
     rrw: float
+    model: str = "flicker"
+    markov_tau: float = 0.0
+    chi2: float = 0.0
 
     def adev(self, tau: np.ndarray) -> np.ndarray:
         """Model Allan deviation (rad/s) at ``tau`` (s)."""
-        return np.sqrt(_design(np.asarray(tau, float)) @ self._coeffs())
+        tau = np.asarray(tau, float)
+        return np.sqrt(_design(tau, self.model, self.markov_tau) @ self._coeffs())
+
+    def bias_term_adev(self, tau: np.ndarray) -> np.ndarray:
+        """Allan deviation of the bias-instability term alone (rad/s)."""
+        tau = np.asarray(tau, float)
+        return np.sqrt(_design(tau, self.model, self.markov_tau)[:, 2]) * self.bias_instability
 
     def _coeffs(self) -> np.ndarray:
         return np.array([self.quantization**2, self.arw**2, self.bias_instability**2, self.rrw**2])
@@ -67,6 +89,17 @@ def tau_grid(n_samples: int, fs: float, per_decade: int = 12, max_fraction: floa
     m_max = max(2, int(n_samples * max_fraction))
     m = np.unique(np.round(np.logspace(0, np.log10(m_max), int(np.log10(m_max) * per_decade) + 2)).astype(np.int64))
     return m / fs
+
+
+def edf_white(n_samples: int, m: np.ndarray) -> np.ndarray:
+    """Equivalent degrees of freedom of the overlapping Allan variance for white rate noise
+    at cluster size ``m`` samples out of ``n_samples`` (Howe, Allan & Barnes 1981):
+    ``[3(N−1)/(2m) − 2(N−2)/N] · 4m²/(4m² + 5)``. The overlapping terms are correlated, so
+    ``adev/√n`` (allantools' error) is far too optimistic; σ_adev/adev ≈ 1/√(2·edf)."""
+    m = np.asarray(m, float)
+    n = float(n_samples)
+    edf = (3.0 * (n - 1.0) / (2.0 * m) - 2.0 * (n - 2.0) / n) * 4.0 * m * m / (4.0 * m * m + 5.0)
+    return np.maximum(edf, 1.0)
 
 
 def block_average(rate: np.ndarray, factor: int) -> np.ndarray:
@@ -95,7 +128,8 @@ def allan_deviation(rate: np.ndarray, fs: float, per_decade: int = 12, max_sampl
     taus = tau_grid(n, fs, per_decade, max_fraction)
     if n <= max_samples:
         t, ad, ade, ns = allantools.oadev(rate, rate=fs, data_type="freq", taus=taus)
-        return AllanCurve(np.asarray(t), np.asarray(ad), np.asarray(ade), np.asarray(ns))
+        t, ad = np.asarray(t), np.asarray(ad)
+        return AllanCurve(t, ad, ad / np.sqrt(2.0 * edf_white(n, np.round(t * fs))), np.asarray(ns))
     factor = int(np.ceil(n / max_samples))
     split = 100 * factor / fs
     short = taus[taus < split]
@@ -104,34 +138,61 @@ def allan_deviation(rate: np.ndarray, fs: float, per_decade: int = 12, max_sampl
     dec = block_average(rate, factor)
     long_ = np.unique(np.maximum(np.round(long_ * fs / factor), 1)) * factor / fs
     t2, a2, e2, n2 = allantools.oadev(dec, rate=fs / factor, data_type="freq", taus=long_)
-    return AllanCurve(np.concatenate([t1, t2]), np.concatenate([a1, a2]), np.concatenate([e1, e2]),
-                      np.concatenate([n1, n2]))
+    t, ad = np.concatenate([t1, t2]), np.concatenate([a1, a2])
+    err = np.concatenate([a1 / np.sqrt(2.0 * edf_white(n, np.round(np.asarray(t1) * fs))),
+                          a2 / np.sqrt(2.0 * edf_white(len(dec), np.round(np.asarray(t2) * fs / factor)))])
+    return AllanCurve(t, ad, err, np.concatenate([n1, n2]))
 
 
-def _design(tau: np.ndarray) -> np.ndarray:
-    return np.column_stack([3.0 / tau**2, 1.0 / tau, np.full_like(tau, BI_FACTOR**2), tau / 3.0])
+def markov_avar(tau: np.ndarray, tc: float) -> np.ndarray:
+    """Allan variance of unit-σ first-order Gauss–Markov noise with correlation time ``tc``."""
+    x = tau / tc
+    return (2.0 / x) * (1.0 - (3.0 - 4.0 * np.exp(-x) + np.exp(-2.0 * x)) / (2.0 * x))
 
 
-def fit_noise_terms(curve: AllanCurve, tau_min: float = 0.1) -> NoiseTerms:
-    """Fit Q, N, B, K to σ²(τ) by non-negative weighted least squares.
+def _design(tau: np.ndarray, model: str = "flicker", tc: float = 0.0) -> np.ndarray:
+    bias = np.full_like(tau, BI_FACTOR**2) if model == "flicker" else markov_avar(tau, tc)
+    return np.column_stack([3.0 / tau**2, 1.0 / tau, bias, tau / 3.0])
+
+
+def _nnls_fit(t, a, var_sd, model, tc):
+    from scipy.optimize import nnls
+
+    design = _design(t, model, tc) / var_sd[:, None]
+    scale = np.abs(design).max(axis=0)
+    sol, rnorm = nnls(design / scale, a**2 / var_sd)
+    return sol / scale, float(rnorm**2 / len(t))
+
+
+def fit_noise_terms(curve: AllanCurve, tau_min: float = 0.1, model: str = "auto") -> NoiseTerms:
+    """Fit Q, N, the bias-instability term and K to σ²(τ) by non-negative weighted least
+    squares (``model``: "flicker", "markov" or "auto", see the module docstring).
 
     Points with τ < ``tau_min`` (s; where the gyro's low-pass filter correlates samples)
     are left out. Each point is weighted by the inverse of its σ² standard error, 2·σ·err.
+    The Markov correlation time is searched on a log grid (the rest is linear).
     """
-    from scipy.optimize import nnls
-
+    if model not in ("auto", "flicker", "markov"):
+        raise ConfigError(f"unknown bias-instability model {model!r} (auto, flicker, markov)")
     tau, ad, err, n = curve.tau, curve.adev, curve.err, curve.n
     keep = (tau >= tau_min) & (ad > 0) & (err > 0) & (n > 0)
-    if keep.sum() < 4:
+    if keep.sum() < 5:
         raise ConfigError(f"too few Allan points above tau_min={tau_min} s to fit the noise terms "
                           f"({int(keep.sum())}); record a longer log")
     t, a, e = tau[keep], ad[keep], err[keep]
     var_sd = 2.0 * a * np.maximum(e, 1e-3 * a)
-    design = _design(t) / var_sd[:, None]
-    scale = np.abs(design).max(axis=0)
-    sol, _ = nnls(design / scale, a**2 / var_sd)
-    c = np.sqrt(sol / scale)
-    return NoiseTerms(quantization=float(c[0]), arw=float(c[1]), bias_instability=float(c[2]), rrw=float(c[3]))
+    fits = []
+    if model in ("auto", "flicker"):
+        sol, chi2 = _nnls_fit(t, a, var_sd, "flicker", 0.0)
+        fits.append((chi2, sol, "flicker", 0.0))
+    if model in ("auto", "markov"):
+        for tc in np.logspace(np.log10(max(1.0, 10.0 * t[0])), np.log10(max(t[-1], 10.0)), 60):
+            sol, chi2 = _nnls_fit(t, a, var_sd, "markov", tc)
+            fits.append((chi2, sol, "markov", float(tc)))
+    chi2, sol, kind, tc = min(fits, key=lambda f: f[0])
+    c = np.sqrt(sol)
+    return NoiseTerms(quantization=float(c[0]), arw=float(c[1]), bias_instability=float(c[2]), rrw=float(c[3]),
+                      model=kind, markov_tau=tc, chi2=chi2)
 
 
 def slope_readings(curve: AllanCurve) -> dict:
@@ -144,8 +205,7 @@ def slope_readings(curve: AllanCurve) -> dict:
     out = {}
     for name, s, tau_ref in (("arw", -0.5, 1.0), ("rrw", 0.5, 3.0)):
         sel = np.abs(slope - s) < 0.1
-        if s < 0:
-            sel &= tau >= 0.1
+        sel &= (tau >= 0.1) if s < 0 else (tau > tau[np.argmin(ad)])
         out[name] = float(10 ** np.median(la[sel] - s * lt[sel] + s * np.log10(tau_ref))) if sel.any() else float("nan")
     out["bias_instability"] = float(ad.min() / BI_FACTOR)
     out["tau_at_minimum"] = float(tau[np.argmin(ad)])

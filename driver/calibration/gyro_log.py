@@ -1,0 +1,96 @@
+"""Gyro records for calibration: load from ``.npz``, or record from a live BMI088.
+
+A record is ``t`` (N,) s (strictly increasing), ``rate`` (N, 3) rad/s in gyro axes, and
+optionally ``temperature`` (N,) °C and ``run`` (N,) int (rate-table run id, −1 between
+runs). ``fs`` is the median sample rate (Hz).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import ConfigError
+
+
+@dataclass
+class GyroRecord:
+    t: np.ndarray
+    rate: np.ndarray
+    temperature: np.ndarray | None = None
+    run: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        self.t = np.asarray(self.t, float)
+        self.rate = np.asarray(self.rate, float)
+        n = len(self.t)
+        if self.t.ndim != 1 or self.rate.shape != (n, 3) or n < 16:
+            raise ConfigError(f"gyro record needs t (N,) and rate (N, 3) with N ≥ 16; got {self.t.shape}, "
+                              f"{self.rate.shape}")
+        if np.any(np.diff(self.t) <= 0):
+            raise ConfigError("gyro timestamps must increase strictly")
+        if not (np.all(np.isfinite(self.rate)) and np.all(np.isfinite(self.t))):
+            raise ConfigError("gyro record holds NaN or infinite values")
+        for name in ("temperature", "run"):
+            v = getattr(self, name)
+            if v is not None and np.shape(v) != (n,):
+                raise ConfigError(f"gyro record: {name} must have one value per sample")
+
+    @property
+    def fs(self) -> float:
+        return float(1.0 / np.median(np.diff(self.t)))
+
+    def save(self, path: Path) -> Path:
+        extra = {k: v for k, v in (("temperature", self.temperature), ("run", self.run)) if v is not None}
+        np.savez_compressed(path, t=self.t, rate=self.rate, **extra)
+        return Path(path)
+
+
+def load(path: Path) -> GyroRecord:
+    """Read a record from ``.npz`` (arrays ``t``, ``rate``, optional ``temperature``, ``run``)."""
+    path = Path(path)
+    if path.suffix != ".npz":
+        raise ConfigError(f"gyro log must be an .npz (t, rate[, temperature, run]); got {path}")
+    with np.load(path) as z:
+        if "t" not in z or "rate" not in z:
+            raise ConfigError(f"{path} must hold arrays 't' (s) and 'rate' (rad/s, N×3)")
+        return GyroRecord(z["t"], z["rate"], z["temperature"] if "temperature" in z else None,
+                          z["run"] if "run" in z else None)
+
+
+def add_live_args(parser) -> None:
+    parser.add_argument("--i2c-bus", type=int, default=1, help="--live: Linux I2C bus number (default 1)")
+    parser.add_argument("--address", type=lambda s: int(s, 0), default=0x68, help="--live: I2C address (0x68)")
+    parser.add_argument("--range-dps", type=float, default=125.0, help="--live: gyro range, deg/s (default 125)")
+    parser.add_argument("--duration", type=float, default=600.0, help="--live: record length, s (default 600)")
+
+
+def record_live(args, folder: Path) -> GyroRecord:
+    """Record ``--duration`` s from a BMI088 gyro on ``--i2c-bus``/``--address`` at 400 Hz;
+    the raw record is saved in the report folder (``gyro_live.npz``) before calibration."""
+    from ..cli.output import progress
+    from ..clock import MONOTONIC
+    from ..gyro import Bmi088Gyro, GyroSamples
+    from ..transport.i2c import I2CBus, I2CRegisters
+
+    gyro = Bmi088Gyro(I2CRegisters(I2CBus.open(args.i2c_bus), args.address))
+    gyro.probe()
+    gyro.configure(400.0, args.range_dps, 50)
+    n = int(args.duration * 400.0 * 1.02) + 200
+    out = GyroSamples(n)
+    gyro.start()
+    t_end = MONOTONIC.now() + args.duration
+    with progress(args, "recording gyro", int(args.duration)) as step:
+        last = MONOTONIC.now()
+        while MONOTONIC.now() < t_end and out.room > 100:
+            gyro.read(out)
+            MONOTONIC.sleep(0.05)
+            if MONOTONIC.now() - last >= 1.0:
+                step()
+                last = MONOTONIC.now()
+    t, _, rate, _ = out.view()
+    rec = GyroRecord(t.copy(), rate.copy())
+    rec.save(folder / "gyro_live.npz")
+    return rec

@@ -1,0 +1,178 @@
+"""``gyrostar calibrate gyro-scale``: gyro scale factors and 3×3 misalignment
+(:mod:`gyrostar.calibration.scale_fit`), from rate-table runs or from star-tracker attitude
+during slews.
+
+Inputs:
+
+* ``--method rate-table``: an ``.npz`` gyro log with ``t``, ``rate`` (N×3 rad/s), ``run``
+  (N,) run id (−1 while the table changes rate) and ``table_rate`` (K×3 rad/s, the known
+  rate vector of each run in the gyro reference frame). ``--trim`` s are dropped at both
+  ends of each run.
+* ``--method slew``: an ``.npz`` with the gyro log (``t``, ``rate``) and the tracker's
+  attitudes ``t_cam`` (K,) s and ``q_cam`` (K×4, [x, y, z, w] ICRS → camera) on the same
+  clock. The result maps gyro readings to camera axes (mounting included) unless
+  ``--alignment`` names a calibration TOML whose [alignment] rotation is removed first.
+
+``--simulate``: the simulator's gyro model (:mod:`gyrostar.calibration.gyro_sim`, parameter
+set ``--gyro-params``) turned at ±``--rates`` about each axis for ``--run-seconds`` per run
+(rate table), or a simulated slew seen by the tracker (slew).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+HELP = "gyro scale factors and misalignment from rate-table runs or star-tracker slews"
+DEG = np.pi / 180.0
+
+
+def configure(parser) -> None:
+    from .report import add_common_args
+
+    add_common_args(parser, "gyro log .npz (see --help: t, rate, run, table_rate; or t_cam, q_cam for slews)")
+    parser.add_argument("--method", choices=("rate-table", "slew"), default="rate-table")
+    parser.add_argument("--trim", type=float, default=0.5, help="rate table: seconds dropped at each run end")
+    parser.add_argument("--alignment", default=None, help="slew: calibration TOML whose [alignment] is applied")
+    parser.add_argument("--gyro-params", default="bmi088", help="--simulate: gyro error-model parameter set")
+    parser.add_argument("--rates", default="10,30,60", help="--simulate: table rates, deg/s (both signs, each axis)")
+    parser.add_argument("--run-seconds", type=float, default=20.0, help="--simulate: seconds per table run")
+    parser.add_argument("--duration", type=float, default=300.0, help="--simulate slew: seconds")
+
+
+def rate_table_schedule(rates_dps, run_s: float, gap_s: float = 2.0, fs: float = 400.0):
+    """Table rate vectors (K×3 rad/s: ± each rate about each axis, then two tilted runs) and
+    the sample times, run ids and true rates of the whole session (gaps between runs ramp)."""
+    vecs = []
+    for r in rates_dps:
+        for axis in range(3):
+            for sign in (1.0, -1.0):
+                v = np.zeros(3)
+                v[axis] = sign * r * DEG
+                vecs.append(v)
+    top = max(rates_dps) * DEG / np.sqrt(3.0)
+    vecs += [np.array([top, top, top]), np.array([-top, top, -top])]
+    table = np.array(vecs)
+    per = int(round((run_s + gap_s) * fs))
+    n_run = int(round(run_s * fs))
+    t = np.arange(per * len(table)) / fs
+    run = np.full(len(t), -1, np.int64)
+    true = np.zeros((len(t), 3))
+    for k, v in enumerate(table):
+        a = k * per
+        run[a:a + n_run] = k
+        true[a:a + n_run] = v
+        nxt = table[k + 1] if k + 1 < len(table) else np.zeros(3)
+        ramp = np.linspace(0.0, 1.0, per - n_run)[:, None]
+        true[a + n_run:a + per] = v + (nxt - v) * ramp
+    return table, t, run, true
+
+
+def _from_rate_table(rec_t, rate, run, table, trim_s):
+    from .scale_fit import fit_rate_table, run_means
+
+    fs = 1.0 / np.median(np.diff(rec_t))
+    means, _ = run_means(rate, run, len(table), trim=int(trim_s * fs))
+    return fit_rate_table(table, means)
+
+
+def _from_slews(t_g, w_g, t_cam, q_cam, lag: int = 5):
+    from .scale_fit import attitude_increments, fit_slews, integrate_gyro
+
+    sel = (t_cam >= t_g[0]) & (t_cam <= t_g[-1])
+    t_cam, q_cam = t_cam[sel], q_cam[sel]
+    idx = np.arange(0, len(t_cam), lag)
+    phi = attitude_increments(q_cam[idx])
+    g = integrate_gyro(t_g, w_g, t_cam[idx])
+    return fit_slews(phi, g, np.diff(t_cam[idx]))
+
+
+def run(args) -> int:
+    from ..errors import ConfigError, NotAvailableError
+    from . import calfile, gyro_sim, report
+
+    source = report.check_source(args)
+    folder = report.report_dir(args, "gyro-scale")
+    truth = None
+    if source == "live":
+        raise NotAvailableError("a rate-table session is driven by the table's controller: record the gyro "
+                                "with run ids and pass the .npz as INPUT")
+    if args.method == "rate-table":
+        if source == "simulate":
+            rates = [float(x) for x in args.rates.split(",")]
+            table, t, run_id, true = rate_table_schedule(rates, args.run_seconds)
+            rate, truth = gyro_sim.measure(true, t, args.gyro_params, args.seed)
+        else:
+            with np.load(args.input) as z:
+                missing = {"t", "rate", "run", "table_rate"} - set(z.files)
+                if missing:
+                    raise ConfigError(f"{args.input} lacks arrays {sorted(missing)}")
+                t, rate, run_id, table = z["t"], z["rate"], z["run"], z["table_rate"]
+        fit = _from_rate_table(t, rate, run_id, table, args.trim)
+    else:
+        if source == "simulate":
+            from .slew_sim import simulate_attitudes
+
+            sl = simulate_attitudes(args.duration, 20.0, args.seed)
+            t = np.arange(0.0, args.duration, 1.0 / 400.0)
+            rate, truth = gyro_sim.measure(sl.profile.rate(t), t, args.gyro_params, args.seed)
+            t_g = t - truth["delay_s"]
+            t_cam, q_cam = sl.t_cam, sl.q_cam
+        else:
+            with np.load(args.input) as z:
+                missing = {"t", "rate", "t_cam", "q_cam"} - set(z.files)
+                if missing:
+                    raise ConfigError(f"{args.input} lacks arrays {sorted(missing)}")
+                t_g, rate, t_cam, q_cam = z["t"], z["rate"], z["t_cam"], z["q_cam"]
+            if args.alignment:
+                al = calfile.load(args.alignment).alignment
+                if al is None:
+                    raise ConfigError(f"{args.alignment} has no [alignment] table")
+                from ..attitude import quat_to_dcm
+
+                r = quat_to_dcm(np.asarray(al.q_gyro_to_camera, float))
+                rate = rate @ r.T
+                t_g = t_g + al.time_offset_s
+        fit = _from_slews(t_g, rate, t_cam, q_cam)
+    table_out = report.ParamTable()
+    ts = None if truth is None else truth["sensitivity"]
+    table_out.add("scale_factor_ppm", fit.scale_factor_ppm, "ppm",
+                  None if ts is None else (np.diag(ts) - 1.0) * 1e6)
+    table_out.add("misalignment_urad", fit.misalignment_rad * 1e6, "µrad (off-diagonal of S)",
+                  None if ts is None else (ts - np.diag(np.diag(ts))) * 1e6)
+    table_out.add("bias_dps", fit.bias / DEG, "deg/s", None if truth is None else truth["bias"] / DEG)
+    table_out.rows["scale_factor_ppm"]["sigma"] = (np.diag(fit.sensitivity_sigma) * 1e6).tolist()
+    extra = {"method": args.method, "residual_rms": fit.residual_rms, "sensitivity": fit.sensitivity}
+    checks = None
+    if ts is not None:
+        sf_err = (np.diag(fit.sensitivity) - np.diag(ts)) * 1e6
+        mis_err = (fit.sensitivity - ts - np.diag(np.diag(fit.sensitivity - ts))) * 1e6
+        checks = {"scale_factor_ppm": report.check(float(np.abs(sf_err).max()), 200.0, "ppm (worst axis)"),
+                  "misalignment_urad": report.check(float(np.abs(mis_err).max()), 200.0, "µrad (worst element)")}
+    cal = calfile.GyroScaleCal(_mat(fit.correction), _mat(fit.sensitivity), tuple(float(v) for v in fit.bias),
+                               tuple(float(v) for v in fit.scale_factor_ppm), args.method)
+    toml = args.toml or folder / "calibration.toml"
+    calfile.write_section(toml, "gyro_scale", cal, source=str(args.input) if args.input else source)
+    extra["toml"] = str(toml)
+    if not args.no_plots:
+        _plot(folder, fit, ts)
+    return report.finish(args, "gyro-scale", table_out, extra, folder, checks)
+
+
+def _mat(m):
+    return tuple(tuple(float(v) for v in row) for row in m)
+
+
+def _plot(folder, fit, truth) -> None:
+    from .report import new_figure, save_figure
+
+    fig, ax = new_figure(figsize=(7, 4.5))
+    est = (fit.sensitivity - np.eye(3)).ravel() * 1e6
+    x = np.arange(9)
+    ax.bar(x - 0.2, est, 0.4, yerr=fit.sensitivity_sigma.ravel() * 1e6, label="estimated")
+    if truth is not None:
+        ax.bar(x + 0.2, (truth - np.eye(3)).ravel() * 1e6, 0.4, label="simulated truth")
+    ax.set_xticks(x, [f"S{i}{j}" for i in "xyz" for j in "xyz"])
+    ax.set_ylabel("S − I (ppm / µrad)")
+    ax.legend()
+    ax.set_title(f"gyro sensitivity matrix, residual RMS {fit.residual_rms:.3g}")
+    save_figure(fig, folder / "gyro_scale.png")
