@@ -111,7 +111,12 @@ class Sky:
     def fixed_pattern(self) -> tuple[np.ndarray, np.ndarray]:
         """(PRNU gain, dark electrons per exposure), float32 (H, W): same for every frame."""
         if self._fpn is None:
-            self._fpn = pixel_noise.fixed_pattern(self.seed, self.camera.height_px, self.camera.width_px, self.det)
+            gain, dark = pixel_noise.fixed_pattern(self.seed, self.camera.height_px, self.camera.width_px, self.det)
+            self._fpn = (gain, dark, pixel_noise.background_exp(gain, dark, self.det))
+        return self._fpn[0], self._fpn[1]
+
+    def _noise_maps(self):
+        self.fixed_pattern  # noqa: B018 - builds the maps on first use
         return self._fpn
 
     def expose(self, q_start, omega=None, quats=None) -> Exposure:
@@ -154,11 +159,11 @@ class Sky:
     def render_frame(self, q_start, omega=None, frame: int = 0, noise: bool = True, quats=None):
         """Whole frame: (uint16 (H, W) ADU, StarTruth)."""
         exp = self.expose(q_start, omega, quats)
-        gain, dark = self.fixed_pattern
+        gain, dark, bg_exp = self._noise_maps()
         sig = self._signal_buffer()
         render.add_stars_full(sig, exp.paths, exp.truth.electrons, exp.boxes, self.preset.optics.psf_sigma_px)
         try:
-            img = pixel_noise.digitise_frame(sig, gain, dark, self.seed, int(frame), self.det, bool(noise),
+            img = pixel_noise.digitise_frame(sig, gain, dark, bg_exp, self.seed, int(frame), self.det, bool(noise),
                                              pixel_noise.normal_table())
         finally:
             render.clear_boxes(sig, exp.boxes)
@@ -182,8 +187,8 @@ class Sky:
         sig = np.zeros(npx)
         render.add_stars_spans(sig, spans, exp.paths, exp.truth.electrons, exp.boxes,
                                self.preset.optics.psf_sigma_px)
-        gain, dark = self.fixed_pattern
-        return pixel_noise.digitise_spans(sig, spans, gain, dark, self.seed, int(frame), self.det, bool(noise),
+        gain, dark, bg_exp = self._noise_maps()
+        return pixel_noise.digitise_spans(sig, spans, gain, dark, bg_exp, self.seed, int(frame), self.det, bool(noise),
                                           pixel_noise.normal_table())
 
 
