@@ -58,3 +58,27 @@ class ProfileRates:
 
     def __call__(self, k: np.ndarray, t: np.ndarray) -> np.ndarray:
         return self.true_rates(t) + self.bias + self.sigma * counter_normal(self.seed, k)
+
+
+class TruthRates:
+    """Measured rates from the simulator's gyro truth + error model (:mod:`gyrostar.mocks.gyro_truth`).
+
+    ``simulate_gyro`` is run once for ``duration_s`` (ideal output: the register model does
+    the quantisation at its own range); model time ``t`` maps to output sample
+    ``floor((t − t0)·odr)``. Times outside the simulated span are an error, not a wrap.
+    """
+
+    def __init__(self, profile, duration_s: float, params: str = "bmi088", t0: float = 0.0, seed: int = 0):
+        from .gyro_truth import gyro_params, simulate_gyro
+
+        p = gyro_params(params, range_dps=0.0) if isinstance(params, str) else params
+        self.samples = simulate_gyro(profile, duration_s, p, seed=seed)
+        self.t0 = t0
+        self.odr_hz = p.odr_hz
+
+    def __call__(self, k: np.ndarray, t: np.ndarray) -> np.ndarray:
+        i = np.floor((np.asarray(t, float) - self.t0) * self.odr_hz + 1e-9).astype(np.int64)
+        if i.size and (i.min() < 0 or i.max() >= len(self.samples.t)):
+            raise ValueError(f"gyro truth covers {len(self.samples.t) / self.odr_hz:.1f} s from t0={self.t0}; "
+                             f"asked t in [{np.min(t):.3f}, {np.max(t):.3f}] s")
+        return self.samples.omega_meas[i]

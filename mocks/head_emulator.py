@@ -358,9 +358,12 @@ class HeadEmulator:
 
     def _write(self, data: bytes) -> None:
         view = memoryview(data)
+        fd = self.master
+        if fd is None:
+            raise OSError("head emulator disconnected")
         while view:
             try:
-                k = os.write(self.master, view)
+                k = os.write(fd, view)
             except BlockingIOError:
                 select.select([], [self.master], [], 0.05)
                 continue

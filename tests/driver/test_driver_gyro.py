@@ -81,6 +81,24 @@ def test_bmi088_configure_and_stream(wire):
     assert abs(gyro.timebase.period - model.period) < 1e-9  # ODR error (1500 ppm) tracked
 
 
+def test_bmi088_against_simulator_gyro_truth():
+    from gyrostar.mocks.fake_rates import TruthRates
+    from gyrostar.mocks.trajectory import Ramp
+
+    profile = Ramp((0.0, 0.0, 0.0), (8 * DPS, -4 * DPS, 2 * DPS), 0.0, 3.0, 4.0)
+    src = TruthRates(profile, 4.5, "bmi088", t0=50.0, seed=3)
+    clock, model, bus, gyro = make("bmi088", "spi", source=src)
+    gyro.configure(400, 250, 16)
+    gyro.start()
+    out = GyroSamples(2000)
+    run(clock, model, gyro, out, 3.5, step=0.04)
+    check_against_truth(model, out, src, 250 / 32768 * DPS, t_tol=2e-6)
+    t, _, rate, _ = out.view()
+    true = profile.rate(t - 50.0)
+    err = rate - true  # zero-rate offset (≤ ~1 °/s, datasheet class) + noise
+    assert np.all(np.abs(err.mean(axis=0)) < 2 * DPS) and np.all(err.std(axis=0) < 0.2 * DPS)
+
+
 def test_bmi088_burst_reads_use_i2c_rdwr_and_no_spi_dummy():
     clock, model, bus, gyro = make("bmi088", "i2c", faults=False)
     calls = []
