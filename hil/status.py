@@ -28,20 +28,20 @@ class StatusLine:
             self._live.start()
 
     def update(self, rec, truth=None, step_us: float | None = None, overruns: int = 0,
-               duration_s: float | None = None, force: bool = False) -> None:
+               duration_s: float | None = None, force: bool = False, t0: float = 0.0) -> None:
         if not self.enabled or rec is None:
             return
         now = time.monotonic()
         if not force and now - self._last < self.period_s:
             return
         self._last = now
-        self._live.update(self.render(rec, truth, step_us, overruns, duration_s))
+        self._live.update(self.render(rec, truth, step_us, overruns, duration_s, t0))
 
     @staticmethod
-    def render(rec, truth=None, step_us=None, overruns=0, duration_s=None) -> str:
+    def render(rec, truth=None, step_us=None, overruns=0, duration_s=None, t0: float = 0.0) -> str:
         mode = MODE_NAMES.get(int(rec["mode"]), "?")
         rate = np.degrees(rec["omega"])
-        t = f"t {rec['t']:7.2f}s" + (f"/{duration_s:.0f}" if duration_s else "")
+        t = f"t {rec['t'] - t0:6.2f}s" + (f"/{duration_s:.0f}" if duration_s else "")
         parts = [t, f"[{_MODE_STYLE.get(mode, 'white')}]{mode:7s}[/]", f"stars {int(rec['n_stars']):2d}",
                  f"rate [{rate[0]:+6.2f} {rate[1]:+6.2f} {rate[2]:+6.2f}]°/s"]
         if truth is not None:

@@ -49,6 +49,7 @@ KIND_NAMES = {META: "meta", TX: "tx", RX: "rx", BUS: "bus", CLOCK: "clock", OUTP
 
 CH_HEAD = 0
 CH_GYRO = 1
+CH_LATENCY = 2   # CLOCK records of the clock that times sample-to-output latency
 
 
 @dataclass(frozen=True)

@@ -50,16 +50,20 @@ def _t_ns(clock) -> int:
 class RecordingClock:
     """Wrap a clock (``now()`` seconds); record every reading."""
 
-    def __init__(self, clock, writer: lf.LogWriter):
+    def __init__(self, clock, writer: lf.LogWriter, channel: int = 0):
         self._clock = clock
         self._w = writer
+        self._ch = channel
         self.last: float | None = None
 
     def now(self) -> float:
         t = float(self._clock.now())
         self.last = t
-        self._w.append(lf.CLOCK, struct.pack("<d", t), t_ns=int(round(t * 1e9)))
+        self._w.append(lf.CLOCK, struct.pack("<d", t), self._ch, t_ns=int(round(t * 1e9)))
         return t
+
+    def sleep(self, dt: float) -> None:
+        self._clock.sleep(dt)
 
     def __getattr__(self, name):
         return getattr(self._clock, name)
@@ -77,6 +81,9 @@ class ReplayClock:
             raise ReplayExhausted("clock readings")
         self.last = self._q.popleft()
         return self.last
+
+    def sleep(self, dt: float) -> None:
+        """Waiting is what the recording did; replay does not wait."""
 
     def remaining(self) -> int:
         return len(self._q)

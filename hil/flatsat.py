@@ -1,0 +1,519 @@
+"""Build a flatsat from its config: devices (simulated or real), driver, loop, truth.
+
+Two halves, kept apart so that replay can reuse the second:
+
+* **devices** — the register bus of the gyro and the packet link of the head. On the
+  simulated flatsat: the simulator (:mod:`gyrostar.mocks`) behind a BMI088 register
+  model on a fake SMBus, and the head emulator or the firmware host program on a pty,
+  all on one clock (simulated, or real time with ``--realtime``). On a real flatsat:
+  ``/dev/i2c-N`` or ``/dev/spidevB.D`` and a serial port.
+* **driver** (:func:`make_driver`) — the gyro driver and the head client built on
+  whatever bus/link/clock they are given: the live devices wrapped by the recording taps,
+  or the replay taps answering from a log. Same code both ways, so replay is exact.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import ConfigError, DeviceError
+from ..recording import logfile as lf
+from ..recording import taps
+from . import config as hc
+from .headport import CH_HEAD_CLOCK, CH_POLL, POLL
+
+log = logging.getLogger(__name__)
+DEG = math.pi / 180.0
+
+
+# ---------------------------------------------------------------------------- truth
+def scenario_profile(scen: hc.Scenario):
+    """The scenario's body-rate profile (a :class:`gyrostar.mocks.trajectory.RateProfile`)."""
+    from ..mocks.trajectory import RateProfile
+
+    class SegmentProfile(RateProfile):
+        """Piecewise-linear body rate from the scenario's segments (rad/s)."""
+
+        def __init__(self, segments):
+            t = 0.0
+            self.t0, self.t1, self.w0, self.w1 = [], [], [], []
+            for s in segments:
+                self.t0.append(t)
+                t += s.seconds
+                self.t1.append(t)
+                w0 = np.asarray(s.rate_dps, float) * DEG
+                self.w0.append(w0)
+                self.w1.append(np.asarray(s.rate_end_dps, float) * DEG if s.rate_end_dps is not None else w0)
+            if not self.t0:
+                self.t0, self.t1, self.w0, self.w1 = [0.0], [math.inf], [np.zeros(3)], [np.zeros(3)]
+            self.t0, self.t1 = np.array(self.t0), np.array(self.t1)
+            self.w0, self.w1 = np.array(self.w0), np.array(self.w1)
+            self.duration_s = float(self.t1[-1])
+
+        def rate(self, t):
+            t = np.atleast_1d(np.asarray(t, dtype=np.float64))
+            i = np.clip(np.searchsorted(self.t1, t, side="right"), 0, len(self.t0) - 1)
+            span = np.where(np.isfinite(self.t1[i]), self.t1[i] - self.t0[i], 1.0)
+            f = np.clip((t - self.t0[i]) / span, 0.0, 1.0)[:, None]
+            return (1.0 - f) * self.w0[i] + f * self.w1[i]
+
+    return SegmentProfile(scen.segments)
+
+
+class Truth:
+    """Attitude, body rate and gyro bias truth of a simulated run at host times (s).
+
+    Scenario time is host time minus ``t_origin`` (the run's start on the host clock).
+    """
+
+    def __init__(self, scen: hc.Scenario, gyro_samples, t_origin: float = 0.0):
+        from ..attitude import quat_from_boresight
+
+        self.profile = scenario_profile(scen)
+        self.q0 = np.asarray(quat_from_boresight(scen.ra_deg * DEG, scen.dec_deg * DEG, scen.roll_deg * DEG))
+        self.gyro = gyro_samples
+        self.t_origin = t_origin
+        self._cache: dict = {}
+        self._lock = threading.Lock()
+
+    def q_at(self, t_host: float, who: str = "") -> np.ndarray:
+        """Attitude at one host time, integrated on from this caller's previous query."""
+        from ..mocks.trajectory import integrate
+
+        ts = max(float(t_host) - self.t_origin, 0.0)
+        with self._lock:
+            t0, q0 = self._cache.get(who, (0.0, self.q0))
+            if ts < t0:
+                t0, q0 = 0.0, self.q0
+            q = integrate(q0, self.profile, np.array([t0, ts]))[-1] if ts > t0 else q0
+            self._cache[who] = (ts, q)
+        return q
+
+    def rates(self, t_host: np.ndarray) -> np.ndarray:
+        return self.profile.rate(np.maximum(np.asarray(t_host, float) - self.t_origin, 0.0))
+
+    def rows(self, t: np.ndarray) -> np.ndarray:
+        from ..loop.record import TRUTH_DTYPE
+        from ..mocks.trajectory import integrate
+
+        t = np.asarray(t, dtype=np.float64)
+        out = np.zeros(len(t), TRUTH_DTYPE)
+        out["t"] = t
+        if not len(t):
+            return out
+        ts = np.maximum(t - self.t_origin, 0.0)
+        order = np.argsort(ts, kind="stable")
+        q = integrate(self.q0, self.profile, np.concatenate([[0.0], ts[order]]))[1:]
+        out["q"][order] = q
+        out["omega"] = self.profile.rate(ts)
+        g = self.gyro
+        k = np.clip(np.round(ts * g.params.odr_hz).astype(np.int64) - 1, 0, len(g.t) - 1)
+        out["bias"] = g.bias[k]
+        return out
+
+    def at(self, t: float):
+        from ..loop.record import TRUTH_DTYPE
+
+        row = np.zeros(1, TRUTH_DTYPE)[0]
+        row["t"] = t
+        row["q"] = self.q_at(t, "status")
+        return row
+
+
+class ScenarioScene:
+    """The head emulator's scene: attitude at exposure start and the body rates over it."""
+
+    def __init__(self, truth: Truth, exposure_s: float, n_rates: int = 8):
+        self.truth = truth
+        self.exposure_s = exposure_s
+        self.n = n_rates
+
+    def at(self, t_host: float):
+        q = self.truth.q_at(t_host, "scene")
+        tm = t_host + (np.arange(self.n) + 0.5) * self.exposure_s / self.n
+        return q, self.truth.rates(tm)
+
+
+# ---------------------------------------------------------------------------- driver
+def loop_params(cfg: hc.FlatsatConfig, e_per_dn: float | None = None):
+    from ..loop.coupled import LoopParams
+
+    lc = cfg.loop
+    p = LoopParams(frame_hz=lc.frame_hz, exposure_s=cfg.head.exposure_ms * 1e-3, window_k=lc.window_k,
+                   max_stars=lc.max_stars, min_stars=lc.min_stars, coast_timeout_s=lc.coast_timeout_s,
+                   acquire_every_s=lc.acquire_every_s, mag_limit=lc.mag_limit)
+    if e_per_dn:
+        p.e_per_dn = e_per_dn
+    return p
+
+
+def make_gyro(cfg: hc.FlatsatConfig, regs, clock):
+    """The gyro driver on a RegisterBus, configured (range, ODR, FIFO watermark)."""
+    from ..gyro import Bmi088Gyro, L3gd20hGyro
+
+    g = cfg.gyro
+    cls = Bmi088Gyro if g.model == "bmi088" else L3gd20hGyro
+    gyro = cls(regs, clock=clock)
+    gyro.configure(odr_hz=g.odr_hz, range_dps=g.range_dps, watermark=g.fifo_watermark)
+    return gyro
+
+
+def make_head(cfg: hc.FlatsatConfig, link, clock, reconnect=None, head_clock=None, poll_log=None,
+              replay_polls=None):
+    """The head port the loop drives (see :mod:`gyrostar.hil.headport`), on a packet link."""
+    from .headport import HeadPort
+
+    return HeadPort(link, clock, timeout_s=cfg.head.timeout_s, retries=cfg.head.retries,
+                    exposure_s=cfg.head.exposure_ms * 1e-3, gain=cfg.head.gain, reconnect=reconnect,
+                    head_clock=head_clock, poll_log=poll_log, replay_polls=replay_polls)
+
+
+def star_index(cfg: hc.FlatsatConfig, camera):
+    from ..starid.index import load_index
+
+    diag = 2.0 * math.degrees(math.atan(0.5 * math.hypot(camera.width_px, camera.height_px)
+                                        / camera.focal_length_px))
+    return load_index(cfg.sim.catalog, cfg.loop.mag_limit, max_sep_deg=math.ceil(diag * 10 + 1) / 10)
+
+
+def make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock=None, e_per_dn=None):
+    from ..loop.coupled import CoupledLoop
+    from ..starid.pyramid import Pyramid
+
+    idx = star_index(cfg, camera)
+    ident = Pyramid(idx, camera)
+    return CoupledLoop(loop_params(cfg, e_per_dn), clock, gyro, head, camera, idx, ident, sinks, lat_clock=lat_clock)
+
+
+# ---------------------------------------------------------------------------- flatsat
+@dataclass
+class Flatsat:
+    cfg: hc.FlatsatConfig
+    scen: hc.Scenario
+    camera: object
+    clock: object              # the recording clock the driver and loop use
+    base_clock: object         # the underlying clock (simulated or monotonic)
+    gyro: object
+    head: object
+    truth: Truth | None
+    simulated_clock: bool
+    wiring: dict
+    lat_clock: object = None
+    e_per_dn: float | None = None
+    faults: object = None
+    closers: tuple = ()
+
+    def make_loop(self, sinks):
+        return make_loop(self.cfg, self.clock, self.gyro, self.head, self.camera, sinks, self.lat_clock,
+                         self.e_per_dn)
+
+    def clock_now(self) -> float:
+        return self.base_clock.now()
+
+    def clock_advance(self, dt: float) -> None:
+        self.base_clock.sleep(dt)
+
+    def apply_faults(self, t: float, loop) -> None:
+        if self.faults is not None:
+            self.faults.apply(t)
+
+    def loop_stalled(self, t: float) -> bool:
+        return self.faults is not None and self.faults.stalled(t)
+
+    def truth_at(self, t: float):
+        return self.truth.at(t) if self.truth is not None else None
+
+    def truth_rows(self, t: np.ndarray):
+        return self.truth.rows(t) if self.truth is not None else None
+
+    def centroid_errors(self, out: np.ndarray) -> np.ndarray | None:
+        """[t, du, dv] (px) of tracked stars' output centroids against their true positions."""
+        if self.truth is None:
+            return None
+        from ..attitude import quat_to_dcm
+        from ..camera import project_point
+        from ..catalog import load_catalog
+
+        cat = load_catalog(self.cfg.sim.catalog, max(self.cfg.loop.mag_limit, self.cfg.sim.mag_limit))
+        pos = {int(i): k for k, i in enumerate(cat.ids)}
+        params = self.camera.as_array()
+        sel = np.flatnonzero((out["n_stars"] > 0) & (out["mode"] == 1))[::10]
+        if not len(sel):
+            return np.zeros((0, 3))
+        tr = self.truth.rows(out["t"][sel])
+        rows = []
+        for j, i in enumerate(sel):
+            a = quat_to_dcm(tr["q"][j])
+            for s in range(int(out["n_stars"][i])):
+                k = pos.get(int(out["star_id"][i, s]))
+                if k is None:
+                    continue
+                u, v, ok = project_point(params, a @ cat.vectors[k])
+                if ok:
+                    rows.append((out["t"][i], out["centroid_px"][i, s, 0] - u, out["centroid_px"][i, s, 1] - v))
+        return np.array(rows) if rows else np.zeros((0, 3))
+
+    def close(self) -> None:
+        for c in self.closers:
+            try:
+                c()
+            except Exception as exc:  # noqa: BLE001 - closing must not hide the run's result
+                log.debug("close: %s", exc)
+
+
+def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, writer) -> Flatsat:
+    """Devices + recording taps + driver for ``cfg`` running ``scen``.
+
+    Every device runs on the host monotonic clock: the head emulator's and the firmware's
+    exposures take their real time, so a simulated flatsat runs in real time too.
+    """
+    from ..camera import camera_preset
+    from ..clock import MONOTONIC
+    from ..transport import I2CBus, I2CRegisters
+
+    wiring = {}
+    preset = scen.preset or cfg.sim.preset
+    camera = camera_preset(preset)
+    base = MONOTONIC
+    truth = sim = gsamp = None
+    e_per_dn = None
+    if cfg.simulated:
+        from ..mocks.gyro_truth import gyro_params, simulate_gyro
+        from ..mocks.sim_preset import load_preset
+
+        sim = load_preset(preset)
+        gp = gyro_params(scen.gyro_errors or cfg.sim.gyro_errors, range_dps=0.0, odr_hz=float(cfg.gyro.odr_hz))
+        gsamp = simulate_gyro(scenario_profile(scen), scen.duration_s + 60.0, gp, seed=seed)
+        truth = Truth(scen, gsamp, t_origin=base.now())
+        wiring["sky"] = f"simulator: {preset} preset, {cfg.sim.catalog} catalog, gyro errors '{gp.name}'"
+        e_per_dn = sim.detector.gain_e_per_adu
+    rec_clock = taps.RecordingClock(base, writer) if writer else base
+    head_clock = taps.RecordingClock(base, writer, channel=CH_HEAD_CLOCK) if writer else base
+    closers = []
+    faults = FaultPlan(scen)
+
+    # gyro bus
+    if cfg.gyro.kind == "emulator":
+        from ..mocks.bmi088_model import Bmi088GyroModel
+        from ..mocks.faults import FaultyBus
+
+        if cfg.gyro.model != "bmi088":
+            raise ConfigError("the gyro emulator models the BMI088 (gyro.model = 'bmi088')")
+        model = Bmi088GyroModel(base, _SampleSource(gsamp, truth.t_origin))
+        smbus = FaultyBus(model.smbus(cfg.gyro.i2c_address, bus_hz=None), clock=base, seed=seed)
+        faults.gyro_bus = smbus
+        regs = I2CRegisters(I2CBus(smbus, name="emulated i2c"), cfg.gyro.i2c_address)
+        wiring["gyro"] = "BMI088 register model on a fake SMBus (mocks), driven by gyrostar.gyro.Bmi088Gyro"
+    elif cfg.gyro.kind == "i2c":
+        regs = I2CRegisters(I2CBus.open(cfg.gyro.i2c_bus), cfg.gyro.i2c_address)
+        wiring["gyro"] = f"{cfg.gyro.model} on /dev/i2c-{cfg.gyro.i2c_bus} address 0x{cfg.gyro.i2c_address:02X}"
+    else:
+        from ..gyro import bmi088, l3gd20h
+        from ..transport import open_spidev
+
+        spi = open_spidev(cfg.gyro.spi_bus, cfg.gyro.spi_device, cfg.gyro.spi_hz)
+        mod = bmi088 if cfg.gyro.model == "bmi088" else l3gd20h
+        regs = mod.spi_registers(spi, name=f"/dev/spidev{cfg.gyro.spi_bus}.{cfg.gyro.spi_device}")
+        wiring["gyro"] = f"{cfg.gyro.model} on /dev/spidev{cfg.gyro.spi_bus}.{cfg.gyro.spi_device}"
+    if writer:
+        regs = taps.RecordingRegisters(regs, writer, clock=rec_clock)
+    gyro = make_gyro(cfg, regs, rec_clock)
+
+    # head link
+    open_link, head_wiring, head_closers = _head_devices(cfg, scen, sim, truth, seed, faults)
+    wiring["head"] = head_wiring
+    closers += head_closers
+    current = {}
+
+    def connect():
+        old = current.get("link")
+        if old is not None:
+            try:
+                old.close()
+            except Exception:  # noqa: BLE001 - the old link is already broken
+                pass
+        link = open_link()
+        current["link"] = link
+        return taps.RecordingLink(link, writer, clock=rec_clock) if writer else link
+
+    head = make_head(cfg, connect(), rec_clock, reconnect=connect, head_clock=head_clock,
+                     poll_log=writer)
+    closers.insert(0, head.close)
+    closers.append(lambda: current["link"].close())
+    wiring["loop"] = ("gyrostar.loop.coupled: spot EKF per star (gyrostar.core.spot_ekf) + QUEST attitude "
+                      "(gyrostar.core.quest), Pyramid acquisition (gyrostar.starid.pyramid), trajectory windows "
+                      "(gyrostar.core.windows), CoG centroids (gyrostar.core.centroid)")
+    return Flatsat(cfg, scen, camera, rec_clock, base, gyro, head, truth, simulated_clock=False, wiring=wiring,
+                   e_per_dn=e_per_dn, faults=faults, closers=tuple(closers))
+
+
+class _SampleSource:
+    """Rate source for the BMI088 register model: the simulator's gyro output at host time t."""
+
+    def __init__(self, gsamp, t_origin: float):
+        self.g = gsamp
+        self.t_origin = t_origin
+
+    def __call__(self, k, t):
+        ts = np.asarray(t) - self.t_origin
+        i = np.clip(np.round(ts * self.g.params.odr_hz).astype(np.int64) - 1, 0, len(self.g.t) - 1)
+        return self.g.omega_meas[i]
+
+
+def _head_devices(cfg, scen, sim, truth, seed, faults):
+    """(open_link() -> SerialLink, wiring text, closers) for the configured head."""
+    from ..transport import SerialLink
+
+    h = cfg.head
+    if h.kind == "emulator":
+        from ..catalog import load_catalog
+        from ..mocks.head_emulator import HeadEmulator
+        from ..mocks.sky import Sky
+
+        cat = load_catalog(cfg.sim.catalog, scen.mag_limit or cfg.sim.mag_limit)
+        sky = Sky(cat, sim, seed=seed)
+        emu = HeadEmulator(sky, ScenarioScene(truth, sim.detector.exposure_s), noise=True)
+        # render once before the loop starts (numba load, fixed-pattern noise): the emulator
+        # shares this interpreter, and a first render would hold the loop off for ~0.5 s
+        warm = emu._sky_for(emu.exposure_us)
+        warm.render_frame(truth.q0, np.zeros(3), frame=0)
+        warm.render_windows(np.array([[0, 10, 10, 16]], np.int32), truth.q0, np.zeros(3), frame=0)
+        emu.start()
+        faults.head_emulator = emu
+
+        def open_link():
+            if emu.master is None:
+                raise DeviceError("head emulator is disconnected (pty closed)")
+            return SerialLink(emu.path, baudrate=h.baudrate)
+
+        return open_link, f"Python head emulator (mocks) on pty {emu.path}", [emu.stop]
+    if h.kind == "firmware-host":
+        from .fwhead import FirmwareHead
+
+        fw = FirmwareHead(h.program or None, sim, truth, seed, cfg.sim)
+        fw.start()
+        faults.firmware_head = fw
+        return fw.open_link, f"firmware host program {fw.program} on pty {fw.path}", [fw.stop]
+
+    def open_serial():
+        return SerialLink(h.url, baudrate=h.baudrate)
+
+    return open_serial, f"serial link {h.url} at {h.baudrate} Bd", []
+
+
+class FaultPlan:
+    """The scenario's injected faults, applied to the devices at their times."""
+
+    def __init__(self, scen: hc.Scenario):
+        self.faults = list(scen.faults)
+        self.eclipse = list(scen.eclipse)
+        self.gyro_bus = None
+        self.head_emulator = None
+        self.firmware_head = None
+        self.active: set = set()
+        self.in_eclipse = False
+        self._saved_electrons = None
+
+    def stalled(self, t: float) -> bool:
+        return any(f.kind == "gyro-fifo-overrun" and f.at_s <= t < f.at_s + f.seconds for f in self.faults)
+
+    def eclipsed(self, t: float) -> bool:
+        return any(a <= t < b for a, b in self.eclipse)
+
+    def apply(self, t: float) -> None:
+        ecl = self.eclipsed(t)
+        if ecl != self.in_eclipse:
+            self.in_eclipse = ecl
+            self._set_eclipse(ecl)
+        for i, f in enumerate(self.faults):
+            on = f.at_s <= t < f.at_s + f.seconds
+            if on and i not in self.active:
+                self.active.add(i)
+                self._set(f, True)
+            elif not on and i in self.active:
+                self.active.discard(i)
+                self._set(f, False)
+
+    def _set(self, f: hc.Fault, on: bool) -> None:
+        log.info("fault %s %s", f.kind, "on" if on else "off")
+        if f.kind == "gyro-nack" and self.gyro_bus is not None:
+            if on:
+                self.gyro_bus.nack_next(10**9)
+            else:
+                self.gyro_bus.nack_next(0)
+        elif f.kind == "head-disconnect":
+            dev = self.head_emulator or self.firmware_head
+            if dev is not None:
+                if on:
+                    dev.disconnect()
+                else:
+                    dev.start()
+        elif f.kind == "link-corruption":
+            from ..mocks.faults import ByteFaults
+
+            dev = self.head_emulator or self.firmware_head
+            if dev is not None:
+                dev.faults = ByteFaults(seed=7, corrupt_p=f.rate) if on else None
+
+    def _set_eclipse(self, on: bool) -> None:
+        """No starlight reaches the sensor (stars' signal 0; background and noise stay)."""
+        log.info("eclipse %s", "begins" if on else "ends")
+        if self.head_emulator is not None:
+            emu = self.head_emulator
+            sky = emu._sky_for(emu.exposure_us)
+            if on:
+                self._saved_electrons = sky.electrons.copy()
+                sky.electrons[:] = 0.0
+            elif self._saved_electrons is not None:
+                sky.electrons[:] = self._saved_electrons
+        if self.firmware_head is not None:
+            self.firmware_head.eclipse = on
+
+
+def replay_loop(meta: dict, records, sinks):
+    """The loop of a logged run rebuilt on replay taps; returns (loop, run_all)."""
+    from .. import config as gconfig
+    from ..camera import camera_preset
+
+    cfg = gconfig.from_dict(meta["config"], hc.FlatsatConfig, source="log META")
+    scen = gconfig.from_dict(meta["scenario"], hc.Scenario, source="log META")
+    camera = camera_preset(scen.preset or cfg.sim.preset)
+    clock = taps.ReplayClock([float(np.frombuffer(r.payload, "<f8")[0]) for r in records
+                              if r.kind == lf.CLOCK and r.channel == 0])
+    lat = [float(np.frombuffer(r.payload, "<f8")[0]) for r in records
+           if r.kind == lf.CLOCK and r.channel == lf.CH_LATENCY]
+    lat_clock = taps.ReplayClock(lat) if lat else None
+    regs = taps.ReplayRegisters([r for r in records if r.kind == lf.BUS and r.channel == lf.CH_GYRO])
+    link = taps.ReplayLink([r for r in records if r.channel == lf.CH_HEAD and r.kind in (lf.TX, lf.RX, taps.WAITING)])
+    e_per_dn = None
+    if cfg.simulated:
+        from ..mocks.sim_preset import load_preset
+
+        e_per_dn = load_preset(scen.preset or cfg.sim.preset).detector.gain_e_per_adu
+    head_clock = taps.ReplayClock([float(np.frombuffer(r.payload, "<f8")[0]) for r in records
+                                   if r.kind == lf.CLOCK and r.channel == CH_HEAD_CLOCK])
+    from collections import deque
+
+    polls = deque(r.payload[0] for r in records if r.kind == POLL and r.channel == CH_POLL)
+    gyro = make_gyro(cfg, regs, clock)
+    head = make_head(cfg, link, clock, reconnect=None, head_clock=head_clock, replay_polls=polls)
+    loop = make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock, e_per_dn)
+
+    def run_all():
+        steps = 0
+        try:
+            loop.start()
+            while True:
+                loop.step()
+                steps += 1
+        except taps.ReplayExhausted as exc:
+            return steps, f"end of log ({exc})"
+        finally:
+            head.close()
+
+    return loop, run_all

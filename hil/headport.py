@@ -1,0 +1,232 @@
+"""The loop's non-blocking access to the camera head: a worker thread runs the head client.
+
+A CAPTURE takes the exposure time (10 ms) plus the transfers, far longer than a gyro
+period (2.5 ms), so the loop never calls the head client itself: it submits a job
+(windows + capture, or a full frame) and polls for the result on later steps while the
+gyro path keeps running. The worker uses :class:`gyrostar.head.HeadClient` unchanged.
+
+Replay: the worker's link traffic is recorded on the head channel, the client's reads of
+the host clock on channel ``CH_HEAD_CLOCK`` (the client times its timeouts and time-sync
+schedule with ``time.monotonic``; while a port is open that name is routed through the
+port's clock), and every poll's answer on ``CH_POLL``; a replayed poll that was "done"
+waits for the replayed worker to finish the same job, so the loop sees the same results
+at the same steps.
+"""
+
+from __future__ import annotations
+
+import logging
+import struct
+import threading
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import DeviceError, GyrostarError
+from ..recording import logfile as lf
+
+log = logging.getLogger(__name__)
+
+CH_HEAD_CLOCK = 3
+CH_POLL = 4
+POLL = 10
+lf.KIND_NAMES[POLL] = "poll"
+
+
+@dataclass
+class ImageResult:
+    kind: str                 # "windows" | "frame"
+    t_start: float            # exposure start, host s
+    t_end: float              # exposure end, host s
+    t_mid: float
+    values: np.ndarray | None = None   # windows: pixels in span order
+    image: np.ndarray | None = None    # frame: (H, W)
+    error: Exception | None = None
+
+
+class _TimeShim:
+    """Stands in for the ``time`` module inside gyrostar.head.client: monotonic() → clock."""
+
+    def __init__(self, clock, real):
+        self._clock = clock
+        self._real = real
+
+    def monotonic(self) -> float:
+        return self._clock.now()
+
+    def __getattr__(self, name):
+        return getattr(self._real, name)
+
+
+class HeadPort:
+    """Jobs for the head on a worker thread; ``poll()`` returns finished results."""
+
+    def __init__(self, link, clock, timeout_s=0.05, retries=2, exposure_s=0.010, gain=1, reconnect=None,
+                 head_clock=None, poll_log=None, replay_polls=None):
+        self.link = link
+        self.clock = clock
+        self.head_clock = head_clock if head_clock is not None else clock
+        self.timeout_s = timeout_s
+        self.retries = retries
+        self.exposure_s = exposure_s
+        self.gain = gain
+        self._reconnect = reconnect
+        self._poll_log = poll_log              # LogWriter when recording
+        self._replay_polls = replay_polls      # deque of recorded poll answers when replaying
+        self.client = None
+        self.info = None
+        self._job = None
+        self._thread = None
+        self._done = threading.Event()
+        self._result: ImageResult | None = None
+        self._patched = None
+
+    # ------------------------------------------------------------------ set-up
+    def _patch_time(self) -> None:
+        import time as real_time
+
+        from ..head import client as client_mod
+
+        if self._patched is None:
+            self._patched = client_mod.time
+            client_mod.time = _TimeShim(self.head_clock, real_time)
+
+    def _unpatch_time(self) -> None:
+        from ..head import client as client_mod
+
+        if self._patched is not None:
+            client_mod.time = self._patched
+            self._patched = None
+
+    def start(self, exposure_s: float | None = None) -> None:
+        from ..head import HeadClient
+
+        self._patch_time()
+        if exposure_s:
+            self.exposure_s = exposure_s
+        self.client = HeadClient(self.link, timeout=self.timeout_s + 0.2, retries=self.retries)
+        self.info = self.client.get_info()
+        self.client.set_exposure(int(round(self.exposure_s * 1e6)))
+        self.client.sync(8)
+
+    def limits(self) -> dict:
+        i = self.info or {}
+        return {k: i.get(k) for k in ("width", "height", "max_windows", "max_spans", "max_window_pixels",
+                                      "pixel_budget", "frame_chunk_max")}
+
+    def reconnect(self) -> None:
+        """Reopen the link (the device came back) and redo the set-up; DeviceError if it is
+        still away. The outcome of reopening is logged (replay answers it from the log)."""
+        if self._thread is not None and self._thread.is_alive():
+            self._thread.join(timeout=5.0)
+        self._job = None
+        self._done.clear()
+        if self._replay_polls is not None:
+            if not self._replay_polls:
+                from ..recording.taps import ReplayExhausted
+
+                raise ReplayExhausted("head reconnects")
+            if not self._replay_polls.popleft():
+                raise DeviceError("head still away (replayed reconnect failure)")
+        elif self._reconnect is not None:
+            try:
+                link = self._reconnect()
+            except DeviceError:
+                self._log_poll(0)
+                raise
+            self._log_poll(1)
+            if link is not None:
+                self.link = link
+        self.start(self.exposure_s)
+
+    def _log_poll(self, value: int) -> None:
+        if self._poll_log is not None:
+            self._poll_log.append(POLL, struct.pack("<B", value), CH_POLL)
+
+    def close(self) -> None:
+        t = self._thread
+        if t is not None and t.is_alive():
+            t.join(timeout=2.0)
+        self._unpatch_time()
+
+    # ------------------------------------------------------------------ jobs
+    @property
+    def busy(self) -> bool:
+        return self._job is not None
+
+    def submit_windows(self, spans: np.ndarray) -> None:
+        self._submit("windows", spans)
+
+    def submit_frame(self) -> None:
+        self._submit("frame", None)
+
+    def _submit(self, kind, spans) -> None:
+        if self._job is not None:
+            raise GyrostarError("head port: a job is already in flight")
+        self._job = (kind, spans)
+        self._done.clear()
+        self._result = None
+        self._thread = threading.Thread(target=self._work, args=(kind, spans), name="head-port", daemon=True)
+        self._thread.start()
+
+    def _work(self, kind, spans) -> None:
+        try:
+            self._result = self._do(kind, spans)
+        except Exception as exc:  # noqa: BLE001 - every failure goes back to the loop as a result
+            self._result = ImageResult(kind, np.nan, np.nan, np.nan, error=exc)
+        self._done.set()
+
+    def _do(self, kind, spans) -> ImageResult:
+        c = self.client
+        if kind == "windows":
+            c.set_windows(spans)
+            cap = c.capture(fetch=True)
+            order = {w.window_id: w.pixels for w in cap.windows}
+            ids = []
+            for wid in spans[:, 0]:
+                if not ids or ids[-1] != wid:
+                    ids.append(int(wid))
+            missing = [w for w in ids if w not in order]
+            if missing:
+                raise DeviceError(f"WINDOW_DATA lacks windows {missing[:4]}")
+            values = np.concatenate([order[w] for w in ids]) if ids else np.zeros(0, np.uint16)
+            n = int(np.sum(spans[:, 3] - spans[:, 2]))
+            if len(values) != n:
+                raise DeviceError(f"window data has {len(values)} pixels, the spans {n}")
+            half = 0.5 * cap.exposure_us * 1e-6
+            return ImageResult("windows", cap.t_mid_host - half, cap.t_mid_host + half, cap.t_mid_host,
+                               values=values)
+        # full frame: one small window keeps CAPTURE legal; the frame is read in chunks
+        w, h = int(self.info["width"]), int(self.info["height"])
+        c.set_windows(np.array([[0, h // 2, w // 2, w // 2 + 1]], np.int32))
+        cap = c.capture(fetch=False)
+        saved, c.timeout = c.timeout, max(c.timeout, 2.0)   # the first chunk waits for a full render
+        try:
+            img, _ = c.full_frame()
+        finally:
+            c.timeout = saved
+        half = 0.5 * cap.exposure_us * 1e-6
+        return ImageResult("frame", cap.t_mid_host - half, cap.t_mid_host + half, cap.t_mid_host, image=img)
+
+    def poll(self) -> ImageResult | None:
+        """The finished job's result (and the port is free again), or None while in flight."""
+        if self._job is None:
+            return None
+        if self._replay_polls is not None:
+            if not self._replay_polls:
+                from ..recording.taps import ReplayExhausted
+
+                raise ReplayExhausted("head polls")
+            done = self._replay_polls.popleft()
+            if done:
+                self._done.wait()
+        else:
+            done = self._done.is_set()
+            self._log_poll(int(done))
+        if not done:
+            return None
+        self._thread.join()
+        res = self._result
+        self._job = None
+        self._result = None
+        return res

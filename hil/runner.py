@@ -1,0 +1,240 @@
+"""``gyrostar run``: the coupled loop on a flatsat (built-in simulated one by default).
+
+A run folder (``gyrostar.paths.runs_dir()/<timestamp>_<scenario>`` or ``--out``) receives:
+
+* ``flatsat.gslog`` — the log (raw link frames both ways, gyro bus transactions, clock
+  readings, outputs, truth); ``gyrostar replay`` feeds it back through the same driver;
+* ``summary.json`` — the figures printed at the end (also ``--json`` on stdout);
+* ``attitude_error.png``, ``centroid_error.png``, ``bias_estimate.png``,
+  ``latency_histogram.png`` (unless ``--no-plots``).
+
+Every flatsat runs on the host monotonic clock: the head emulator's and the firmware's
+exposures take their real time, so a simulated flatsat runs in real time as well; the loop
+is paced every gyro period by a drift-free scheduler. ``--realtime`` also asks for the
+config's SCHED_FIFO priority / CPU affinity (when permitted) and shortens Python's thread
+switch interval. Latency is host time from a gyro FIFO read to the emitted outputs;
+``cpu_percent`` is the loop thread's CPU time per wall second.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from datetime import UTC, datetime
+from pathlib import Path
+
+import numpy as np
+
+from ..cli.output import emit
+from ..errors import ConfigError
+from ..paths import runs_dir
+from . import config as hc
+
+log = logging.getLogger(__name__)
+
+
+def make_run_folder(out: str | None, scenario: str) -> Path:
+    if out:
+        folder = Path(out)
+        folder.mkdir(parents=True, exist_ok=True)
+        if (folder / "flatsat.gslog").exists():
+            raise ConfigError(f"run folder {folder} already holds a log; choose another --out")
+        return folder
+    stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%S")
+    base = runs_dir() / f"{stamp}_{scenario}"
+    folder = base
+    i = 1
+    while folder.exists():
+        folder = Path(f"{base}_{i}")
+        i += 1
+    folder.mkdir(parents=True)
+    return folder
+
+
+def run(args) -> int:
+    cfg = hc.load_flatsat(getattr(args, "config", None))
+    scen = hc.load_scenario(getattr(args, "scenario", None))
+    duration = float(args.duration) if getattr(args, "duration", None) else scen.duration_s
+    if duration <= 0:
+        raise ConfigError(f"--duration must be positive, got {duration}")
+    folder = make_run_folder(getattr(args, "out", None), scen.name)
+    result = run_flatsat(cfg, scen, duration=duration, seed=int(getattr(args, "seed", 1) or 0), folder=folder,
+                         realtime=bool(getattr(args, "realtime", False)),
+                         plots=not getattr(args, "no_plots", False),
+                         status=getattr(args, "verbose", 0) >= 0,
+                         config_path=getattr(args, "config", None))
+    emit(args, result, human_summary(result))
+    return 0
+
+
+def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed: int, folder: Path,
+                realtime: bool = False, plots: bool = True, status: bool = True, config_path=None,
+                record: bool | None = None, on_output=None) -> dict:
+    """Run one flatsat session and return its summary (also written to summary.json)."""
+    from ..loop.record import describe
+    from ..loop.scheduler import PeriodicScheduler, realtime_setup
+    from ..loop.sinks import CallbackSink, RecorderSink, UdpSink
+    from ..recording import logfile as lf
+    from . import flatsat
+    from .analysis import summarize
+    from .status import StatusLine
+
+    record = cfg.outputs.record if record is None else record
+    writer = lf.LogWriter(folder / "flatsat.gslog") if record else None
+    meta = {"format": "gyrostar flatsat log 1", "config": _cfg_dict(cfg), "scenario": _cfg_dict(scen),
+            "duration_s": duration, "seed": seed, "realtime": realtime, "output": describe(),
+            "started_utc": datetime.now(UTC).isoformat()}
+    if writer:
+        writer.meta(meta)
+    import sys
+
+    # the loop shares the interpreter with the link reader and head worker threads (and
+    # in-process emulators): switch threads often so the 400 Hz path is not held off
+    sys.setswitchinterval(0.0002)
+    rt = None
+    if realtime:
+        rt = realtime_setup(cfg.realtime.sched_fifo_priority or None, cfg.realtime.cpus or None)
+
+    from ..loop.coupled import warmup
+
+    t_w = time.perf_counter()
+    warm = warmup()
+    warm["seconds"] = time.perf_counter() - t_w
+
+    chunks: list[np.ndarray] = []
+    sinks = [CallbackSink(lambda recs: chunks.append(recs.copy()))]
+    if on_output is not None:
+        sinks.append(CallbackSink(on_output))
+    if writer:
+        sinks.append(RecorderSink(writer))
+    udp = None
+    if cfg.outputs.udp:
+        udp = UdpSink(cfg.outputs.udp_host, cfg.outputs.udp_port)
+        sinks.append(udp)
+
+    fs = flatsat.build(cfg, scen, seed=seed, realtime=realtime, writer=writer)
+    loop = fs.make_loop(sinks)
+    warm["identifier_s"] = loop.warm_identifier()
+    wiring = fs.wiring
+    line = StatusLine(enabled=status)
+    step_wall: list[float] = []
+    cpu_loop = 0.0
+    t_wall0 = time.perf_counter()
+    cpu0 = time.process_time()
+    try:
+        loop.start()
+        period = 1.0 / loop.gyro.odr_hz
+        sched = PeriodicScheduler(period)
+        sched.start()
+        t_start = fs.truth.t_origin if fs.truth is not None else fs.clock_now()
+        while True:
+            sched.wait()
+            t = fs.clock_now() - t_start
+            if t >= duration:
+                break
+            fs.apply_faults(t, loop)
+            if fs.loop_stalled(t):       # injected "loop does not read the FIFO" fault
+                sched.done()
+                continue
+            c0 = time.thread_time()
+            w0 = time.perf_counter()
+            loop.step()
+            step_wall.append(time.perf_counter() - w0)
+            cpu_loop += time.thread_time() - c0
+            sched.done()
+            if status and loop.last_output is not None:
+                line.update(loop.last_output, fs.truth_at(loop.last_output["t"]), step_wall[-1] * 1e6,
+                            sched.overruns, duration, t0=t_start)
+    finally:
+        line.close()
+        fs.close()
+        for s in sinks:
+            s.close()
+    wall = time.perf_counter() - t_wall0
+    cpu_proc = time.process_time() - cpu0
+    out = np.concatenate(chunks) if chunks else np.zeros(0, loop.out_buf.dtype)
+    truth = fs.truth_rows(out["t"]) if len(out) else None
+    if writer and truth is not None:
+        writer.append(lf.TRUTH, truth.tobytes(), t_ns=0)
+    res = summarize(out, truth, loop.gyro.odr_hz)
+    counters = loop.counters()
+    res_top = {
+        "scenario": scen.name,
+        "flatsat": cfg.name,
+        "duration_s": duration,
+        "attitude_error_arcsec_1sigma": res.get("attitude_error_arcsec_1sigma"),
+        "latency_p99_ms": res.get("latency_p99_ms"),
+        "cpu_percent": 100.0 * cpu_loop / wall if wall > 0 else None,
+        "overruns": sched.overruns,
+        "mode_seconds": res["mode_seconds"],
+        "frames": counters["frames"],
+        "gyro_samples": counters["gyro_samples"],
+        "samples_lost": counters["samples_lost"],
+    }
+    res_top.update({k: v for k, v in res.items() if k not in res_top})
+    res_top["step_wall_p99_ms"] = float(np.percentile(step_wall, 99)) * 1e3 if step_wall else None
+    res_top["process_cpu_percent"] = 100.0 * cpu_proc / wall if wall > 0 else None
+    res_top["wall_s"] = wall
+    res_top["realtime"] = realtime
+    res_top["latency_clock"] = "host monotonic clock, FIFO read complete → output emitted"
+    res_top["counters"] = counters
+    res_top["numba_startup"] = warm
+    res_top["wiring"] = wiring
+    if rt is not None:
+        res_top["realtime_setup"] = {"sched_fifo": rt.sched_fifo, "cpus": rt.cpus, "notes": rt.notes}
+    if udp is not None:
+        res_top["udp"] = {"sent": udp.sent, "dropped": udp.dropped, "to": f"{udp.addr[0]}:{udp.addr[1]}"}
+    res_top["run_folder"] = str(folder)
+    if writer:
+        writer.event({"summary": _jsonable(res_top)})
+        writer.close()
+        res_top["log"] = str(folder / "flatsat.gslog")
+    if plots and len(out):
+        from .plots import write_plots
+
+        cerr = fs.centroid_errors(out) if truth is not None else None
+        if cerr is not None and len(cerr):
+            res_top["centroid_error_px_rms"] = float(np.sqrt(np.mean(cerr[:, 1:] ** 2)))
+        res_top["plots"] = [str(p) for p in write_plots(folder, out, truth, cerr)]
+    (folder / "summary.json").write_text(json.dumps(_jsonable(res_top), indent=2))
+    return res_top
+
+
+def _cfg_dict(obj) -> dict:
+    from .. import config as gconfig
+
+    return gconfig.to_dict(obj)
+
+
+def _jsonable(obj):
+    from ..cli.output import _clean
+
+    return _clean(obj)
+
+
+def human_summary(r: dict) -> str:
+    def f(v, fmt):
+        return "n/a" if v is None else format(v, fmt)
+
+    modes = ", ".join(f"{k} {v:.1f} s" for k, v in r["mode_seconds"].items())
+    lines = [
+        f"[bold]gyrostar run[/] — {r['scenario']} on {r['flatsat']}, {r['duration_s']:.1f} s of flatsat time "
+        f"({r['wall_s']:.1f} s wall{', real time' if r['realtime'] else ''})",
+        f"  attitude error (cross-boresight, 1σ, TRACK): {f(r['attitude_error_arcsec_1sigma'], '.2f')}″",
+        f"  modes: {modes}",
+        f"  frames {r['frames']}, gyro samples {r['gyro_samples']}, samples lost {r['samples_lost']}",
+        f"  latency p99 {f(r['latency_p99_ms'], '.3f')} ms ({r['latency_clock']}), loop CPU "
+        f"{f(r['cpu_percent'], '.1f')} % of a core, overruns {r['overruns']}",
+        f"  numba start-up {r['numba_startup']['seconds']:.2f} s ({r['numba_startup']['cache_hits']} cached, "
+        f"{r['numba_startup']['compiled']} compiled)",
+    ]
+    if r.get("bias_error_dps_final") is not None:
+        lines.append("  final bias error (°/s): " + " ".join(f"{v:+.4f}" for v in r["bias_error_dps_final"]))
+    if r.get("centroid_error_px_rms") is not None:
+        lines.append(f"  tracked-star centroid error RMS {r['centroid_error_px_rms']:.3f} px")
+    not_wired = [k for k, v in r.get("wiring", {}).items() if str(v).startswith("NOT WIRED")]
+    for k in not_wired:
+        lines.append(f"  [red]{k}: {r['wiring'][k]}[/]")
+    lines.append(f"  run folder: {r['run_folder']}")
+    return "\n".join(lines)
