@@ -10,6 +10,9 @@ counted; a request without a valid reply within ``timeout`` is sent again, at mo
 Full frames are streamed: FULL_FRAME chunk requests are kept ``depth`` deep in flight and
 the replies matched by sequence number, so the link is never idle between chunks.
 
+Window pixels default to U16 on the wire: 1.6× the bytes of PACKED10, but decoding a
+10-window reply is ~10× cheaper (``bench/bench_driver.py``), and the link has room.
+
 Times: captures report MCU microseconds; the client keeps a :class:`~.timesync.ClockSync`
 fed by TIME_SYNC exchanges (``sync()``, and automatically every ``sync_every_s``), and
 gives each capture's exposure mid-time in host monotonic seconds.
@@ -161,7 +164,7 @@ class HeadClient:
         if time.monotonic() - self._last_sync >= self.sync_every_s:
             self.sync(n)
 
-    def capture(self, fetch: bool = True, pixel_format: int = PixelFormat.PACKED10, dark: bool = False) -> Capture:
+    def capture(self, fetch: bool = True, pixel_format: int = PixelFormat.U16, dark: bool = False) -> Capture:
         """Expose (CAPTURE, or DARK), then fetch every window's pixels (WINDOW_DATA pages)."""
         self.maybe_sync()
         msg = MsgType.DARK if dark else MsgType.CAPTURE
@@ -176,7 +179,7 @@ class HeadClient:
 
     _exposure_s = LIMITS["exposure_default_us"] * 1e-6
 
-    def window_data(self, pixel_format: int = PixelFormat.PACKED10, capture_no: int | None = None) -> list:
+    def window_data(self, pixel_format: int = PixelFormat.U16, capture_no: int | None = None) -> list:
         """All windows of the last capture (as many WINDOW_DATA pages as needed)."""
         out, start = [], 0
         while True:

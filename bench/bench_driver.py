@@ -1,0 +1,258 @@
+"""Driver speed: head-frame decoding and gyro FIFO read + conversion, each against a baseline.
+
+* ``decode_10_window_frame`` — one WINDOW_DATA reply with 10 windows of 12×12 px in U16
+  (the head client's default pixel format), from the bytes between two delimiters to
+  per-window uint16 arrays, with the product path (:mod:`gyrostar.protocol`: ``cobs`` and
+  ``crc32c`` C packages + numpy). Baseline: the same decode as a numba codec (COBS, table
+  CRC-32C, pixel unpack). A ratio above 1 means the packages are faster. Target ≤ 200 µs.
+* ``decode_10_window_frame_packed10`` — the same in 10-bit packed pixels (smaller on the
+  link, slower to unpack in numpy).
+* ``read_convert_40_fifo_frames`` — :meth:`Bmi088Gyro.read` of 40 FIFO frames (status read,
+  burst, frame indices, time base, numba conversion to rad/s + times + flags into the
+  preallocated arrays) over a replay bus that answers instantly (bus time excluded).
+  Baseline: the same read with a per-sample pure-Python conversion. Target ≤ 100 µs.
+"""
+
+from __future__ import annotations
+
+import statistics
+import struct
+import time
+
+import numpy as np
+from numba import njit
+
+
+def _time_us(fn, repeat: int, inner: int) -> float:
+    fn()
+    samples = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        for _ in range(inner):
+            fn()
+        samples.append((time.perf_counter() - t0) / inner * 1e6)
+    return statistics.median(samples)
+
+
+# --- numba codec (baseline for the decode case) ------------------------------------------------
+def _crc_table() -> np.ndarray:
+    tab = np.zeros(256, np.uint32)
+    for i in range(256):
+        c = i
+        for _ in range(8):
+            c = (c >> 1) ^ 0x82F63B78 if c & 1 else c >> 1
+        tab[i] = c
+    return tab
+
+
+CRC_TABLE = _crc_table()
+
+
+@njit(cache=True)
+def nb_cobs_decode(src, out):
+    i = 0
+    o = 0
+    n = src.shape[0]
+    while i < n:
+        code = src[i]
+        if code == 0:
+            return -1
+        i += 1
+        for _ in range(code - 1):
+            if i >= n:
+                return -1
+            out[o] = src[i]
+            o += 1
+            i += 1
+        if code < 0xFF and i < n:
+            out[o] = 0
+            o += 1
+    return o
+
+
+@njit(cache=True)
+def nb_crc32c(buf, n, table):
+    c = np.uint32(0xFFFFFFFF)
+    for i in range(n):
+        c = table[(c ^ buf[i]) & 0xFF] ^ (c >> np.uint32(8))
+    return c ^ np.uint32(0xFFFFFFFF)
+
+
+@njit(cache=True)
+def nb_unpack10(buf, off, n, out, o):
+    for i in range(n):
+        bit = 10 * i
+        b = off + (bit >> 3)
+        sh = bit & 7
+        v = np.uint32(buf[b]) | (np.uint32(buf[b + 1]) << 8)  # 10 bits at offset ≤ 6 fit in 16
+        out[o + i] = (v >> sh) & 0x3FF
+    return n
+
+
+@njit(cache=True)
+def nb_decode_windows(src, raw, table, pixels, win_ids, win_n):
+    """COBS → CRC check → WINDOW_DATA windows into flat ``pixels``; returns the window count."""
+    n = nb_cobs_decode(src, raw)
+    if n < 10:
+        return -1
+    crc = np.uint32(raw[n - 4]) | (np.uint32(raw[n - 3]) << 8) | (np.uint32(raw[n - 2]) << 16) \
+        | (np.uint32(raw[n - 1]) << 24)
+    if nb_crc32c(raw, n - 4, table) != crc:
+        return -2
+    p = 6 + 12  # header + WINDOW_DATA fixed part
+    count = raw[6 + 6] | (raw[6 + 7] << 8)
+    fmt = raw[6 + 10]
+    o = 0
+    for w in range(count):
+        win_ids[w] = raw[p] | (raw[p + 1] << 8)
+        m = raw[p + 2] | (raw[p + 3] << 8)
+        win_n[w] = m
+        p += 8
+        if fmt == 1:
+            nb_unpack10(raw, p, m, pixels, o)
+            p += (10 * m + 7) // 8
+        else:
+            for i in range(m):
+                pixels[o + i] = raw[p + 2 * i] | (np.uint16(raw[p + 2 * i + 1]) << 8)
+            p += 2 * m
+        o += m
+    return count
+
+
+def _window_frame(pixel_format):
+    from gyrostar.protocol import MsgType, encode_frame
+    from gyrostar.protocol.defs import REPLY_FLAG
+    from gyrostar.protocol.payloads import WindowPixels, encode_reply, encode_windows_tail
+
+    rng = np.random.default_rng(0)
+    wins = [WindowPixels(w, 0, rng.integers(0, 1024, 144).astype(np.uint16)) for w in range(10)]
+    wins = [WindowPixels(w.window_id, int(w.pixels.sum()), w.pixels) for w in wins]
+    payload = encode_reply(MsgType.WINDOW_DATA, capture_no=1, start=0, count=10, total=10,
+                           pixel_format=pixel_format) + encode_windows_tail(wins, pixel_format)
+    return encode_frame(MsgType.WINDOW_DATA | REPLY_FLAG, 5, payload)[:-1], wins
+
+
+def bench_decode(quick: bool, pixel_format: int) -> dict:
+    from gyrostar.protocol import decode_frame
+    from gyrostar.protocol.payloads import decode_reply
+
+    packet, wins = _window_frame(pixel_format)
+
+    def product():
+        return decode_reply(decode_frame(packet))["windows"]
+
+    src = np.frombuffer(packet, np.uint8)
+    raw = np.empty(len(packet), np.uint8)
+    pixels = np.empty(2048, np.uint16)
+    ids = np.empty(64, np.int64)
+    ns = np.empty(64, np.int64)
+
+    def baseline():
+        return nb_decode_windows(src, raw, CRC_TABLE, pixels, ids, ns)
+
+    got = product()
+    assert all(np.array_equal(a.pixels, b.pixels) for a, b in zip(got, wins))
+    assert baseline() == 10 and np.array_equal(pixels[:1440], np.concatenate([w.pixels for w in wins]))
+    rep, inner = (5, 200) if quick else (15, 500)
+    t = _time_us(product, rep, inner)
+    b = _time_us(baseline, rep, inner)
+    fmt = "U16" if pixel_format == 0 else "PACKED10"
+    return {"us": t, "baseline_us": b, "ratio": b / t, "target_us": 200.0, "bytes": len(packet),
+            "note": f"{fmt}: gyrostar.protocol (cobs+crc32c packages, numpy) vs numba codec"}
+
+
+# --- gyro FIFO ---------------------------------------------------------------------------------
+class ReplayBus:
+    """Answers FIFO_STATUS with 40 frames and FIFO_DATA with a fixed 240-byte burst, instantly."""
+
+    def __init__(self, raw: bytes):
+        self.raw = raw
+        self.status = bytes([40])
+
+    def read(self, reg: int, n: int) -> bytes:
+        return self.status if reg == 0x0E else self.raw[:n]
+
+    def write(self, reg: int, data: bytes) -> None:
+        pass
+
+    def describe(self) -> str:
+        return "replay bus"
+
+
+def python_convert(raw, n, scale, mounting, t_ref, period, k_ref, first_index, first_flags, prev_raw,
+                   out_t, out_index, out_rate, out_flags, start):
+    """Per-sample pure-Python twin of :func:`gyrostar.gyro.convert.convert_frames`."""
+    m = mounting.tolist()
+    data = bytes(raw)
+    for i in range(n):
+        sx, sy, sz = struct.unpack_from("<3h", data, 6 * i)
+        flags = first_flags if i == 0 else 0
+        if sx in (32767, -32768):
+            flags |= 1
+        if sy in (32767, -32768):
+            flags |= 2
+        if sz in (32767, -32768):
+            flags |= 4
+        if prev_raw[3] and (sx, sy, sz) == (prev_raw[0], prev_raw[1], prev_raw[2]):
+            flags |= 0x10
+        prev_raw[0], prev_raw[1], prev_raw[2], prev_raw[3] = sx, sy, sz, 1
+        w = (sx * scale, sy * scale, sz * scale)
+        o = start + i
+        for r in range(3):
+            out_rate[o, r] = m[r][0] * w[0] + m[r][1] * w[1] + m[r][2] * w[2]
+        k = first_index + i
+        out_index[o] = k
+        out_t[o] = t_ref + period * (k - k_ref)
+        out_flags[o] = flags
+    return n
+
+
+def bench_fifo(quick: bool) -> dict:
+    import gyrostar.gyro.base as base
+    from gyrostar.clock import SimulatedClock
+    from gyrostar.gyro import Bmi088Gyro, GyroSamples
+
+    rng = np.random.default_rng(1)
+    raw = rng.integers(-3000, 3000, (40, 3)).astype("<i2").tobytes()
+
+    def make():
+        clock = SimulatedClock(10.0)
+        gyro = Bmi088Gyro(ReplayBus(raw), clock=clock)
+        gyro.odr_hz, gyro.range_dps, gyro.watermark, gyro.scale = 400.0, 2000.0, 20, 2000 / 32768 * np.pi / 180
+        gyro.start()
+        out = GyroSamples(40)
+
+        def one():
+            clock.advance(0.1)
+            out.n = 0
+            return gyro.read(out)
+
+        return one, out
+
+    product, out_p = make()
+    orig = base.convert_frames
+    base.convert_frames = python_convert
+    try:
+        baseline, out_b = make()
+        assert baseline() == 40
+        rep, inner = (5, 300) if quick else (15, 1000)
+        b = _time_us(baseline, rep, inner)
+    finally:
+        base.convert_frames = orig
+    assert product() == 40
+    assert np.allclose(out_p.rate, out_b.rate) and np.array_equal(out_p.flags, out_b.flags)
+    t = _time_us(product, rep, inner)
+    return {"us": t, "baseline_us": b, "ratio": b / t, "target_us": 100.0,
+            "note": "Bmi088Gyro.read, numba conversion vs per-sample Python; replay bus (no bus time)"}
+
+
+def run(quick: bool = False) -> dict:
+    return {"decode_10_window_frame": bench_decode(quick, 0),          # the head client's default format
+            "decode_10_window_frame_packed10": bench_decode(quick, 1),
+            "read_convert_40_fifo_frames": bench_fifo(quick)}
+
+
+if __name__ == "__main__":
+    import json
+
+    print(json.dumps(run(), indent=2))
