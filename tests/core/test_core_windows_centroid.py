@@ -8,6 +8,7 @@ from gyrostar.core.centroid import (
     cog,
     iwcog,
     iwcog_variance,
+    smear_fit,
     window_background,
     window_spans_of,
 )
@@ -151,3 +152,30 @@ def test_iwcog_smeared_spot_beats_cog_at_low_snr():
     assert np.sqrt((e_iw ** 2).mean()) < 0.9 * np.sqrt((e_cog ** 2).mean())
     # its error propagation agrees with the scatter (fixed-weight linear estimator)
     np.testing.assert_allclose(np.mean(v_iw, axis=0), e_iw.var(axis=0), rtol=0.3)
+
+
+def test_smear_fit_is_unbiased_beats_iwcog_and_knows_its_variance():
+    rng = np.random.default_rng(4)
+    traj = np.array([[20.2, 20.7], [28.4, 24.1]])
+    spans = trajectory_window(traj, 6, 64, 64, 0)
+    t = np.linspace(0, 1, 41)
+    pts = traj[0] + t[:, None] * (traj[1] - traj[0])
+    centre = pts.mean(axis=0)
+    offsets = np.ascontiguousarray(pts[::2] - centre)
+    clean = np.zeros(span_pixel_count(spans))
+    for p in pts:
+        clean += gaussian_window(spans, p[0], p[1], 0.85, 2000.0 / len(pts), 0.0, None)
+    e_fit, e_iw, v_fit = [], [], []
+    noise_var = 20.0 + 225.0
+    for _ in range(300):
+        vals = rng.poisson(clean + 20.0) + rng.standard_normal(clean.size) * 15.0
+        u, v, flux, vu, vv, it = smear_fit(spans, vals, 20.0, centre[0] + 0.4, centre[1] - 0.3, offsets, 0.85,
+                                           noise_var, 1.0, 10, 1e-4)
+        e_fit.append([u, v] - centre)
+        v_fit.append([vu, vv])
+        u, v, _, _ = iwcog(spans, vals, 20.0, centre[0], centre[1], offsets, 1.0, 30, 1e-4)
+        e_iw.append([u, v] - centre)
+    e_fit, e_iw = np.array(e_fit), np.array(e_iw)
+    assert np.abs(e_fit.mean(axis=0)).max() < 0.03
+    assert np.sqrt((e_fit ** 2).mean()) < 0.9 * np.sqrt((e_iw ** 2).mean())
+    np.testing.assert_allclose(np.mean(v_fit, axis=0), e_fit.var(axis=0), rtol=0.25)
