@@ -68,13 +68,15 @@ class ParamTable:
         self.rows[name] = row
 
     def human(self, title: str) -> str:
+        from rich.markup import escape
+
         lines = [f"[bold]{title}[/bold]", f"{'parameter':<28} {'value':>14} {'truth':>14} {'error':>12}  unit"]
         for name, row in self.rows.items():
             vals = [np.atleast_1d(np.asarray(row.get(k, np.nan), float)).ravel() for k in ("value", "truth", "error")]
             for i in range(len(vals[0])):
                 label = name if len(vals[0]) == 1 else f"{name}[{i}]"
                 cells = [f"{v[i]:.7g}" if i < len(v) and np.isfinite(v[i]) else "" for v in vals]
-                lines.append(f"{label:<28} {cells[0]:>14} {cells[1]:>14} {cells[2]:>12}  {row['unit']}")
+                lines.append(escape(f"{label:<28} {cells[0]:>14} {cells[1]:>14} {cells[2]:>12}  {row['unit']}"))
         return "\n".join(lines)
 
 
