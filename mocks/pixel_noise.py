@@ -7,7 +7,8 @@ so it is the same in every frame of a sensor (same seed).
 
 Detector chain for one pixel with mean photo-signal ``s`` electrons (stars + sky):
 
-    λ = (s + sky) · (1 + PRNU) + dark_rate · exposure   (dark_rate: DSNU lognormal or hot)
+    λ = (s + sky) · (1 + PRNU) + dark_rate · exposure   (dark_rate: DSNU lognormal or hot;
+                                                        s = 0: the float32 map λ_bg)
     n = Poisson(λ)  (exact inversion for λ < 40, else round(λ + √λ·z))
     e = min(n, full_well) + read_noise · z'
     ADU = clip(round(e / gain + bias), 0, 2^bits − 1)  → uint16
@@ -200,23 +201,26 @@ _K_VEC = 12  # Poisson terms evaluated branch-free (vectorised) before the scala
 
 
 @njit(cache=True)
-def background_exp(gain_fp, dark, det):
-    """exp(−λ_bg) per pixel for the star-free mean λ_bg = sky·(1 + PRNU) + dark (float64 (H, W)).
+def background_maps(gain_fp, dark, det):
+    """Star-free mean λ_bg = sky·(1 + PRNU) + dark and exp(−λ_bg) per pixel, float32 (H, W) each.
 
-    Fixed per sensor; saves the exponential of the Poisson inversion on every pixel that
-    receives no star light (computed with the same expression as :func:`digitise_run`).
+    Fixed per sensor. Pixels without star light take their λ and the first Poisson term
+    from these maps (no exponential per pixel, half the memory traffic); the full-frame
+    and span digitisers apply the same rule, so they stay identical.
     """
     h, w = gain_fp.shape
-    out = np.empty((h, w))
+    lam_bg = np.empty((h, w), dtype=np.float32)
+    exp_bg = np.empty((h, w), dtype=np.float32)
     for r in range(h):
         for c in range(w):
-            lam = (0.0 + det[D_SKY_E]) * gain_fp[r, c] + dark[r, c]
-            out[r, c] = math.exp(-min(lam, _POISSON_EXACT))
-    return out
+            lam = det[D_SKY_E] * gain_fp[r, c] + dark[r, c]
+            lam_bg[r, c] = lam
+            exp_bg[r, c] = math.exp(-min(np.float64(np.float32(lam)), _POISSON_EXACT))
+    return lam_bg, exp_bg
 
 
 @njit(cache=True)
-def digitise_run(signal, gain_fp, dark, bg_exp, fkey, row, col0, det, noise, table, out,
+def digitise_run(signal, gain_fp, dark, lam_bg, exp_bg, fkey, row, col0, det, noise, table, out,
                  lam, u, p, f, cnt, hs):
     """ADU of a run of pixels ``row, col0 .. col0 + len − 1`` (1-D views); see the module docstring.
 
@@ -229,7 +233,10 @@ def digitise_run(signal, gain_fp, dark, bg_exp, fkey, row, col0, det, noise, tab
     """
     m = signal.shape[0]
     for i in range(m):
-        lam[i] = (signal[i] + det[D_SKY_E]) * gain_fp[i] + dark[i]
+        if signal[i] == 0.0:
+            lam[i] = lam_bg[i]
+        else:
+            lam[i] = (signal[i] + det[D_SKY_E]) * gain_fp[i] + dark[i]
     if noise:
         rkey = fkey ^ (np.uint64(row) << np.uint64(20))
         for i in range(m):
@@ -237,7 +244,7 @@ def digitise_run(signal, gain_fp, dark, bg_exp, fkey, row, col0, det, noise, tab
             hs[i] = h
             u[i] = (np.float64(h & _M32) + 0.5) * (1.0 / 4294967296.0)
         for i in range(m):
-            p[i] = bg_exp[i] if signal[i] == 0.0 else math.exp(-min(lam[i], _POISSON_EXACT))
+            p[i] = exp_bg[i] if signal[i] == 0.0 else math.exp(-min(lam[i], _POISSON_EXACT))
         for i in range(m):
             f[i] = p[i]
             cnt[i] = 1.0 if u[i] > f[i] else 0.0
@@ -282,7 +289,7 @@ def _adc(e, det):
 
 
 @njit(cache=True)
-def digitise_frame(signal, gain_fp, dark, bg_exp, seed, frame, det, noise, table):
+def digitise_frame(signal, gain_fp, dark, lam_bg, exp_bg, seed, frame, det, noise, table):
     """Whole frame: mean photo-signal (H, W) float64 → uint16 ADU (H, W).
 
     Single-threaded on purpose: on a shared 2-core host a threaded loop ran 2-3x slower.
@@ -293,13 +300,13 @@ def digitise_frame(signal, gain_fp, dark, bg_exp, seed, frame, det, noise, table
     lam, u, p, f, cnt = np.empty(w), np.empty(w), np.empty(w), np.empty(w), np.empty(w)
     hs = np.empty(w, dtype=np.uint64)
     for r in range(h):
-        digitise_run(signal[r], gain_fp[r], dark[r], bg_exp[r], fkey, r, 0, det, noise, table, out[r],
+        digitise_run(signal[r], gain_fp[r], dark[r], lam_bg[r], exp_bg[r], fkey, r, 0, det, noise, table, out[r],
                      lam, u, p, f, cnt, hs)
     return out
 
 
 @njit(cache=True)
-def digitise_spans(signal, spans, gain_fp, dark, bg_exp, seed, frame, det, noise, table):
+def digitise_spans(signal, spans, gain_fp, dark, lam_bg, exp_bg, seed, frame, det, noise, table):
     """Span pixels: mean photo-signal (m,) in span order → uint16 ADU (m,)."""
     out = np.empty(signal.shape[0], dtype=np.uint16)
     fkey = frame_key(seed, frame)
@@ -312,7 +319,7 @@ def digitise_spans(signal, spans, gain_fp, dark, bg_exp, seed, frame, det, noise
     k = 0
     for i in range(spans.shape[0]):
         r, a, b = spans[i, 1], spans[i, 2], spans[i, 3]
-        digitise_run(signal[k:k + b - a], gain_fp[r, a:b], dark[r, a:b], bg_exp[r, a:b], fkey, r, a, det, noise,
-                     table, out[k:k + b - a], lam, u, p, f, cnt, hs)
+        digitise_run(signal[k:k + b - a], gain_fp[r, a:b], dark[r, a:b], lam_bg[r, a:b], exp_bg[r, a:b], fkey, r, a,
+                     det, noise, table, out[k:k + b - a], lam, u, p, f, cnt, hs)
         k += b - a
     return out

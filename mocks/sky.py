@@ -39,7 +39,7 @@ from gyrostar.errors import ConfigError
 
 from . import pixel_noise, render
 from .sim_preset import SimPreset, load_preset
-from .trajectory import Constant, Piecewise, exposure_substeps, integrate
+from .trajectory import piecewise_attitudes
 
 
 @dataclasses.dataclass(frozen=True)
@@ -112,7 +112,7 @@ class Sky:
         """(PRNU gain, dark electrons per exposure), float32 (H, W): same for every frame."""
         if self._fpn is None:
             gain, dark = pixel_noise.fixed_pattern(self.seed, self.camera.height_px, self.camera.width_px, self.det)
-            self._fpn = (gain, dark, pixel_noise.background_exp(gain, dark, self.det))
+            self._fpn = (gain, dark) + pixel_noise.background_maps(gain, dark, self.det)
         return self._fpn[0], self._fpn[1]
 
     def _noise_maps(self):
@@ -132,18 +132,21 @@ class Sky:
         # image speed bound: |ω|·(F + r²/F) px/s at radius r from the principal point
         path_px = w_max * t_exp * (f + half * half / f)
         n_sub = int(min(render.MAX_SUBSTEPS, max(1, math.ceil(path_px / render.MAX_STEP_PX))))
-        q_sub = exposure_substeps(q_start, rates, t_exp, n_sub)
-        q_mid = exposure_substeps(q_start, rates, t_exp, 1)[0]
-        q_fin = _end_attitude(q_start, rates, t_exp)
+        # one exact attitude grid: 4·n_sub intervals; sub-step midpoints are every 4th from 2
+        n_grid = 4 * n_sub
+        rates2 = np.ascontiguousarray(np.atleast_2d(rates), dtype=np.float64)
+        qs = piecewise_attitudes(q_start, rates2, t_exp, np.arange(n_grid + 1) * (t_exp / n_grid))
+        q_mid, q_fin = qs[2 * n_sub].copy(), qs[-1].copy()
         # stars near the field: within the field radius + the rotation of the exposure
         bore = quat_to_dcm(q_mid)[2]
         reach = self._field_radius + w_max * t_exp
         sel = np.flatnonzero(self.catalog.vectors @ bore > math.cos(min(reach, math.pi)))
         vecs = np.ascontiguousarray(self.catalog.vectors[sel])
-        paths = render.star_paths(self.params, vecs, q_sub)
+        grid_paths = render.star_paths(self.params, vecs, qs)
+        paths = np.ascontiguousarray(grid_paths[:, 2::4])
         boxes = render.star_boxes(paths, self.preset.optics.psf_sigma_px, self.camera.width_px,
                                   self.camera.height_px)
-        uv = _exposure_average(self.params, vecs, q_start, rates, t_exp, n_sub)
+        uv = _simpson_mean(grid_paths)
         w, h = self.camera.width_px, self.camera.height_px
         in_field = (uv[:, 0] >= -0.5) & (uv[:, 0] < w - 0.5) & (uv[:, 1] >= -0.5) & (uv[:, 1] < h - 0.5)
         truth = StarTruth(self.catalog.ids[sel], self.catalog.vmag[sel], uv, in_field, self.electrons[sel],
@@ -159,12 +162,12 @@ class Sky:
     def render_frame(self, q_start, omega=None, frame: int = 0, noise: bool = True, quats=None):
         """Whole frame: (uint16 (H, W) ADU, StarTruth)."""
         exp = self.expose(q_start, omega, quats)
-        gain, dark, bg_exp = self._noise_maps()
+        gain, dark, lam_bg, exp_bg = self._noise_maps()
         sig = self._signal_buffer()
         render.add_stars_full(sig, exp.paths, exp.truth.electrons, exp.boxes, self.preset.optics.psf_sigma_px)
         try:
-            img = pixel_noise.digitise_frame(sig, gain, dark, bg_exp, self.seed, int(frame), self.det, bool(noise),
-                                             pixel_noise.normal_table())
+            img = pixel_noise.digitise_frame(sig, gain, dark, lam_bg, exp_bg, self.seed, int(frame), self.det,
+                                             bool(noise), pixel_noise.normal_table())
         finally:
             render.clear_boxes(sig, exp.boxes)
         return img, exp.truth
@@ -187,34 +190,15 @@ class Sky:
         sig = np.zeros(npx)
         render.add_stars_spans(sig, spans, exp.paths, exp.truth.electrons, exp.boxes,
                                self.preset.optics.psf_sigma_px)
-        gain, dark, bg_exp = self._noise_maps()
-        return pixel_noise.digitise_spans(sig, spans, gain, dark, bg_exp, self.seed, int(frame), self.det, bool(noise),
-                                          pixel_noise.normal_table())
+        gain, dark, lam_bg, exp_bg = self._noise_maps()
+        return pixel_noise.digitise_spans(sig, spans, gain, dark, lam_bg, exp_bg, self.seed, int(frame), self.det,
+                                          bool(noise), pixel_noise.normal_table())
 
 
-def _profile(rates, t_exp):
-    om = np.atleast_2d(rates)
-    m = om.shape[0]
-    if m == 1:
-        return Constant(tuple(om[0])), 1
-    return Piecewise(tuple(np.arange(m) * t_exp / m), tuple(map(tuple, om))), m
-
-
-def _end_attitude(q_start, rates, t_exp) -> np.ndarray:
-    prof, m = _profile(rates, t_exp)
-    grid = np.arange(m + 1) * t_exp / m
-    return integrate(q_start, prof, grid, max_step_s=t_exp)[-1]
-
-
-def _exposure_average(params, vecs, q_start, rates, t_exp, n_sub) -> np.ndarray:
-    """Exposure-averaged image position of each star (composite Simpson, 4·n_sub + 1 points)."""
-    n_pts = 4 * max(n_sub, 2)
-    t = np.arange(n_pts + 1) * t_exp / n_pts
-    prof, m = _profile(rates, t_exp)
-    grid, inverse = np.unique(np.concatenate([t, np.arange(1, m) * t_exp / m]), return_inverse=True)
-    qs = integrate(q_start, prof, grid, max_step_s=t_exp)[inverse[: n_pts + 1]]
-    paths = render.star_paths(params, vecs, qs)  # (n, n_pts+1, 2)
-    wts = np.ones(n_pts + 1)
+def _simpson_mean(paths: np.ndarray) -> np.ndarray:
+    """Time average (n, 2) of positions (n, 2k + 1, 2) sampled on an even grid (composite Simpson)."""
+    k = paths.shape[1]
+    wts = np.ones(k)
     wts[1:-1:2] = 4.0
     wts[2:-1:2] = 2.0
     wts /= wts.sum()

@@ -185,19 +185,22 @@ def random_attitudes(n: int, rng: np.random.Generator) -> np.ndarray:
     return q
 
 
-def exposure_substeps(q_start: np.ndarray, omega: np.ndarray, exposure_s: float, n_sub: int) -> np.ndarray:
-    """Attitudes (n_sub, 4) at the midpoints of ``n_sub`` equal sub-steps of an exposure.
+@njit(cache=True)
+def piecewise_attitudes(q0, rates, duration, times):
+    """Exact attitudes (k, 4) at ``times`` (s, in [0, duration]) under piecewise-constant rates.
 
-    ``omega``: (3,) constant body rate, or (m, 3) piecewise-constant rates over ``m`` equal
-    segments of the exposure (rad/s).
+    ``rates`` (m, 3) rad/s hold on m equal segments of ``duration``; each point is one exact
+    constant-rate rotation from the start of its segment.
     """
-    om = np.atleast_2d(np.asarray(omega, dtype=np.float64))
-    if om.shape[1] != 3 or not np.isfinite(om).all():
-        raise ConfigError(f"exposure rates must be (3,) or (m, 3) finite rad/s, got shape {np.shape(omega)}")
-    m = om.shape[0]
-    prof = Constant(tuple(om[0])) if m == 1 else Piecewise(tuple(np.arange(m) * exposure_s / m), tuple(map(tuple, om)))
-    t_mid = (np.arange(n_sub) + 0.5) * exposure_s / n_sub
-    bounds = np.arange(1, m) * exposure_s / m  # grid points at segment changes keep it exact
-    grid, inverse = np.unique(np.concatenate([[0.0], t_mid, bounds]), return_inverse=True)
-    qs = integrate(q_start, prof, grid, max_step_s=exposure_s)
-    return qs[inverse[1:n_sub + 1]]
+    m = rates.shape[0]
+    seg = duration / m
+    starts = np.empty((m, 4))
+    q = quat_normalize(q0)
+    for j in range(m):
+        starts[j] = q
+        q = quat_normalize(quat_mult(rotvec_to_quat(rates[j] * seg), q))
+    out = np.empty((times.shape[0], 4))
+    for i in range(times.shape[0]):
+        j = min(m - 1, max(0, int(times[i] / seg)))
+        out[i] = quat_normalize(quat_mult(rotvec_to_quat(rates[j] * (times[i] - j * seg)), starts[j]))
+    return out

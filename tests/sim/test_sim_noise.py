@@ -34,8 +34,9 @@ def test_poisson_mean_and_variance(lam):
     sig = np.full((h, w), lam)
     one = np.ones((h, w), dtype=np.float32)
     zero = np.zeros((h, w), dtype=np.float32)
-    bg = pixel_noise.background_exp(one, zero, det)
-    n = pixel_noise.digitise_frame(sig, one, zero, bg, 5, 0, det, True, pixel_noise.normal_table()).astype(float)
+    lam_bg, exp_bg = pixel_noise.background_maps(one, zero, det)
+    n = pixel_noise.digitise_frame(sig, one, zero, lam_bg, exp_bg, 5, 0, det, True,
+                                   pixel_noise.normal_table()).astype(float)
     assert n.mean() == pytest.approx(lam, rel=0.02, abs=0.01)
     assert n.var() == pytest.approx(lam, rel=0.05)
 

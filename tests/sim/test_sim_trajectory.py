@@ -74,3 +74,14 @@ def test_bad_inputs():
         tj.integrate(Q0, tj.Constant((0, 0, 0)), np.array([1.0, 0.0]))
     with pytest.raises(ConfigError):
         tj.paper000("sim9")
+
+
+def test_piecewise_attitudes_match_integrator():
+    rates = np.radians([[1.0, 2.0, 3.0], [-4.0, 0.5, 2.0], [0.0, 0.0, 9.0], [3.0, 3.0, -3.0]])
+    t = np.linspace(0.0, 0.01, 17)
+    prof = tj.Piecewise(tuple(np.arange(4) * 0.0025), tuple(map(tuple, rates)))
+    grid, inv = np.unique(np.concatenate([t, np.arange(1, 4) * 0.0025]), return_inverse=True)
+    ref = tj.integrate(Q0, prof, grid, max_step_s=1.0)[inv[:17]]
+    got = tj.piecewise_attitudes(Q0, rates, 0.01, t)
+    for a, b in zip(got, ref):
+        assert np.abs(quat_error_angles(a, b)).max() < 1e-13
