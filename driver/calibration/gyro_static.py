@@ -12,11 +12,13 @@ How long a log must be. The simulator's bias instability is first-order Gauss–
 relative error ≈ √(4 T_c / T) even with no other noise: σ to 5 % (1-σ, so that a 10 %
 check is a 2-σ one) needs T ≈ 400 T_c, times (1 + r)² where r is the ARW variance over
 the Markov variance at the Markov peak (τ ≈ 1.89 T_c). For the datasheet-class ``bmi088``
-set (0.014 °/s/√Hz, 2 °/h, T_c = 100 s) r ≈ 8.7 and T ≈ 100 h: its bias instability is
-buried under the ARW for any practical record. The default simulation therefore uses the
-``bmi088`` set with a consumer-MEMS bias wander (20 °/h, T_c = 10 s; r ≈ 0.9, T ≈ 4 h
-for 2 σ; the default 1.5 h gives ≈ 8 % 1-σ on σ — a statement of the estimator's accuracy,
-printed as ``bias_instability_rel_sigma``). ``--hours`` overrides the length.
+set (0.014 °/s/√Hz, 2 °/h, T_c = 100 s) r ≈ 4.4 (ARW variance over Markov variance at
+the peak, with the IEEE N = n/√2) and T ≈ 330 h (``gyro_sim.sound_static_hours``): its
+bias instability is buried under the ARW for any practical record. The default simulation
+therefore uses the ``bmi088`` set with a consumer-MEMS bias wander (20 °/h, T_c = 10 s;
+r ≈ 0.44, T ≈ 2.3 h for a 2-σ check); the default 3 h gives ≈ 4.4 % 1-σ on σ, so the 10 %
+check is a 2.3-σ one per axis. The estimate of that 1-σ for the record at hand is printed
+as ``bias_instability_rel_sigma``. ``--hours`` overrides the length.
 """
 
 from __future__ import annotations
@@ -38,7 +40,7 @@ def configure(parser) -> None:
     parser.add_argument("--set", action="append", default=None, metavar="KEY=VALUE",
                         help="--simulate: override a gyro parameter (repeatable; default "
                              "bias_instability_dph=20 bias_tau_s=10, see the module docstring)")
-    parser.add_argument("--hours", type=float, default=1.5, help="--simulate: record length, h (default 1.5)")
+    parser.add_argument("--hours", type=float, default=3.0, help="--simulate: record length, h (default 3)")
     parser.add_argument("--bias-model", choices=("auto", "flicker", "markov"), default="auto",
                         help="bias-instability term: flicker floor, Gauss-Markov, or the better fit")
     parser.add_argument("--tau-min", type=float, default=0.1,
