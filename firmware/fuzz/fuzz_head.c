@@ -52,8 +52,9 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     uint16_t width = (cfg & 0x08) ? 1024 : (uint16_t)(1 + (cfg & 0x07) * 37);
     uint16_t height = (cfg & 0x08) ? 1024 : (uint16_t)(1 + ((cfg >> 4) & 0x03) * 50);
     fake_hal_init(&f, &hal, width, height, (cfg & 0x80) ? 2 : 1);
-    f.busy_begins = (cfg & 0x40) ? 3 : 0;
-    f.frame_changes = (cfg & 0x04) ? 25 : 0;
+    /* sensor faults: transient (retried) or persistent busy (SENSOR_BUSY without reading) */
+    f.busy_begins = (cfg & 0x40) ? ((cfg & 0x04) ? (int)GS_SENSOR_RETRIES + 5 : 3) : 0;
+    f.frame_changes = (cfg & 0x04) ? 2 : 0;
     f.io_fail = (cfg & 0x30) == 0x30;
     gs_head_init(&head, &hal, line);
 

@@ -1,6 +1,7 @@
 /* fake_hal.c - see fake_hal.h. */
 #include "fake_hal.h"
 
+#include <stddef.h>
 #include <string.h>
 
 uint16_t fake_pixel(const fake_hal *f, uint8_t plane, uint32_t index)
@@ -80,7 +81,8 @@ static void kick(void *ctx) { ((fake_hal *)ctx)->kicks++; }
 
 void fake_hal_init(fake_hal *f, gs_hal *hal, uint16_t width, uint16_t height, uint8_t planes)
 {
-    memset(f, 0, sizeof *f);
+    memset(f, 0, offsetof(fake_hal, out)); /* the output buffer itself need not be cleared */
+    f->out_len = 0;
     f->now = 1000000u;
     f->geom.width = width;
     f->geom.height = height;
