@@ -339,6 +339,27 @@ def _pix_dgauss(edge_lo, centre, sigma):
 
 
 @njit(cache=True)
+def _inv3_sym(a):
+    """Inverse of a symmetric positive-definite 3×3 matrix by cofactors (NaN if singular)."""
+    c00 = a[1, 1] * a[2, 2] - a[1, 2] * a[1, 2]
+    c01 = a[0, 2] * a[1, 2] - a[0, 1] * a[2, 2]
+    c02 = a[0, 1] * a[1, 2] - a[0, 2] * a[1, 1]
+    det = a[0, 0] * c00 + a[0, 1] * c01 + a[0, 2] * c02
+    out = np.empty((3, 3))
+    if not det > 0.0:
+        out[:, :] = np.nan
+        return out
+    inv = 1.0 / det
+    out[0, 0] = c00 * inv
+    out[0, 1] = out[1, 0] = c01 * inv
+    out[0, 2] = out[2, 0] = c02 * inv
+    out[1, 1] = (a[0, 0] * a[2, 2] - a[0, 2] * a[0, 2]) * inv
+    out[1, 2] = out[2, 1] = (a[0, 1] * a[0, 2] - a[0, 0] * a[1, 2]) * inv
+    out[2, 2] = (a[0, 0] * a[1, 1] - a[0, 1] * a[0, 1]) * inv
+    return out
+
+
+@njit(cache=True)
 def smear_fit(spans, values, bg, u0, v0, offsets, sigma_psf, noise_var, e_per_dn, n_iter, tol):
     """Weighted least-squares fit of the smeared spot: (u, v, flux, var_u, var_v, iterations).
 
@@ -424,9 +445,9 @@ def smear_fit(spans, values, bg, u0, v0, offsets, sigma_psf, noise_var, e_per_dn
         a[1, 0] = a[0, 1]
         a[2, 0] = a[0, 2]
         a[2, 1] = a[1, 2]
-        if np.linalg.det(a) <= 0.0:
+        cov = _inv3_sym(a)
+        if cov[0, 0] != cov[0, 0]:  # singular: no information on the position
             return np.nan, np.nan, 0.0, np.inf, np.inf, it
-        cov = np.linalg.inv(a)
         step = cov @ g
         # keep steps sane at very low SNR (a spot cannot jump more than a pixel per iteration)
         su = min(1.0, max(-1.0, step[0]))

@@ -166,6 +166,8 @@ def joint_update(X, P, active, z, r_var, gate, accepted, nis):
     N = X.shape[0]
     n_ok = 0
     K = np.empty((N, 2))
+    hp0 = np.empty(N)
+    hp1 = np.empty(N)
     for s in range(active.shape[0]):
         accepted[s] = 0
         nis[s] = np.nan
@@ -191,14 +193,22 @@ def joint_update(X, P, active, z, r_var, gate, accepted, nis):
             K[k, 1] = P[k, i] * i01 + P[k, i + 1] * i11
         for k in range(N):
             X[k] += K[k, 0] * nu0 + K[k, 1] * nu1
-        # P ← P − K S Kᵀ (= P − K H P), kept symmetric
+        # P ← P − K (H P) with H P = P[i:i+2, :] (= P − K S Kᵀ); rows of P are
+        # contiguous, so the update runs row by row; symmetry is restored after all stars
+        for j in range(N):
+            hp0[j] = P[i, j]
+            hp1[j] = P[i + 1, j]
         for k in range(N):
-            ks0 = K[k, 0] * s00 + K[k, 1] * s01
-            ks1 = K[k, 0] * s01 + K[k, 1] * s11
-            for j in range(k, N):
-                v = P[k, j] - (ks0 * K[j, 0] + ks1 * K[j, 1])
-                P[k, j] = v
-                P[j, k] = v
+            k0 = K[k, 0]
+            k1 = K[k, 1]
+            for j in range(N):
+                P[k, j] -= k0 * hp0[j] + k1 * hp1[j]
         accepted[s] = 1
         n_ok += 1
+    if n_ok > 0:
+        for k in range(N):
+            for j in range(k + 1, N):
+                v = 0.5 * (P[k, j] + P[j, k])
+                P[k, j] = v
+                P[j, k] = v
     return n_ok
