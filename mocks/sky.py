@@ -167,7 +167,8 @@ class Sky:
         render.add_stars_full(sig, exp.paths, exp.truth.electrons, exp.boxes, self.preset.optics.psf_sigma_px)
         try:
             img = pixel_noise.digitise_frame(sig, gain, dark, lam_bg, exp_bg, self.seed, int(frame), self.det,
-                                             bool(noise), pixel_noise.normal_table())
+                                             bool(noise), pixel_noise.normal_table(),
+                                             render.lit_rows(exp.boxes, self.camera.height_px))
         finally:
             render.clear_boxes(sig, exp.boxes)
         return img, exp.truth

@@ -36,7 +36,7 @@ def test_poisson_mean_and_variance(lam):
     zero = np.zeros((h, w), dtype=np.float32)
     lam_bg, exp_bg = pixel_noise.background_maps(one, zero, det)
     n = pixel_noise.digitise_frame(sig, one, zero, lam_bg, exp_bg, 5, 0, det, True,
-                                   pixel_noise.normal_table()).astype(float)
+                                   pixel_noise.normal_table(), np.ones(h, dtype=bool)).astype(float)
     assert n.mean() == pytest.approx(lam, rel=0.02, abs=0.01)
     assert n.var() == pytest.approx(lam, rel=0.05)
 
