@@ -1,0 +1,75 @@
+"""Camera intrinsics: the fit's projection and Jacobians against gyrostar.camera, and the
+camera command on the simulator's sky."""
+
+import json
+
+import numpy as np
+import pytest
+from gyrostar.calibration.intrinsics import StarFields, model_difference, project
+from gyrostar.camera import project_many
+from gyrostar.cli.main import main
+from gyrostar.errors import ConfigError
+
+THETA = np.array([6700.0, 515.0, 508.0, 0.3, 4.0, 20.0, 2e-4, -1e-4])
+
+
+def _dirs(n, rng, half=0.07):
+    s = np.column_stack([rng.uniform(-half, half, (n, 2)), np.ones(n)])
+    return s / np.linalg.norm(s, axis=1)[:, None]
+
+
+def test_projection_matches_the_camera_model():
+    s = _dirs(50, np.random.default_rng(1))
+    uv = project(THETA, s)
+    ref, _ = project_many(np.array([*THETA, 1024, 1024]), s)
+    np.testing.assert_allclose(uv, ref, atol=1e-9)
+
+
+def test_jacobians_match_finite_differences():
+    s = _dirs(20, np.random.default_rng(2))
+    _, jt, js = project(THETA, s, jac=True)
+    for i in range(8):
+        h = 1e-6 * max(abs(THETA[i]), 1e-3)
+        d = THETA.copy()
+        d[i] += h
+        num = (project(d, s) - project(THETA, s)) / h
+        np.testing.assert_allclose(jt[:, :, i], num, rtol=1e-4, atol=1e-6)
+    for k in range(3):
+        d = s.copy()
+        d[:, k] += 1e-7
+        num = (project(THETA, d) - project(THETA, s)) / 1e-7
+        np.testing.assert_allclose(js[:, :, k], num, rtol=1e-4, atol=1e-3)
+
+
+def test_model_difference_ignores_a_common_rotation_but_not_distortion():
+    p = np.array([*THETA, 1024, 1024])
+    assert model_difference(p, p)[0] < 1e-9
+    shifted = p.copy()
+    shifted[1] += 0.01  # a principal-point shift this small is almost a rotation
+    assert model_difference(shifted, p)[1] < 1e-3
+    bent = p.copy()
+    bent[3] += 0.1
+    assert model_difference(bent, p)[1] > 0.1
+
+
+def test_star_table_validation():
+    with pytest.raises(ConfigError):
+        StarFields(np.zeros(2, int), np.zeros((2, 2)), np.ones((2, 3)))  # < 3 stars in a field
+    with pytest.raises(ConfigError):
+        StarFields(np.zeros(3, int), np.full((3, 2), np.nan), np.ones((3, 3)))
+
+
+def test_camera_simulated_meets_acceptance(tmp_path, capsys):
+    # 1,500 fields × ~29 stars at 0.02 px: σ(principal point) ≈ 0.12 px (see camera.py)
+    code = main(["calibrate", "camera", "--simulate", "--seed", "4", "--fields", "1500", "--json", "--no-plots",
+                 "--report", str(tmp_path)])
+    out = json.loads(capsys.readouterr().out)
+    par = out["parameters"]
+    assert abs(par["focal_length_rel_error"]["value"]) < 5e-4
+    assert np.hypot(par["cx_px"]["error"], par["cy_px"]["error"]) < 0.5
+    assert par["distortion_residual_px"]["value"] <= 0.05
+    assert par["k1"]["error"] == pytest.approx(0.0, abs=0.03)
+    assert out["residual_rms_after_px"] < 0.03 < out["residual_rms_before_px"]
+    assert out["outliers_caught"] >= 0.9 * out["outliers_injected"]
+    assert code == 0
+    assert (tmp_path / "calibration.toml").exists()

@@ -1,0 +1,63 @@
+"""Dark-frame maps against known per-pixel truth, FITS products, and the dark command on
+the simulator's detector."""
+
+import json
+
+import numpy as np
+import pytest
+from gyrostar.calibration import calfile
+from gyrostar.calibration.dark_frames import read_hot_pixels, solve, stack, write_fits
+from gyrostar.cli.main import main
+from gyrostar.errors import ConfigError
+
+
+def _frames(rate, offset, read, t, n, rng):
+    return offset + rate * t + read * rng.standard_normal((n, *rate.shape))
+
+
+def test_dark_solve_recovers_rate_offset_read_noise_and_hot_pixels(tmp_path):
+    rng = np.random.default_rng(2)
+    h, w = 64, 80
+    rate = rng.uniform(40, 60, (h, w))
+    hot = [(5, 7), (70, 3), (33, 60)]
+    for c, r in hot:
+        rate[r, c] = 5000.0
+    offset = rng.normal(20.0, 1.0, (h, w))
+    stacks = [stack(_frames(rate, offset, 2.0, t, 10, rng), t) for t in (0.01, 0.1, 0.2, 0.4)]
+    res = solve(stacks)
+    assert res.read_noise == pytest.approx(2.0, rel=0.03)
+    normal = rate < 1000
+    assert np.sqrt(np.mean((res.rate - rate)[normal] ** 2)) < 5.0
+    assert np.sqrt(np.mean((res.offset - offset) ** 2)) < 1.0
+    assert sorted(map(tuple, res.hot.tolist())) == sorted(hot)
+    path = write_fits(tmp_path / "d.fits", res, temperature_c=21.5)
+    assert sorted(map(tuple, read_hot_pixels(path).tolist())) == sorted(hot)
+    from astropy.io import fits
+
+    with fits.open(path) as hdul:
+        assert hdul[0].header["BUNIT"] == "DN/s"
+        assert hdul[0].header["NEXPOS"] == 4
+        assert hdul[0].header["RDNOISE"] == pytest.approx(res.read_noise)
+        assert hdul["OFFSET"].data.shape == (h, w)
+
+
+def test_dark_needs_two_exposures_and_two_frames():
+    with pytest.raises(ConfigError):
+        stack(np.zeros((1, 4, 4)), 0.1)
+    with pytest.raises(ConfigError):
+        solve([stack(np.zeros((3, 4, 4)), 0.1), stack(np.ones((3, 4, 4)), 0.1)])
+
+
+def test_dark_simulated_detector(tmp_path, capsys):
+    code = main(["calibrate", "dark", "--simulate", "--frames", "4", "--json", "--no-plots",
+                 "--report", str(tmp_path)])
+    out = json.loads(capsys.readouterr().out)
+    par = out["parameters"]
+    assert par["read_noise_dn"]["value"] == pytest.approx(par["read_noise_dn"]["truth"], rel=0.05)
+    assert par["hot_pixels"]["truth"] > 50
+    assert out["hot_missed"] == 0 and out["hot_false"] == 0
+    assert par["hot_pixel_rate_rel_error_rms"]["value"] < 0.02
+    assert code == 0
+    cal = calfile.load(tmp_path / "calibration.toml")
+    assert len(cal.dark.hot_pixels) == par["hot_pixels"]["value"]
+    assert (tmp_path / "dark.fits").exists()

@@ -1,0 +1,63 @@
+"""Scale factor / misalignment least squares: exact on hand-made data, and the
+gyro-scale command on the simulator's gyro model."""
+
+import json
+
+import numpy as np
+import pytest
+from gyrostar.calibration.gyro_integral import GyroIntegral
+from gyrostar.calibration.scale_fit import fit_rate_table, fit_slews
+from gyrostar.cli.main import main
+from gyrostar.errors import ConfigError
+
+S_TRUE = np.array([[1.002, 0.0015, -0.0007], [-0.0012, 0.9985, 0.0009], [0.0004, 0.0011, 1.0003]])
+B_TRUE = np.array([0.01, -0.02, 0.005])
+
+
+def test_rate_table_least_squares_is_exact_without_noise():
+    table = np.array([[1, 0, 0], [-1, 0, 0], [0, 0.5, 0], [0, -0.5, 0], [0, 0, 2], [0, 0, -2], [1, 1, 1.0]])
+    means = table @ S_TRUE.T + B_TRUE
+    fit = fit_rate_table(table, means)
+    np.testing.assert_allclose(fit.sensitivity, S_TRUE, atol=1e-12)
+    np.testing.assert_allclose(fit.bias, B_TRUE, atol=1e-12)
+    np.testing.assert_allclose(fit.correction @ S_TRUE, np.eye(3), atol=1e-12)
+    assert fit.scale_factor_ppm == pytest.approx([2000.0, -1500.0, 300.0])
+
+
+def test_rate_table_needs_every_axis():
+    table = np.array([[1, 0, 0], [-1, 0, 0], [2, 0, 0], [0, 1, 0.0]])
+    with pytest.raises(ConfigError):
+        fit_rate_table(table, table)
+
+
+def test_slew_fit_is_exact_for_constant_rate_intervals():
+    rng = np.random.default_rng(1)
+    w_true = rng.normal(0, 0.2, (40, 3))
+    dt = np.full(40, 0.5)
+    phi = w_true * dt[:, None]
+    g = (w_true @ S_TRUE.T + B_TRUE) * dt[:, None]
+    fit = fit_slews(phi, g, dt)
+    np.testing.assert_allclose(fit.sensitivity, S_TRUE, atol=1e-10)
+    np.testing.assert_allclose(fit.bias, B_TRUE, atol=1e-10)
+
+
+def test_gyro_integral_is_exact_for_piecewise_linear_rates():
+    t = np.linspace(0, 1, 11)
+    w = np.column_stack([t, t**0, -2 * t])  # linear: trapezoid is exact
+    gi = GyroIntegral(t, w)
+    te = np.array([0.05, 0.37, 0.99])
+    np.testing.assert_allclose(gi.at(te), np.column_stack([te**2 / 2, te, -(te**2)]), atol=1e-14)
+    with pytest.raises(ConfigError):
+        gi.at(np.array([1.5]))
+
+
+def test_gyro_scale_simulated_rate_table_within_200_ppm(tmp_path, capsys):
+    code = main(["calibrate", "gyro-scale", "--simulate", "--seed", "3", "--run-seconds", "10", "--json",
+                 "--no-plots", "--report", str(tmp_path)])
+    out = json.loads(capsys.readouterr().out)
+    err = np.abs(np.asarray(out["parameters"]["scale_factor_ppm"]["error"]))
+    truth = np.abs(np.asarray(out["parameters"]["scale_factor_ppm"]["truth"]))
+    assert np.all(err < 200.0), err
+    assert truth.max() > 1000.0  # the simulated part really has scale errors to find
+    assert out["misalignment_max_error_urad"] < 200.0
+    assert code == 0
