@@ -112,11 +112,28 @@ class GyroSamples:
     t: np.ndarray            # (n,) s
     omega_true: np.ndarray   # (n, 3) rad/s body rate at t (unfiltered truth)
     omega_meas: np.ndarray   # (n, 3) rad/s what the gyro reports (raw·LSB, or ideal)
-    raw: np.ndarray | None   # (n, 3) int16 register values, None if ideal
+    omega_sensed: np.ndarray  # (n, 3) rad/s filtered sensor output before quantisation
+    raw: np.ndarray | None   # (n, 3) int16 register values at params.range_dps, None if ideal
     bias: np.ndarray         # (n, 3) rad/s total additive bias b₀ + b_gm + b_rw at t
     scale: np.ndarray        # (3,) scale-factor errors (fraction)
     misalignment: np.ndarray  # (3, 3) I + [m]
     params: GyroErrorParams
+
+    def raw_at_range(self, range_dps: float) -> np.ndarray:
+        """int16 register values (n, 3) had the range register been set to ``range_dps``.
+
+        For a register model that serves whatever range the driver configured
+        (BMI088: 2000, 1000, 500, 250, 125 °/s; LSB = range / 32768).
+        """
+        if not range_dps > 0:
+            raise ConfigError(f"range_dps must be > 0, got {range_dps!r}")
+        return quantise(self.omega_sensed, range_dps)
+
+
+def quantise(omega: np.ndarray, range_dps: float) -> np.ndarray:
+    """Rates (rad/s) → int16 LSBs at ``range_dps`` full scale: round, then saturate."""
+    lsb = range_dps / 32768.0
+    return np.clip(np.round(omega / DEG / lsb), -32768, 32767).astype(np.int16)
 
 
 def butterworth2(fc: float, fs: float) -> tuple[np.ndarray, np.ndarray]:
@@ -207,7 +224,8 @@ def simulate_gyro(profile: RateProfile, duration_s: float, params: GyroErrorPara
                                fb, fa, p.filter_hz > 0, decim, int(rng.integers(0, 2**31 - 1)))
     t = np.arange(1, n_out + 1) / p.odr_hz
     raw = None
+    sensed = meas
     if p.range_dps > 0:
-        raw = np.clip(np.round(meas / DEG / p.lsb_dps), -32768, 32767).astype(np.int16)
+        raw = quantise(sensed, p.range_dps)
         meas = raw.astype(np.float64) * p.lsb_dps * DEG
-    return GyroSamples(t, profile.rate(t), meas, raw, bias, scale, mis, p)
+    return GyroSamples(t, profile.rate(t), meas, sensed, raw, bias, scale, mis, p)

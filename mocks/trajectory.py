@@ -41,6 +41,16 @@ class RateProfile:
         """ω at times ``t`` (s), shape (n, 3)."""
         raise NotImplementedError
 
+    def segment_rates(self, t0: float, duration_s: float, m: int) -> np.ndarray:
+        """Rates (m, 3) at the midpoints of m equal segments of [t0, t0 + duration_s].
+
+        The piecewise-constant rate input of an exposure (``Sky.expose(q, omega=...)``):
+        the midpoint rule makes each segment's rotation second-order accurate.
+        """
+        if m < 1 or not duration_s > 0:
+            raise ConfigError("segment_rates needs m >= 1 and duration_s > 0")
+        return self.rate(t0 + (np.arange(m) + 0.5) * duration_s / m)
+
 
 @dataclasses.dataclass(frozen=True)
 class Constant(RateProfile):

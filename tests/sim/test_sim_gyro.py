@@ -74,3 +74,13 @@ def test_bad_parameters():
         gt.gyro_params("bmi088", nonsense=1)
     with pytest.raises(ConfigError):
         gt.simulate_gyro(Constant((0, 0, 0)), -1.0)
+
+
+def test_raw_at_other_range_matches_rerun():
+    prof = Constant((math.radians(3.0), math.radians(-40.0), math.radians(0.7)))
+    a = gt.simulate_gyro(prof, 0.5, gt.gyro_params("bmi088", range_dps=2000.0), seed=9)
+    b = gt.simulate_gyro(prof, 0.5, gt.gyro_params("bmi088", range_dps=125.0), seed=9)
+    assert np.array_equal(a.raw_at_range(125.0), b.raw)
+    assert np.array_equal(a.raw_at_range(2000.0), a.raw)
+    with pytest.raises(ConfigError):
+        a.raw_at_range(0.0)

@@ -85,3 +85,11 @@ def test_piecewise_attitudes_match_integrator():
     got = tj.piecewise_attitudes(Q0, rates, 0.01, t)
     for a, b in zip(got, ref):
         assert np.abs(quat_error_angles(a, b)).max() < 1e-13
+
+
+def test_segment_rates_midpoints():
+    prof = tj.Ramp((0.0, 0.0, 0.0), (1.0, 2.0, 3.0), 0.0, 1.0)
+    r = prof.segment_rates(0.5, 0.01, 4)
+    assert r[:, 0] == pytest.approx(0.5 + (np.arange(4) + 0.5) * 0.0025)
+    with pytest.raises(ConfigError):
+        prof.segment_rates(0.0, 0.01, 0)
