@@ -161,3 +161,42 @@ def write_section(path: str | Path, section: str, value, source: str) -> Calibra
     tmp.write_bytes(tomli_w.dumps(raw).encode())
     tmp.replace(path)
     return cal
+
+
+def camera_model(cal: Calibration, nominal):
+    """The :class:`gyrostar.camera.CameraModel` with the calibrated intrinsics of ``cal``
+    (``nominal`` itself when ``cal`` has no [camera] table). The pixel pitch is kept, so
+    ``focal_length_m = focal_length_px · pitch``."""
+    import dataclasses
+
+    c = cal.camera
+    if c is None:
+        return nominal
+    if tuple(c.image_size_px) != (nominal.width_px, nominal.height_px):
+        raise ConfigError(f"camera calibration is for {c.image_size_px} px, the camera is "
+                          f"{nominal.width_px}×{nominal.height_px}")
+    return dataclasses.replace(nominal, focal_length_m=c.focal_length_px * nominal.pixel_pitch_m,
+                               cx_px=c.principal_point_px[0], cy_px=c.principal_point_px[1],
+                               k1=c.k1, k2=c.k2, k3=c.k3, p1=c.p1, p2=c.p2)
+
+
+def gyro_to_camera(cal: Calibration):
+    """``(M, b, δt)`` such that ``ω_camera = M (ω_meas − b)`` at camera time ``t_gyro + δt``:
+    ``M = R_alignment · correction`` (identity parts when a table is absent), ``b`` the
+    [gyro_scale] bias, else the [gyro_static] bias, else zero (rad/s, gyro axes)."""
+    import numpy as np
+
+    from ..attitude import quat_to_dcm
+
+    m = np.eye(3)
+    b = np.zeros(3)
+    if cal.gyro_static is not None:
+        b = np.asarray(cal.gyro_static.bias_rps, float)
+    if cal.gyro_scale is not None:
+        m = np.asarray(cal.gyro_scale.correction, float)
+        b = np.asarray(cal.gyro_scale.bias_rps, float)
+    dt = 0.0
+    if cal.alignment is not None:
+        m = quat_to_dcm(np.asarray(cal.alignment.q_gyro_to_camera, float)) @ m
+        dt = cal.alignment.time_offset_s
+    return m, b, dt

@@ -160,7 +160,6 @@ def run(args) -> int:
 
 
 def _plot(folder, a) -> None:
-    from .allan import BI_FACTOR
     from .report import new_figure, save_figure
 
     fig, axes = new_figure(1, 3, figsize=(16, 5), sharey=True)
@@ -170,8 +169,11 @@ def _plot(folder, a) -> None:
         ax.errorbar(c.tau, c.adev * to_dph, yerr=c.err * to_dph, fmt=".", ms=3, label="overlapping ADEV")
         ax.loglog(tau, x.adev(tau) * to_dph, "k-", lw=1.5, label="IEEE 952 model")
         ax.loglog(tau, x.arw / np.sqrt(tau) * to_dph, "--", label=f"ARW {x.arw * RAD2DEG * 60:.3g} °/√h (−½)")
-        ax.loglog(tau, np.full_like(tau, BI_FACTOR * x.bias_instability) * to_dph, "--",
-                  label=f"BI {x.bias_instability * to_dph:.3g} °/h (0)")
+        if x.model == "markov":
+            label = f"Markov σ {x.bias_instability * to_dph:.3g} °/h, T_c {x.markov_tau:.3g} s"
+        else:
+            label = f"BI {x.bias_instability * to_dph:.3g} °/h (0)"
+        ax.loglog(tau, x.bias_term_adev(tau) * to_dph, "--", label=label)
         if x.rrw > 0:
             ax.loglog(tau, x.rrw * np.sqrt(tau / 3.0) * to_dph, "--",
                       label=f"RRW {x.rrw * to_dph * 60:.3g} °/h/√h (+½)")

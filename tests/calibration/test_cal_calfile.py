@@ -33,3 +33,24 @@ def test_bad_values_and_keys_are_rejected_without_losing_the_file(tmp_path):
 def test_cli_needs_exactly_one_source(tmp_path):
     assert main(["calibrate", "camera", "--report", str(tmp_path)]) == 2
     assert main(["calibrate", "dark", str(tmp_path / "missing.npz"), "--report", str(tmp_path)]) == 2
+
+
+def test_driver_helpers_apply_the_calibration(tmp_path):
+    import numpy as np
+    from gyrostar.camera import camera_preset
+
+    path = tmp_path / "cal.toml"
+    nominal = camera_preset("xing2012")
+    calfile.write_section(path, "camera", calfile.CameraCal(6700.0, (515.0, 509.0), k1=0.3), source="t")
+    corr = ((1.001, 0.0, 0.0), (0.0, 0.999, 0.0), (0.0, 0.0, 1.0))
+    calfile.write_section(path, "gyro_scale", calfile.GyroScaleCal(corr, corr, (0.01, 0.0, 0.0), (0.0,) * 3), "t")
+    q = (0.0, 0.0, np.sin(np.pi / 4), np.cos(np.pi / 4))  # 90° about z
+    calfile.write_section(path, "alignment", calfile.AlignmentCal(q, -0.002), source="t")
+    cal = calfile.load(path)
+    cam = calfile.camera_model(cal, nominal)
+    assert cam.focal_length_px == pytest.approx(6700.0) and (cam.cx_px, cam.k1) == (515.0, 0.3)
+    m, b, dt = calfile.gyro_to_camera(cal)
+    w = m @ (np.array([1.0, 0.0, 0.0]) - b)
+    # x gyro axis scaled by 1.001 after bias removal, then turned 90° about z (A(q) convention)
+    np.testing.assert_allclose(np.abs(w), [0.0, 0.99 * 1.001, 0.0], atol=1e-12)
+    assert dt == -0.002
