@@ -71,3 +71,25 @@ def test_gyro_static_simulated_recovers_arw_and_bias_instability(tmp_path, capsy
     assert np.all(bias_err < 1e-3)  # deg/s
     assert code == 0
     assert (tmp_path / "calibration.toml").exists()
+
+
+def test_gyro_static_from_a_log_file_with_temperature(tmp_path, capsys):
+    from gyrostar.calibration import calfile
+
+    fs, hours = 100.0, 0.5
+    rng = np.random.default_rng(9)
+    n = int(fs * hours * 3600)
+    t = np.arange(n) / fs
+    temp = 20.0 + 10.0 * t / t[-1]
+    coeff = np.array([1e-4, -2e-4, 5e-5])  # rad/s per °C
+    rate = 0.002 + np.outer(temp - 25.0, coeff) + 1e-3 * rng.standard_normal((n, 3))
+    path = tmp_path / "static.npz"
+    np.savez(path, t=t, rate=rate, temperature=temp)
+    code = main(["calibrate", "gyro-static", str(path), "--json", "--no-plots", "--report", str(tmp_path / "r")])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 0 and "truth" not in out["parameters"]["arw"]
+    tc = np.radians(out["parameters"]["bias_temp_coeff_dps_per_c"]["value"])
+    np.testing.assert_allclose(tc, coeff, atol=3e-6)
+    cal = calfile.load(tmp_path / "r" / "calibration.toml")
+    assert cal.gyro_static.temperature_c == pytest.approx(25.0, abs=0.01)
+    np.testing.assert_allclose(cal.gyro_static.bias_rps, 0.002, atol=1e-4)
