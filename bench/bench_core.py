@@ -124,7 +124,6 @@ def _loop_joint_predict(X, P, act, w, work, n):
 
 
 def _timed(loop, n, *args) -> float:
-    loop(*args, 1) if False else None
     t0 = time.perf_counter()
     loop(*args, n)
     return (time.perf_counter() - t0) / n * 1e6
@@ -336,8 +335,7 @@ def run(quick: bool) -> dict:
     traj += 511.5
     spans = trajectory_window(traj, 6, 1024, 1024, 0)
     np.testing.assert_array_equal(np_window(traj, 6, 1024, 1024), spans)
-    t_nb = _median_us(lambda: _timed(_loop_window, n_fast // 10, traj, n_fast // 10), rep) if False else \
-        _median_us(lambda: _timed(_loop_window, n_fast // 10, traj), rep)
+    t_nb = _median_us(lambda: _timed(_loop_window, n_fast // 10, traj), rep)
     t_np = _py_us(lambda: np_window(traj, 6, 1024, 1024), rep, 300)
     out["window_build"] = _case(t_nb, t_np, f"{spans.shape[0]} spans, {int(np.sum(spans[:, 3] - spans[:, 2]))} px")
 

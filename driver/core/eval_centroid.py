@@ -83,9 +83,13 @@ def plot(result: dict, s: dict, path: str) -> None:
     n = len(s["acq"])
     k = np.arange(n)
     fig, axs = plt.subplots(5, 1, figsize=(8, 13), sharex=True)
+    spf = s["spf"]
+    tk = np.arange(s["meas_dps"].shape[0]) / spf
     for i, c in enumerate("xyz"):
-        axs[0].plot(k, s["rate_dps"][:, i], label=f"ω{c}")
-    axs[0].set_ylabel("true rate (°/s)")
+        axs[0].plot(tk, s["meas_dps"][:, i], lw=0.4, color=f"C{i}", label=f"ω{c} measured (400 Hz)")
+        axs[0].plot(k, s["rate_dps"][:, i], lw=1.0, ls="--", color=f"C{i}")
+    axs[0].set_ylabel("rate (°/s), dashed: true")
+    axs[0].ticklabel_format(axis="y", useOffset=False)
     axs[0].legend(loc="upper left", fontsize=8)
     axs[0].set_title(f"paper 000 {result['scenario']}: A fixed window, B gyro window, C EKF")
     names = (("fixed_window", "A", "tab:red"), ("gyro_window", "B", "tab:blue"), ("ekf", "C", "k"))
