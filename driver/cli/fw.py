@@ -3,8 +3,10 @@
 from . import group
 
 TARGETS = {
-    "build": "gyrostar.head.fw_build",
-    "ping": "gyrostar.head.fw_ping",
+    "build": "gyrostar.fwtools.cli_build",
+    "host": "gyrostar.fwtools.cli_host",
+    "arm": "gyrostar.fwtools.cli_arm",
+    "ping": "gyrostar.fwtools.cli_ping",
 }
 
 
