@@ -42,7 +42,7 @@ import numpy as np
 from .errors import ConfigError
 from .paths import cache_dir
 
-CACHE_VERSION = 1
+CACHE_VERSION = 2
 CATALOG_NAMES = ("hip2", "gaia")
 HIP2_EPOCH = 1991.25
 GAIA_EPOCH = 2016.0
@@ -56,7 +56,8 @@ class StarCatalog:
     """Stars sorted by V ascending.
 
     ``ids`` int64 (n,): HIP number or Gaia source id. ``vectors`` float64 (n, 3): ICRS unit
-    vectors at ``epoch`` (Julian year). ``vmag`` float64 (n,): Johnson V.
+    vectors at ``epoch`` (Julian year). ``vmag`` float64 (n,): Johnson V. ``b_v`` float64
+    (n,): Johnson B − V from Hipparcos where known, else NaN (None for hand-made catalogs).
     """
 
     name: str
@@ -64,6 +65,7 @@ class StarCatalog:
     vectors: np.ndarray
     vmag: np.ndarray
     epoch: float
+    b_v: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.ids.shape[0])
@@ -71,7 +73,17 @@ class StarCatalog:
     def brighter_than(self, mag_limit: float) -> StarCatalog:
         """The sub-catalog with V ≤ ``mag_limit`` (a prefix, since sorted by V)."""
         n = int(np.searchsorted(self.vmag, mag_limit, side="right"))
-        return StarCatalog(self.name, self.ids[:n], self.vectors[:n], self.vmag[:n], self.epoch)
+        b_v = None if self.b_v is None else self.b_v[:n]
+        return StarCatalog(self.name, self.ids[:n], self.vectors[:n], self.vmag[:n], self.epoch, b_v)
+
+    def tycho_vt(self) -> np.ndarray:
+        """Tycho V_T estimated from V and B − V: V_T = V + (0.090/0.850)(B − V), unknown colour 0.6.
+
+        (ESA 1997, Hipparcos and Tycho Catalogues vol. 1 §1.3: V = V_T − 0.090 (B_T − V_T),
+        B − V = 0.850 (B_T − V_T).) For comparing with work that cut Tycho-2 at a V_T limit.
+        """
+        bv = np.full(len(self), 0.6) if self.b_v is None else np.where(np.isfinite(self.b_v), self.b_v, 0.6)
+        return self.vmag + (0.090 / 0.850) * bv
 
 
 def hp_to_v(hp: np.ndarray, b_v: np.ndarray) -> np.ndarray:
@@ -125,10 +137,10 @@ def _read_hip2() -> dict[str, np.ndarray]:
             "pmra": cols[:, 3], "pmdec": cols[:, 4], "hp": cols[:, 5], "b_v": cols[:, 6]}
 
 
-def _hip2_arrays(epoch: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _hip2_arrays(epoch: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     h = _read_hip2()
     vec = propagate(h["ra"], h["dec"], h["pmra"], h["pmdec"], epoch - HIP2_EPOCH)
-    return h["hip"], vec, hp_to_v(h["hp"], h["b_v"])
+    return h["hip"], vec, hp_to_v(h["hp"], h["b_v"]), h["b_v"]
 
 
 def _read_gaia() -> np.ndarray:
@@ -146,11 +158,11 @@ def _read_gaia() -> np.ndarray:
     return np.frombuffer(raw[16:], dt)
 
 
-def _gaia_arrays(epoch: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _gaia_arrays(epoch: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     from scipy.spatial import cKDTree
 
     g = _read_gaia()
-    hip_ids, hip_vec16, hip_v = _hip2_arrays(GAIA_EPOCH)
+    hip_ids, hip_vec16, hip_v, hip_bv = _hip2_arrays(GAIA_EPOCH)
     is_hip = g["id"] < 0
     ids = np.where(is_hip, -g["id"], g["id"]).astype(np.int64)
     ra, dec = np.radians(g["ra"]), np.radians(g["dec"])
@@ -158,6 +170,7 @@ def _gaia_arrays(epoch: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     pmdec = g["pmdec"].astype(np.float64)
     gmag = g["g"].astype(np.float64)
     vmag = np.empty(len(g))
+    b_v = np.full(len(g), np.nan)
     vec16 = propagate(ra, dec, pmra, pmdec, 0.0)
     # Hipparcos entries: V, position and motion from hip2 itself
     hip_index = {int(h): i for i, h in enumerate(hip_ids)}
@@ -165,10 +178,12 @@ def _gaia_arrays(epoch: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     if np.any(rows < 0):
         raise ConfigError("gaia catalog names a HIP star that hip2 lacks")
     vmag[is_hip] = hip_v[rows]
+    b_v[is_hip] = hip_bv[rows]
     # Gaia stars: match to Hipparcos at J2016.0 for their V
     dist, idx = cKDTree(hip_vec16).query(vec16, distance_upper_bound=_MATCH_RAD)
     matched = (~is_hip) & np.isfinite(dist)
     vmag[matched] = hip_v[idx[matched]]
+    b_v[matched] = hip_bv[idx[matched]]
     field = matched & (gmag >= 8.0)
     offset = float(np.median(gmag[field] - vmag[field])) if np.any(field) else float(gaia_g_minus_v(0.9))
     rest = ~is_hip & ~matched
@@ -177,7 +192,7 @@ def _gaia_arrays(epoch: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     # the Hipparcos entries carry no motion in the package: take hip2's at epoch
     hip_vec = propagate_hip_rows(rows, epoch)
     vec[is_hip] = hip_vec
-    return ids, vec, vmag
+    return ids, vec, vmag, b_v
 
 
 def propagate_hip_rows(rows: np.ndarray, epoch: float) -> np.ndarray:
@@ -194,12 +209,13 @@ def cache_path(name: str, mag_limit: float, epoch: float) -> Path:
 def build_catalog(name: str, mag_limit: float, epoch: float) -> StarCatalog:
     """Parse the package data (slow; no cache)."""
     _check_args(name, mag_limit, epoch)
-    ids, vec, vmag = _hip2_arrays(epoch) if name == "hip2" else _gaia_arrays(epoch)
+    ids, vec, vmag, b_v = _hip2_arrays(epoch) if name == "hip2" else _gaia_arrays(epoch)
     keep = np.isfinite(vmag) & (vmag <= mag_limit)
     order = np.argsort(vmag[keep], kind="stable")
     return StarCatalog(name, np.ascontiguousarray(ids[keep][order], dtype=np.int64),
                        np.ascontiguousarray(vec[keep][order], dtype=np.float64),
-                       np.ascontiguousarray(vmag[keep][order], dtype=np.float64), float(epoch))
+                       np.ascontiguousarray(vmag[keep][order], dtype=np.float64), float(epoch),
+                       np.ascontiguousarray(b_v[keep][order], dtype=np.float64))
 
 
 def load_catalog(name: str = "hip2", mag_limit: float = 7.5, epoch: float = 2025.0) -> StarCatalog:
@@ -209,12 +225,12 @@ def load_catalog(name: str = "hip2", mag_limit: float = 7.5, epoch: float = 2025
     if path.exists():
         try:
             with np.load(path) as z:
-                return StarCatalog(name, z["ids"], z["vectors"], z["vmag"], float(z["epoch"]))
+                return StarCatalog(name, z["ids"], z["vectors"], z["vmag"], float(z["epoch"]), z["b_v"])
         except (OSError, KeyError, ValueError):
             path.unlink(missing_ok=True)  # corrupt cache: rebuild below
     cat = build_catalog(name, float(mag_limit), float(epoch))
     fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".npz")
     os.close(fd)
-    np.savez(tmp, ids=cat.ids, vectors=cat.vectors, vmag=cat.vmag, epoch=np.float64(cat.epoch))
+    np.savez(tmp, ids=cat.ids, vectors=cat.vectors, vmag=cat.vmag, epoch=np.float64(cat.epoch), b_v=cat.b_v)
     os.replace(tmp, path)
     return cat

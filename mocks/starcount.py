@@ -17,6 +17,9 @@ def configure(parser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="random seed")
     parser.add_argument("--catalog", default="hip2", help="catalog name: hip2 or gaia")
     parser.add_argument("--epoch", type=float, default=2025.0, help="catalog epoch (Julian year)")
+    parser.add_argument("--band", choices=("V", "VT"), default="V",
+                        help="magnitude the limit applies to: Johnson V, or Tycho V_T estimated from V and B-V "
+                             "(paper 001 cut Tycho-2)")
     add_json(parser)
 
 
@@ -26,15 +29,20 @@ def run(args) -> int:
 
     from .field_count import BINS, star_count_distribution
 
-    cat = load_catalog(args.catalog, args.mag_limit, args.epoch)
+    if args.band == "V":
+        cat = load_catalog(args.catalog, args.mag_limit, args.epoch)
+        vectors = cat.vectors
+    else:  # V_T >= V - 0.03 for any B - V >= -0.25 in the catalog: load a little deeper, then cut
+        cat = load_catalog(args.catalog, args.mag_limit + 0.05, args.epoch)
+        vectors = cat.vectors[cat.tycho_vt() <= args.mag_limit]
     with progress(args, "random fields", args.trials) as advance:
-        res = star_count_distribution(cat.vectors, args.fov_deg, args.trials, args.seed, advance=advance)
+        res = star_count_distribution(vectors, args.fov_deg, args.trials, args.seed, advance=advance)
     dist = res["distribution"]
     result = dict(dist)
     result.update({"trials": args.trials, "fov_deg": args.fov_deg, "mag_limit": args.mag_limit,
-                   "catalog": args.catalog, "catalog_stars": len(cat), "seed": args.seed})
-    lines = [f"{len(cat)} {args.catalog} stars with V <= {args.mag_limit}, {args.fov_deg} deg square field, "
-             f"{args.trials} random attitudes (seed {args.seed})", "stars   this run %   paper 001 Table 1 %"]
+                   "catalog": args.catalog, "band": args.band, "catalog_stars": len(vectors), "seed": args.seed})
+    lines = [f"{len(vectors)} {args.catalog} stars with {args.band} <= {args.mag_limit}, {args.fov_deg} deg square "
+             f"field, {args.trials} random attitudes (seed {args.seed})", "stars   this run %   paper 001 Table 1 %"]
     compare = args.fov_deg == 4.0 and args.mag_limit == 7.5
     if compare:
         result["paper001_table1"] = PAPER001_TABLE1

@@ -65,6 +65,16 @@ def test_cache_round_trip_identical(tmp_path, monkeypatch):
     b = load_catalog("hip2", 5.0, 2025.0)
     assert np.array_equal(a.ids, b.ids) and np.array_equal(a.vectors, b.vectors)
     assert np.array_equal(a.vmag, b.vmag) and a.epoch == b.epoch == 2025.0
+    assert np.array_equal(a.b_v, b.b_v, equal_nan=True)
+
+
+def test_tycho_vt_from_colour():
+    cat = load_catalog("hip2", 6.0, 2000.0)
+    # Polaris B-V = 0.64 (hip2): V_T = V + 0.090/0.850 * 0.64
+    i = int(np.flatnonzero(cat.ids == 11767)[0])
+    assert cat.b_v[i] == pytest.approx(0.64, abs=0.03)
+    assert cat.tycho_vt()[i] - cat.vmag[i] == pytest.approx(0.090 / 0.850 * cat.b_v[i], abs=1e-9)
+    assert np.isfinite(cat.b_v).mean() > 0.99
 
 
 def test_gaia_agrees_with_hip2_for_bright_stars():
