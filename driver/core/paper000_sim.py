@@ -227,6 +227,7 @@ def run_paper000(cfg: Paper000Config, progress=None) -> dict:
         truth_uv = exp.truth.uv[sid]
         truth_mid = _project(exp.truth.q_mid, stars[which[k]], f, cx, cy)
         if k == 0 or which[k] != which[k - 1]:
+            acq[k] = True
             # acquisition: squares of 2k px along the path predicted from the catalog position
             # at exposure start (attitude known to ~0.5 px) and the frame's gyro rates
             p0 = _project(qs[j0], stars[which[k]], f, cx, cy) + rng.normal(0.0, 0.5, 2) - (cx, cy)
