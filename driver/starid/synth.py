@@ -5,8 +5,9 @@ stars in and out; entries closer than ``duplicate_arcsec`` are one star listed t
 keep only the brighter) with a voxel grid for cone queries. :meth:`Sky.observe` projects its
 stars through a camera at attitude ``q`` (ICRS → body), adds Gaussian centroid noise
 (px, per axis) and magnitude noise, keeps stars whose noisy V is within the sensor limit,
-adds false stars uniformly over the sensor, merges spots closer than ``blend_px`` (an
-unresolved pair is one centroid) and sorts by brightness. Truth is the
+merges spots closer than ``blend_px`` (an unresolved pair is one centroid, whatever the
+brightness of its members), adds false stars uniformly over the sensor (merged likewise
+when they land on a star) and sorts by brightness. Truth is the
 catalog id of every centroid (-1 for a false star).
 """
 
@@ -64,35 +65,42 @@ class Sky:
         radius = math.atan(0.5 * math.hypot(camera.width_px, camera.height_px) / camera.focal_length_px)
         near = self.cone(a[2], radius + 1e-3, mag_limit + 5.0 * mag_noise + 1e-9)
         body = self.vectors[near] @ a.T
-        uv, valid = project_many(params, np.ascontiguousarray(body))
-        mag = self.vmag[near] + rng.normal(0.0, mag_noise, near.size) if mag_noise > 0 else self.vmag[near].copy()
-        uv = uv + rng.normal(0.0, pos_noise_px, uv.shape) if pos_noise_px > 0 else uv
+        uv, _ = project_many(params, np.ascontiguousarray(body))
+        near, uv = near[~np.isnan(uv[:, 0])], uv[~np.isnan(uv[:, 0])]
         w, h = camera.width_px, camera.height_px
-        on = (valid & (mag <= mag_limit) & (uv[:, 0] >= -0.5) & (uv[:, 0] < w - 0.5)
+        # spots closer than blend_px are one spot, whatever their brightness
+        order = np.argsort(self.vmag[near], kind="stable")
+        uv, mag, truth, alt = blend(uv[order], self.vmag[near][order], self.ids[near][order], self.blend_px)
+        n = uv.shape[0]
+        if mag_noise > 0:
+            mag = mag + rng.normal(0.0, mag_noise, n)
+        if pos_noise_px > 0:
+            uv = uv + rng.normal(0.0, pos_noise_px, uv.shape)
+        on = ((mag <= mag_limit) & (uv[:, 0] >= -0.5) & (uv[:, 0] < w - 0.5)
               & (uv[:, 1] >= -0.5) & (uv[:, 1] < h - 0.5))
-        uv, mag, truth = uv[on], mag[on], self.ids[near][on]
+        uv, mag, truth, alt = uv[on], mag[on], truth[on], alt[on]
         if n_false:
             fuv = np.column_stack([rng.uniform(-0.5, w - 0.5, n_false), rng.uniform(-0.5, h - 0.5, n_false)])
             fmag = rng.uniform(mag_limit - 3.0, mag_limit, n_false)
-            uv = np.vstack([uv, fuv])
-            mag = np.concatenate([mag, fmag])
-            truth = np.concatenate([truth, -np.ones(n_false, dtype=np.int64)])
-        order = np.argsort(mag, kind="stable")
-        uv, mag, truth, alt = blend(uv[order], mag[order], truth[order], self.blend_px)
+            none = -np.ones(n_false, dtype=np.int64)
+            order = np.argsort(np.concatenate([mag, fmag]), kind="stable")
+            uv, mag, truth, alt = blend(np.vstack([uv, fuv])[order], np.concatenate([mag, fmag])[order],
+                                        np.concatenate([truth, none])[order], self.blend_px,
+                                        np.concatenate([alt, none])[order])
         return Frame(np.ascontiguousarray(uv), mag, truth, np.asarray(q, dtype=np.float64), alt)
 
 
-def blend(uv: np.ndarray, mag: np.ndarray, truth: np.ndarray, blend_px: float):
+def blend(uv: np.ndarray, mag: np.ndarray, truth: np.ndarray, blend_px: float, alt: np.ndarray | None = None):
     """Merge spots closer than ``blend_px`` (input brightest first): one centroid at the flux-
     weighted position, the summed flux, the truth id of the brightest real star in it and
     (``alt``) of the next real one, -1 if none: naming either is a correct identification."""
     n = uv.shape[0]
+    alt = -np.ones(n, dtype=np.int64) if alt is None else alt.copy()
     if n < 2 or blend_px <= 0:
-        return uv, mag, truth, -np.ones(n, dtype=np.int64)
+        return uv, mag, truth, alt
     flux = 10.0 ** (-0.4 * mag)
     uv = uv.copy()
     truth = truth.copy()
-    alt = -np.ones(n, dtype=np.int64)
     keep = np.ones(n, dtype=bool)
     for i in range(1, n):
         d = np.hypot(uv[:i, 0] - uv[i, 0], uv[:i, 1] - uv[i, 1])

@@ -16,6 +16,7 @@ from numba import njit
 
 from ..attitude import quat_to_dcm
 from ..core.quest import quest
+from .index import cone_query
 
 
 @njit(cache=True)
@@ -97,3 +98,27 @@ def verify_matches(b, ref, match, tol):
                     return q, out, 0, np.inf
             return q, out, n, wres
         out[worst] = -1
+
+
+@njit(cache=True)
+def drop_ambiguous(b, q, vec, vmag, vstart, vstars, vh, vg, fov_radius, tol, match):
+    """Unmatch (in place) every star with more than one catalog star within ``tol`` of its
+    direction under attitude ``q``: a close pair cannot be told apart by position, so
+    naming either could be wrong. Returns the number of stars dropped."""
+    a = quat_to_dcm(q)
+    near = cone_query(vec, vmag, vstart, vstars, vh, vg, a[2].copy(), fov_radius + tol, np.inf)
+    cos_tol = np.cos(tol)
+    dropped = 0
+    for i in range(b.shape[0]):
+        if match[i] < 0:
+            continue
+        v = a.T @ b[i]
+        hits = 0
+        for t in range(near.shape[0]):
+            s = near[t]
+            if v[0] * vec[s, 0] + v[1] * vec[s, 1] + v[2] * vec[s, 2] >= cos_tol:
+                hits += 1
+        if hits > 1:
+            match[i] = -1
+            dropped += 1
+    return dropped

@@ -1,0 +1,322 @@
+"""Extended grid tracking identification (paper 001) and the extended-image triangle baseline.
+
+While tracking, the attitude predicted from the last identification and the gyro,
+``q_pred`` (ICRS → body), gives the boresight of the coming image:
+
+* image A — the catalog stars (V ≤ ``mag_max``) that fall in the extended field
+  θ_E × θ_E around the predicted boresight, as predicted body vectors; its real part is
+  what projects onto the sensor;
+* image B — the observed centroids (body vectors);
+* image C = B ∪ (A minus its real part): the observed field surrounded by the predicted
+  extension ring.
+
+Reference stars (the brightest ``max_ref`` of B) get grid patterns built on C; every
+real-part star of A gets its pattern built on A; patterns are lists of occupied cell
+numbers (:func:`gyrostar.starid.grid.grid_pattern`), compared by shared cells. A reference
+takes the candidate with the most shared cells when that is ≥ ξ and strictly more than any
+other; a candidate claimed by two references is given to neither. The matches must then
+pass QUEST residual verification, no matched star may have a second indexed star within
+the residual tolerance (:func:`gyrostar.starid.verify.drop_ambiguous`; the index may go
+deeper than ``mag_max`` for this), and the attitude must lie within ``gate`` (rad) of the
+prediction, or the frame is rejected (the tracker falls back to lost-in-space).
+
+``method="triangle"``: the comparison method of paper 001 (extended image + triangles):
+each star's triangle with its two nearest stars (beyond ``2·tri_eps``) in C (reference)
+or A (candidate); a match needs all three sides within ``tri_eps`` and to be unique.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+from numba import njit
+
+from ..attitude import quat_error_angles, quat_to_dcm
+from ..camera import project_point
+from ..errors import ConfigError
+from .grid import GridParams, cells_from, grid_pattern, nth_neighbour, tangent_coords
+from .index import cone_query
+from .result import StarIdResult, to_body_vectors
+from .verify import drop_ambiguous, verify_matches
+
+M_GRID, M_TRIANGLE = 0, 1
+
+
+@njit(cache=True)
+def _angle(u, v):
+    return np.arccos(min(1.0, max(-1.0, u[0] * v[0] + u[1] * v[1] + u[2] * v[2])))
+
+
+@njit(cache=True)
+def _triangle(vecs, ref, min_sep):
+    """Sides (θ_r1, θ_r2, θ_12) of ``ref`` with its two nearest stars beyond ``min_sep``,
+    plus the neighbour index; sides are NaN when fewer than two."""
+    d1 = np.inf
+    d2 = np.inf
+    i1 = -1
+    i2 = -1
+    for s in range(vecs.shape[0]):
+        if s == ref:
+            continue
+        d = _angle(vecs[ref], vecs[s])
+        if d < min_sep:
+            continue
+        if d < d1:
+            d2 = d1
+            i2 = i1
+            d1 = d
+            i1 = s
+        elif d < d2:
+            d2 = d
+            i2 = s
+    out = np.full(3, np.nan)
+    if i2 < 0:
+        return out, i1
+    out[0] = d1
+    out[1] = d2
+    out[2] = _angle(vecs[i1], vecs[i2])
+    return out, i1
+
+
+@njit(cache=True)
+def build_images(b, q_pred, cam, vec, vmag, vstart, vstars, vh, vg, mag_max, half_ext, mag_deep):
+    """Images A and C. Returns ``(a_vecs, a_cat, a_real, c_vecs, c_cat)``: A's predicted
+    body vectors, catalog indexes and real-part flags; C's body vectors and catalog index
+    of each row (-1 for the observed rows, which come first). The ring holds stars to
+    ``mag_max``; A's real part goes to ``mag_deep`` (stars the sensor may report when
+    magnitude noise lifts them over its limit)."""
+    a = quat_to_dcm(q_pred)
+    bore = a[2].copy()
+    radius = np.arctan(half_ext * np.sqrt(2.0)) + 1e-3
+    near = cone_query(vec, vmag, vstart, vstars, vh, vg, bore, radius, max(mag_max, mag_deep))
+    m = near.shape[0]
+    a_vecs = np.empty((m, 3))
+    a_cat = np.empty(m, dtype=np.int64)
+    a_real = np.empty(m, dtype=np.bool_)
+    k = 0
+    n_ring = 0
+    for t in range(m):
+        p = a @ vec[near[t]]
+        if p[2] <= 0.0 or abs(p[0] / p[2]) > half_ext or abs(p[1] / p[2]) > half_ext:
+            continue
+        _, _, ok = project_point(cam, p)
+        if not ok and vmag[near[t]] > mag_max:
+            continue
+        a_vecs[k] = p
+        a_cat[k] = near[t]
+        a_real[k] = ok
+        if not ok:
+            n_ring += 1
+        k += 1
+    n = b.shape[0]
+    c_vecs = np.empty((n + n_ring, 3))
+    c_cat = -np.ones(n + n_ring, dtype=np.int64)
+    c_vecs[:n] = b
+    j = n
+    for t in range(k):
+        if not a_real[t]:
+            c_vecs[j] = a_vecs[t]
+            c_cat[j] = a_cat[t]
+            j += 1
+    return a_vecs[:k], a_cat[:k], a_real[:k], c_vecs, c_cat
+
+
+@njit(cache=True)
+def extended_core(b, q_pred, cam, vec, vmag, vstart, vstars, vh, vg, mag_max, half_ext, br, pr, g, cell, xi,
+                  max_ref, method, tri_eps, n_orient, mag_deep):
+    """Match the brightest ``max_ref`` observed stars. Returns ``(match, nb_c, c_cat, cand_cat,
+    pat_nb)``: catalog index per observed star (-1 none); C-row of each reference's
+    neighbour (-1 none); C's catalog map (-1 for observed rows); catalog index of each
+    candidate (A's real part); catalog index of the neighbour each candidate pattern is
+    oriented on, (n_cand, n_orient) (-1 none).
+
+    ``n_orient``: each candidate's pattern is built oriented on each of its ``n_orient``
+    nearest stars outside ``br`` and the best-sharing orientation counts, so a neighbour
+    that is missing from, or extra in, the observed image (magnitude noise at the sensor
+    limit) does not lose the match."""
+    n = b.shape[0]
+    a_vecs, a_cat, a_real, c_vecs, c_cat = build_images(b, q_pred, cam, vec, vmag, vstart, vstars, vh, vg,
+                                                        mag_max, half_ext, mag_deep)
+    na = a_vecs.shape[0]
+    nc = c_vecs.shape[0]
+    match = -np.ones(n, dtype=np.int64)
+    nb_c = -np.ones(n, dtype=np.int64)
+    ncand = 0
+    for t in range(na):
+        if a_real[t]:
+            ncand += 1
+    cand = np.empty(ncand, dtype=np.int64)
+    cand_cat = np.empty(ncand, dtype=np.int64)
+    j = 0
+    for t in range(na):
+        if a_real[t]:
+            cand[j] = t
+            cand_cat[j] = a_cat[t]
+            j += 1
+    no = n_orient if method == M_GRID else 1
+    pat_nb = -np.ones((ncand, no), dtype=np.int64)
+    nr = min(n, max_ref)
+    if method == M_GRID:
+        npat = ncand * n_orient
+        cells = np.empty((npat, na + 1), dtype=np.int64)
+        ncell = np.zeros(npat, dtype=np.int64)
+        for c in range(ncand):
+            xs, ys, idx, dots, kk = tangent_coords(a_vecs, cand[c], br, pr)
+            for o in range(n_orient):
+                u = c * n_orient + o
+                nb = nth_neighbour(dots, kk, o)
+                if nb < 0:
+                    break
+                ncell[u] = cells_from(xs, ys, kk, nb, g, cell, cells[u])
+                pat_nb[c, o] = a_cat[idx[nb]]
+        buf = np.empty(nc + 1, dtype=np.int64)
+        occupied = np.zeros(g * g, dtype=np.bool_)
+        for r in range(nr):
+            k, nb = grid_pattern(c_vecs, r, br, pr, g, cell, buf)
+            nb_c[r] = nb
+            if nb < 0 or k < xi:
+                continue
+            for t in range(k):
+                occupied[buf[t]] = True
+            best = -1
+            bv = 0
+            second = 0
+            for c in range(ncand):
+                cv = 0
+                cu = -1
+                for o in range(n_orient):
+                    u = c * n_orient + o
+                    if ncell[u] == 0:
+                        continue
+                    v = 0
+                    for t in range(ncell[u]):
+                        if occupied[cells[u, t]]:
+                            v += 1
+                    if v > cv:
+                        cv = v
+                        cu = u
+                if cv > bv:
+                    second = bv
+                    bv = cv
+                    best = cu
+                elif cv > second:
+                    second = cv
+            for t in range(k):
+                occupied[buf[t]] = False
+            if bv >= xi and bv > second:
+                match[r] = a_cat[cand[best // n_orient]]
+    else:
+        tri = np.empty((ncand, 3))
+        for u in range(ncand):
+            tri[u], nb = _triangle(a_vecs, cand[u], 2.0 * tri_eps)
+            if nb >= 0:
+                pat_nb[u, 0] = a_cat[nb]
+        for r in range(nr):
+            tr, nb = _triangle(c_vecs, r, 2.0 * tri_eps)
+            nb_c[r] = nb
+            if np.isnan(tr[2]):
+                continue
+            hits = 0
+            best = -1
+            for u in range(ncand):
+                if (abs(tri[u, 0] - tr[0]) <= tri_eps and abs(tri[u, 1] - tr[1]) <= tri_eps
+                        and abs(tri[u, 2] - tr[2]) <= tri_eps):
+                    hits += 1
+                    best = u
+            if hits == 1:
+                match[r] = a_cat[cand[best]]
+    # a catalog star claimed twice is given to neither
+    for r in range(nr):
+        for s in range(r + 1, nr):
+            if match[r] >= 0 and match[r] == match[s]:
+                match[r] = -1
+                match[s] = -1
+    return match, nb_c, c_cat, cand_cat, pat_nb
+
+
+ST_OK, ST_FEW, ST_GATE = 0, 1, 2
+STATUS_TEXT = {ST_OK: "ok", ST_FEW: "fewer than 2 verified matches",
+               ST_GATE: "attitude disagrees with the prediction"}
+
+
+@njit(cache=True)
+def extended_identify(b, q_pred, cam, vec, vmag, vstart, vstars, vh, vg, mag_max, half_ext, br, pr, g, cell, xi,
+                      max_ref, method, tri_eps, n_orient, tol, fov_radius, gate, mag_deep):
+    """:func:`extended_core` + verification, in one call. Returns ``(match, q, status, nb_c,
+    c_cat, cand_cat, pat_nb)`` (``match`` all -1 unless status is ``ST_OK``)."""
+    raw, nb_c, c_cat, cand_cat, pat_nb = extended_core(b, q_pred, cam, vec, vmag, vstart, vstars, vh, vg, mag_max,
+                                                       half_ext, br, pr, g, cell, xi, max_ref, method,
+                                                       tri_eps, n_orient, mag_deep)
+    q, match, nok, _ = verify_matches(b, vec, raw, tol)
+    if nok >= 2 and drop_ambiguous(b, q, vec, vmag, vstart, vstars, vh, vg, fov_radius, tol, match) > 0:
+        q, match, nok, _ = verify_matches(b, vec, match, tol)
+    if nok < 2:
+        match[:] = -1
+        return match, q, ST_FEW, nb_c, c_cat, cand_cat, pat_nb
+    err = quat_error_angles(q, q_pred)
+    if np.sqrt(err[0] * err[0] + err[1] * err[1]) > gate:
+        match[:] = -1
+        return match, q, ST_GATE, nb_c, c_cat, cand_cat, pat_nb
+    return match, q, ST_OK, nb_c, c_cat, cand_cat, pat_nb
+
+
+@dataclasses.dataclass
+class ExtendedIdentifier:
+    """Tracking identification on the extended image (grid or triangle comparison).
+
+    ``sigma_px``: expected total centroid error (px, 1σ; sensor + prediction) for the
+    residual tolerance ``n_sigma·1.25·σ`` and the triangle tolerance ``n_sigma·√2·σ``.
+    ``ext_deg``: θ_E (paper: 8°). ``mag_max``: faintest catalog star put into image A.
+    ``gate_px``: largest accepted distance (px at the boresight) between the verified
+    attitude and the prediction. ``n_orient``: orientations tried per candidate pattern
+    (1 = the plain grid rule). ``deep_mag``: A's real part also holds catalog stars this
+    much fainter than ``mag_max`` (candidates and pattern stars the sensor may report).
+    """
+
+    index: object
+    camera: object
+    params: GridParams = dataclasses.field(default_factory=GridParams)
+    method: str = "grid"
+    ext_deg: float = 8.0
+    mag_max: float = 7.5
+    sigma_px: float = 1.0
+    n_sigma: float = 4.0
+    max_ref: int = 12
+    gate_px: float = 20.0
+    n_orient: int = 3
+    deep_mag: float = 0.3
+
+    def __post_init__(self) -> None:
+        if self.method not in ("grid", "triangle"):
+            raise ConfigError(f"extended method must be 'grid' or 'triangle', got {self.method!r}")
+        if not (0.0 < self.ext_deg < 60.0):
+            raise ConfigError(f"extended field must be in (0, 60)°, got {self.ext_deg}")
+        self._cam = self.camera.as_array()
+        ifov = 1.0 / self.camera.focal_length_px
+        self.tol = self.n_sigma * 1.25 * self.sigma_px * ifov + 2e-6
+        self.tri_eps = self.n_sigma * math.sqrt(2.0) * self.sigma_px * ifov + 2e-6
+        self.gate = self.gate_px * ifov
+        self.half_ext = math.tan(math.radians(self.ext_deg) / 2.0)
+        w, h = self.camera.width_px, self.camera.height_px
+        self.fov_radius = math.atan(0.5 * math.hypot(w, h) / self.camera.focal_length_px)
+        self._code = M_GRID if self.method == "grid" else M_TRIANGLE
+        self.last = None  # raw outputs of the last call (neighbour statistics)
+
+    def identify_vectors(self, b: np.ndarray, q_pred: np.ndarray) -> StarIdResult:
+        """Identify body unit vectors (n, 3), brightest first, given the predicted attitude."""
+        ix = self.index
+        p = self.params
+        b = np.ascontiguousarray(b, dtype=np.float64)
+        q_pred = np.ascontiguousarray(q_pred, dtype=np.float64)
+        out = extended_identify(b, q_pred, self._cam, ix.vectors, ix.vmag, ix.vox_start, ix.vox_stars, ix.vox_h,
+                                ix.vox_g, self.mag_max, self.half_ext, p.br, p.pr, p.g, p.cell, p.xi, self.max_ref,
+                                self._code, self.tri_eps, self.n_orient, self.tol, self.fov_radius, self.gate,
+                                self.mag_max + self.deep_mag)
+        match, q, st = out[0], out[1], int(out[2])
+        self.last = (match,) + out[3:]
+        return StarIdResult.make(ix, match, q, st == ST_OK, STATUS_TEXT[st], math.nan, "extended-" + self.method)
+
+    def identify(self, uv: np.ndarray, q_pred: np.ndarray) -> StarIdResult:
+        return self.identify_vectors(to_body_vectors(self._cam, uv), q_pred)
