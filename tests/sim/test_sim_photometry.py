@@ -22,6 +22,7 @@ def test_mv5_xing2012_electrons_match_hand_computation():
     sky = Sky(one_star_catalog([0.001, -0.002, 1.0], 5.0), preset, seed=1)
     exp = sky.expose(IDENTITY_Q, np.zeros(3))
     total = sky.signal_frame(exp).sum()
+    print(f"Mv5 xing2012: hand {hand:.1f} e-, preset {preset.star_electrons(5.0):.1f} e-, rendered {total:.1f} e-")
     assert abs(total - hand) / hand < 0.10
     assert total == pytest.approx(preset.star_electrons(5.0), rel=1e-6)
 

@@ -44,6 +44,7 @@ def test_smeared_centroid_matches_exposure_average(rate_dps):
     rows, cols = np.indices(sig.shape)
     cen = np.array([(sig * cols).sum(), (sig * rows).sum()]) / sig.sum()
     truth = analytic_average(s0, omega, preset.detector.exposure_s, cam.focal_length_px, cam.cx_px)
+    print(f"smear {rate_dps:4.1f} deg/s: centroid - analytic average = {cen - truth} px")
     assert np.abs(cen - truth).max() < 0.01
     # the simulator's own truth agrees too
     assert np.abs(exp.truth.uv[0] - truth).max() < 1e-3
