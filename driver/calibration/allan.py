@@ -18,7 +18,8 @@ Markov (correlated)   2σ²T_c/τ·[1 − T_c/(2τ)·     +½ → −½    σ (r
 The bias-instability term is either the flicker floor B (flat, the IEEE reading) or, when
 the bias wanders as exponentially correlated (first-order Gauss–Markov) noise, the
 Markov term of annex C, whose Allan deviation peaks at 0.617 σ at τ ≈ 1.89 T_c.
-``model="auto"`` fits both and keeps the one with the smaller weighted χ². ``N`` is the
+``model="auto"`` fits both and keeps the Markov term only when its weighted χ² is clearly
+smaller (a BIC-like margin). ``N`` is the
 IEEE coefficient (two-sided PSD ``S = N²``): a one-sided noise density ``n`` (°/s/√Hz, as
 datasheets and the simulator state it, ``σ_sample = n·√(fs/2)``) gives ``N = n/√2``.
 
@@ -155,22 +156,28 @@ def _design(tau: np.ndarray, model: str = "flicker", tc: float = 0.0) -> np.ndar
     return np.column_stack([3.0 / tau**2, 1.0 / tau, bias, tau / 3.0])
 
 
-def _nnls_fit(t, a, var_sd, model, tc):
+def _nnls_fit(t, a, var_sd, model, tc, quantization):
     from scipy.optimize import nnls
 
     design = _design(t, model, tc) / var_sd[:, None]
-    scale = np.abs(design).max(axis=0)
+    if not quantization:
+        design[:, 0] = 0.0
+    scale = np.maximum(np.abs(design).max(axis=0), 1e-300)
     sol, rnorm = nnls(design / scale, a**2 / var_sd)
     return sol / scale, float(rnorm**2 / len(t))
 
 
-def fit_noise_terms(curve: AllanCurve, tau_min: float = 0.1, model: str = "auto") -> NoiseTerms:
+def fit_noise_terms(curve: AllanCurve, tau_min: float = 0.1, model: str = "auto",
+                    quantization: bool = False) -> NoiseTerms:
     """Fit Q, N, the bias-instability term and K to σ²(τ) by non-negative weighted least
     squares (``model``: "flicker", "markov" or "auto", see the module docstring).
 
     Points with τ < ``tau_min`` (s; where the gyro's low-pass filter correlates samples)
     are left out. Each point is weighted by the inverse of its σ² standard error, 2·σ·err.
     The Markov correlation time is searched on a log grid (the rest is linear).
+    ``quantization`` adds the Q term; it is off by default because a rate-output MEMS gyro
+    quantises *rate*, which is white rate noise (part of N), not the angle quantisation the
+    τ⁻¹ term describes, and over a short record the extra term trades off against N.
     """
     if model not in ("auto", "flicker", "markov"):
         raise ConfigError(f"unknown bias-instability model {model!r} (auto, flicker, markov)")
@@ -183,13 +190,21 @@ def fit_noise_terms(curve: AllanCurve, tau_min: float = 0.1, model: str = "auto"
     var_sd = 2.0 * a * np.maximum(e, 1e-3 * a)
     fits = []
     if model in ("auto", "flicker"):
-        sol, chi2 = _nnls_fit(t, a, var_sd, "flicker", 0.0)
+        sol, chi2 = _nnls_fit(t, a, var_sd, "flicker", 0.0, quantization)
         fits.append((chi2, sol, "flicker", 0.0))
     if model in ("auto", "markov"):
         for tc in np.logspace(np.log10(max(1.0, 10.0 * t[0])), np.log10(max(t[-1], 10.0)), 60):
-            sol, chi2 = _nnls_fit(t, a, var_sd, "markov", tc)
+            sol, chi2 = _nnls_fit(t, a, var_sd, "markov", tc, quantization)
             fits.append((chi2, sol, "markov", float(tc)))
-    chi2, sol, kind, tc = min(fits, key=lambda f: f[0])
+    best = min(fits, key=lambda f: f[0])
+    if model == "auto" and best[2] == "markov":
+        # the Markov term has one parameter more (T_c) and, with T_c short, mimics ARW:
+        # keep the flicker floor unless the Markov fit is clearly better (total χ² drop
+        # above 2 ln n + 6, a BIC-like margin)
+        n_pts = len(t)
+        if (fits[0][0] - best[0]) * n_pts < 2.0 * np.log(n_pts) + 6.0:
+            best = fits[0]
+    chi2, sol, kind, tc = best
     c = np.sqrt(sol)
     return NoiseTerms(quantization=float(c[0]), arw=float(c[1]), bias_instability=float(c[2]), rrw=float(c[3]),
                       model=kind, markov_tau=tc, chi2=chi2)

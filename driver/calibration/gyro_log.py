@@ -67,30 +67,37 @@ def add_live_args(parser) -> None:
     parser.add_argument("--duration", type=float, default=600.0, help="--live: record length, s (default 600)")
 
 
+def record(gyro, clock, duration_s: float, range_dps: float = 125.0, step=None) -> GyroRecord:
+    """Record ``duration_s`` from a :class:`gyrostar.gyro.GyroDevice` at 400 Hz, polling its
+    FIFO every 50 ms on ``clock`` (the host clock, or a simulated one with the mocks)."""
+    from ..gyro import GyroSamples
+
+    gyro.probe()
+    gyro.configure(400.0, range_dps, 50)
+    out = GyroSamples(int(duration_s * 400.0 * 1.02) + 200)
+    gyro.start()
+    t0 = clock.now()
+    last = t0
+    while clock.now() - t0 < duration_s and out.room > 100:
+        clock.sleep(0.05)
+        gyro.read(out)
+        if step is not None and clock.now() - last >= 1.0:
+            step()
+            last = clock.now()
+    t, _, rate, _ = out.view()
+    return GyroRecord(t.copy(), rate.copy())
+
+
 def record_live(args, folder: Path) -> GyroRecord:
-    """Record ``--duration`` s from a BMI088 gyro on ``--i2c-bus``/``--address`` at 400 Hz;
-    the raw record is saved in the report folder (``gyro_live.npz``) before calibration."""
+    """Record ``--duration`` s from a BMI088 gyro on ``--i2c-bus``/``--address``; the raw
+    record is saved in the report folder (``gyro_live.npz``) before calibration."""
     from ..cli.output import progress
     from ..clock import MONOTONIC
-    from ..gyro import Bmi088Gyro, GyroSamples
+    from ..gyro import Bmi088Gyro
     from ..transport.i2c import I2CBus, I2CRegisters
 
-    gyro = Bmi088Gyro(I2CRegisters(I2CBus.open(args.i2c_bus), args.address))
-    gyro.probe()
-    gyro.configure(400.0, args.range_dps, 50)
-    n = int(args.duration * 400.0 * 1.02) + 200
-    out = GyroSamples(n)
-    gyro.start()
-    t_end = MONOTONIC.now() + args.duration
+    gyro = Bmi088Gyro(I2CRegisters(I2CBus.open(args.i2c_bus), args.address), clock=MONOTONIC)
     with progress(args, "recording gyro", int(args.duration)) as step:
-        last = MONOTONIC.now()
-        while MONOTONIC.now() < t_end and out.room > 100:
-            gyro.read(out)
-            MONOTONIC.sleep(0.05)
-            if MONOTONIC.now() - last >= 1.0:
-                step()
-                last = MONOTONIC.now()
-    t, _, rate, _ = out.view()
-    rec = GyroRecord(t.copy(), rate.copy())
+        rec = record(gyro, MONOTONIC, args.duration, args.range_dps, step)
     rec.save(folder / "gyro_live.npz")
     return rec

@@ -93,3 +93,26 @@ def test_gyro_static_from_a_log_file_with_temperature(tmp_path, capsys):
     cal = calfile.load(tmp_path / "r" / "calibration.toml")
     assert cal.gyro_static.temperature_c == pytest.approx(25.0, abs=0.01)
     np.testing.assert_allclose(cal.gyro_static.bias_rps, 0.002, atol=1e-4)
+
+
+def test_recording_through_the_bmi088_driver_and_emulator():
+    # the --live path (driver FIFO reading, frame-count time base) on the register model
+    from gyrostar.calibration.gyro_log import record
+    from gyrostar.calibration.gyro_static import analyse
+    from gyrostar.clock import SimulatedClock
+    from gyrostar.gyro import Bmi088Gyro
+    from gyrostar.mocks.bmi088_model import Bmi088GyroModel
+    from gyrostar.mocks.fake_rates import ProfileRates
+    from gyrostar.transport import I2CBus, I2CRegisters
+
+    clock = SimulatedClock(10.0)
+    source = ProfileRates(amp_dps=(0.0, 0.0, 0.0), bias_dps=(0.05, -0.03, 0.01), noise_dps_rt_hz=0.014, seed=3)
+    model = Bmi088GyroModel(clock, source)
+    gyro = Bmi088Gyro(I2CRegisters(I2CBus(model.smbus(), name="sim"), 0x68), clock=clock)
+    rec = record(gyro, clock, 120.0, range_dps=125.0)
+    assert rec.fs == pytest.approx(400.0, rel=1e-3)
+    assert len(rec.t) == pytest.approx(48000, abs=100)
+    a = analyse(rec)
+    np.testing.assert_allclose(np.degrees(a["bias"]), [0.05, -0.03, 0.01], atol=2e-3)
+    arw = np.array([x.arw for x in a["terms"]])
+    np.testing.assert_allclose(arw, np.radians(0.014) / np.sqrt(2.0), rtol=0.1)
