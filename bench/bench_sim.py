@@ -55,7 +55,6 @@ def _numpy_spots(rows, cols, paths, electrons, sigma):
         ex = 0.5 * (erf((c + 0.5 - u) * inv) - erf((c - 0.5 - u) * inv))
         ey = 0.5 * (erf((r + 0.5 - v) * inv) - erf((r - 0.5 - v) * inv))
         out[near] += electrons[s] / m * (ex * ey).sum(axis=0)
-    out["_host_load_1min"] = {"note": f"{os.getloadavg()[0]:.2f} (2-core host; figures above scale with it)"}
     return out
 
 
