@@ -4,7 +4,7 @@
  *   mode even: the rest is raw link bytes fed to the receive stream (COBS, CRC, resync);
  *   mode odd:  the rest is a script of requests [type u8][len u16 LE][payload], each sent
  *              as a valid frame (so the dispatcher sees arbitrary payloads past the CRC);
- *              bit 1 of the mode byte flips one byte of every 7th frame.
+ *              bit 1 of the mode byte flips one byte of every 7th frame; at most 64 requests.
  * Invariants checked after every input: every byte the head sent decodes as a valid frame
  * with the current protocol version, and the window table respects its limits.
  */
@@ -14,6 +14,8 @@
 
 #include "fake_hal.h"
 #include "gs_head.h"
+
+#define FUZZ_MAX_REQUESTS 64u /* bounds the work per input (each CAPTURE reads up to 8192 px) */
 
 static fake_hal f;
 static gs_hal hal;
@@ -63,7 +65,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     } else {
         size_t pos = 0;
         unsigned k = 0;
-        while (pos + 3 <= size) {
+        while (pos + 3 <= size && k < FUZZ_MAX_REQUESTS) {
             uint8_t type = data[pos];
             size_t len = (size_t)(data[pos + 1] | data[pos + 2] << 8) % (GS_PROTO_MAX_PAYLOAD + 1u);
             pos += 3;
@@ -71,9 +73,10 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                 len = size - pos;
             size_t n = gs_frame_encode(type, (uint16_t)k, data + pos, len, scratch, sizeof scratch, enc, sizeof enc);
             pos += len;
-            if (n && (mode & 2) && ++k % 7 == 0)
+            if (n && (mode & 2) && (k + 1u) % 7u == 0)
                 enc[n / 2] ^= 0x5A;
             gs_head_rx(&head, enc, n);
+            k++;
         }
     }
     check_output();
