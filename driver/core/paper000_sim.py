@@ -87,6 +87,7 @@ class Paper000Config:
     spike_ratio: float = 4.0               # drop pixels brighter than this × their brightest neighbour (0: off)
     start_xy_px: tuple[float, float] = (150.0, 100.0)
     edge_px: float = 430.0                 # hand over when the star is this far from the centre
+    max_coast_frames: int = 5              # frames without an accepted update before re-acquiring
 
     def validate(self) -> None:
         if self.scenario not in SCENARIOS:
@@ -220,13 +221,17 @@ def run_paper000(cfg: Paper000Config, progress=None) -> dict:
     bg = bg_sig = np.nan
     rejects = 0
     n_resets = 0
+    acquiring = False
+    coast = 0
+    accepted = False
+    acq_failures = 0
     for k in range(n_frames):
         j0 = k * spf
         exp = sky.expose(qs[j0], quats=qs[j0:j0 + spf + 1])
         sid = int(np.flatnonzero(exp.truth.ids == which[k])[0])
         truth_uv = exp.truth.uv[sid]
         truth_mid = _project(exp.truth.q_mid, stars[which[k]], f, cx, cy)
-        if k == 0 or which[k] != which[k - 1]:
+        if k == 0 or which[k] != which[k - 1] or acquiring:
             acq[k] = True
             # acquisition: squares of 2k px along the path predicted from the catalog position
             # at exposure start (attitude known to ~0.5 px) and the frame's gyro rates
@@ -242,9 +247,21 @@ def run_paper000(cfg: Paper000Config, progress=None) -> dict:
                 bg, bg_sig = m, sd
             thr = bg + cfg.threshold_sigma * bg_sig
             pix = suppress_isolated(spans, pix, bg, thr, cfg.isolated_neighbours, cfg.spike_ratio)
-            u, v, _, _ = cog(spans, pix, bg, thr)
-            if not np.isfinite(u):
-                raise ConfigError("acquisition failed: the star is not detectable in this preset")
+            # the smeared-spot fit from the predicted path; a thresholded CoG if it fails
+            mid = traj.mean(axis=0)
+            u, v, flux, vu, vv, _ = smear_fit(spans, pix, bg, mid[0], mid[1], np.ascontiguousarray(traj - mid),
+                                              psf_sigma, bg_sig * bg_sig, e_per_dn, 10, 1e-3)
+            if not (np.isfinite(u) and flux > 0 and max(vu, vv) < 0.25):
+                u, v, _, npix = cog(spans, pix, bg, thr)
+            acquiring = not np.isfinite(u)
+            if acquiring:  # not found: keep dead-reckoning and try again next frame
+                acq_failures += 1
+                if X is not None:
+                    spot_ekf_propagate(X, P, meas[j0:j0 + spf], dt, f, sig_rate, sig_brw, model)
+                    bias_est[k] = X[2:]
+                if progress:
+                    progress()
+                continue
             a_uv = np.array([u, v])
             b_uv = a_uv.copy()
             if X is None:
@@ -327,7 +344,7 @@ def run_paper000(cfg: Paper000Config, progress=None) -> dict:
             offsets = np.ascontiguousarray(traj_c[::cfg.offset_stride] - mean_xy)
             u, v, flux, vu, vv, _ = smear_fit(s, p, bg, mean_xy[0], mean_xy[1], offsets, psf_sigma,
                                               bg_sig * bg_sig, e_per_dn, 10, 1e-3)
-            ok = np.isfinite(u) and flux > 0.0 and np.isfinite(vu) and np.hypot(u - mean_xy[0], v - mean_xy[1]) < 3.0
+            ok = np.isfinite(u) and flux > 0.0 and np.isfinite(vu) and np.isfinite(vv)
         else:
             u, v, flux, npix = cog(s, p, bg, thr)
             ok = npix > 0
@@ -340,12 +357,19 @@ def run_paper000(cfg: Paper000Config, progress=None) -> dict:
             nis_log[k] = nis
             if accepted:
                 rejects = 0
+                coast = 0
             else:
                 rejects += 1
                 if rejects >= 3:  # persistent disagreement: trust the image, keep the drift
                     spot_ekf_reset(X, P, u - cx, v - cy, vu, vv)
                     n_resets += 1
                     rejects = 0
+                    coast = 0
+        if not ok or not accepted:
+            coast += 1
+            if coast >= cfg.max_coast_frames:  # nothing usable in the EKF's window: re-acquire
+                acquiring = True
+                coast = 0
         est = X[:2] + (cx, cy)
         err["ekf"][k] = est - truth_mid
         ekf_sigma[k] = np.sqrt([P[0, 0], P[1, 1]])
@@ -355,11 +379,11 @@ def run_paper000(cfg: Paper000Config, progress=None) -> dict:
         if progress:
             progress()
     return _summarise(cfg, preset, err, lost, acq, bias_est, drift, frame_rates, win_px, ekf_sigma, nis_log,
-                      n_resets, meas, true_rates, spf, meas_err, meas_sig)
+                      n_resets, meas, true_rates, spf, meas_err, meas_sig, acq_failures)
 
 
 def _summarise(cfg, preset, err, lost, acq, bias_est, drift, frame_rates, win_px, ekf_sigma, nis_log,
-               n_resets, meas, true_rates, spf, meas_err, meas_sig) -> dict:
+               n_resets, meas, true_rates, spf, meas_err, meas_sig, acq_failures) -> dict:
     rate_dps = np.linalg.norm(frame_rates, axis=1) / DEG
     use = ~acq
     rms, rms_axes, lost_frac, max_rate = {}, {}, {}, {}
@@ -401,7 +425,8 @@ def _summarise(cfg, preset, err, lost, acq, bias_est, drift, frame_rates, win_px
         "ekf_measurement_sigma_px": [float(x) for x in np.sqrt(np.nanmean(meas_sig[use] ** 2, axis=0))],
         "mean_window_px": {m: float(np.mean(v[use])) for m, v in win_px.items()},
         "ekf_resets": int(n_resets),
-        "acquisitions": int(acq.sum()),
+        "acquisitions": int(acq.sum() - acq_failures),
+        "acquisition_failures": int(acq_failures),
         "settings": dataclasses.asdict(cfg),
         "_series": {"err": err, "lost": lost, "acq": acq, "bias_est": bias_est, "drift": drift,
                     "rate_dps": frame_rates / DEG, "ekf_sigma": ekf_sigma, "nis": nis_log,
