@@ -3,16 +3,19 @@
 FIFO frames carry no timestamp. Time is rebuilt from the frame count and anchors:
 
 * an *event* anchor — frame ``k`` was sampled at host time ``t`` (the watermark or
-  data-ready interrupt edge, timestamped by the host);
-* a *bound* anchor — frame ``k`` was the newest in the FIFO when polled at host time ``t``,
-  so it was sampled in ``(t − period, t]``; it counts as ``t − period/2`` with a lower weight.
+  data-ready interrupt edge, timestamped by the host): exact up to interrupt latency;
+* a *bound* — frame ``k`` was the newest in the FIFO when polled at host time ``t``, so
+  ``t_k ≤ t < t_{k+1}``: the line must pass below ``(k, t)`` and above ``(k + 1, t)``.
 
-A weighted least-squares line through the anchors with exponential forgetting (so the
-gyro's own ODR error and drift against the host clock are tracked) gives ``t_ref`` and
-``period``; the period is held within ±``max_rate_error`` of nominal. When only bound
-anchors are recent, the line's offset is then placed mid-way in the intersection of the
-recent bounds' intervals (a lower/upper envelope), which shrinks to a small fraction of a
-period as poll phases vary.
+Events feed a weighted least-squares line with exponential forgetting (``forget`` per
+anchor), which tracks the gyro's ODR error and its drift against the host clock. Bounds
+alone (no interrupt line) are solved as a feasibility problem every ``block`` polls: over
+the last ``history`` bounds, the lines ``t = a + b·k`` with ``max(t_i − b(k_i+1)) < a ≤
+min(t_i − b·k_i)`` form a convex polygon in (b, a); its centroid (vectorised over a grid of
+periods) gives the line. The polygon shrinks as poll phases vary, to a small fraction of a
+period. Before the first solution a
+least-squares line through the interval midpoints stands in. The period is held within
+±``max_rate_error`` of nominal.
 """
 
 from __future__ import annotations
@@ -20,27 +23,65 @@ from __future__ import annotations
 import math
 from collections import deque
 
+import numpy as np
+
+
+class _Fit:
+    """Weighted LS sums with forgetting, in coordinates relative to the first point."""
+
+    def __init__(self, forget: float):
+        self.forget = forget
+        self.s = [0.0] * 5  # w, w·x, w·y, w·x², w·x·y
+        self.k0 = None
+        self.t0 = 0.0
+        self.n = 0
+        self.k_min = math.inf
+        self.k_max = -math.inf
+
+    def add(self, k: float, t: float, w: float) -> None:
+        if self.k0 is None:
+            self.k0, self.t0 = k, t
+        x, y, f, s = k - self.k0, t - self.t0, self.forget, self.s
+        s[0] = s[0] * f + w
+        s[1] = s[1] * f + w * x
+        s[2] = s[2] * f + w * y
+        s[3] = s[3] * f + w * x * x
+        s[4] = s[4] * f + w * x * y
+        self.n += 1
+        self.k_min, self.k_max = min(self.k_min, k), max(self.k_max, k)
+
+    def solve(self, nominal: float):
+        """``(k_ref, t_ref, period or None)``; period None when the points span < 1 frame."""
+        s = self.s
+        mx, my = s[1] / s[0], s[2] / s[0]
+        var = s[3] / s[0] - mx * mx
+        period = (s[4] / s[0] - mx * my) / var if var > 1.0 else None
+        return self.k0 + mx, self.t0 + my, period
+
 
 class FrameTimebase:
     def __init__(self, nominal_period: float, forget: float = 0.97, max_rate_error: float = 0.05,
-                 bound_weight: float = 0.05, bound_forget: float = 0.998):
+                 block: int = 32, history: int = 256, mid_forget: float = 0.998):
         self.nominal = float(nominal_period)
         self.forget = forget
+        self.mid_forget = mid_forget
         self.max_rate_error = max_rate_error
-        self.bound_weight = bound_weight
-        self.bound_forget = bound_forget  # poll bounds are coarse: average them over a longer memory
+        self.block = block
+        self.history = history
         self.reset()
 
     def reset(self) -> None:
         self.k_ref = None
         self.t_ref = 0.0
         self.period = self.nominal
-        self._s = [0.0] * 5  # sums w, w·k, w·t, w·k², w·k·t  (k, t relative to the first anchor)
-        self._k0 = 0
-        self._t0 = 0.0
-        self.anchors = 0
-        self._bounds: deque = deque(maxlen=48)
+        self._events = _Fit(self.forget)
+        self._coarse = _Fit(self.mid_forget)
+        self._bounds: deque = deque(maxlen=self.history)
+        self._new_bounds = 0
         self._since_event = 1 << 30
+        self._solved = False
+        self.anchors = 0
+        self.envelope_width = math.nan  # s, width of the feasible offset interval at the last solve
 
     @property
     def ready(self) -> bool:
@@ -49,45 +90,94 @@ class FrameTimebase:
     def add_event(self, k: int, t: float) -> None:
         """Frame ``k`` was sampled at host time ``t`` (s)."""
         self._since_event = 0
-        self._add(k, t, 1.0, self.forget)
+        self._events.add(float(k), t, 1.0)
+        self.anchors += 1
+        self._use(self._events)
 
     def add_bound(self, k: int, t_poll: float) -> None:
         """Frame ``k`` was the newest in the FIFO at host time ``t_poll`` (s)."""
         self._since_event += 1
-        self._add(k, t_poll - 0.5 * self.period, self.bound_weight, self.bound_forget)
-        self._bounds.append((k, t_poll))
-        if self._since_event > self._bounds.maxlen:
-            lo, hi = -math.inf, math.inf
-            for kb, tb in self._bounds:
-                r = tb - self.time_of(kb)
-                hi = min(hi, r)
-                lo = max(lo, r - self.period)
-            if lo < hi:
-                self.t_ref += 0.5 * (lo + hi)
-
-    def _add(self, k: int, t: float, w: float, f: float) -> None:
-        if self.k_ref is None:
-            self._k0, self._t0 = int(k), float(t)
-        s = self._s
-        x = float(k - self._k0)
-        y = t - self._t0
-        s[0] = s[0] * f + w
-        s[1] = s[1] * f + w * x
-        s[2] = s[2] * f + w * y
-        s[3] = s[3] * f + w * x * x
-        s[4] = s[4] * f + w * x * y
         self.anchors += 1
-        mx, my = s[1] / s[0], s[2] / s[0]
-        var = s[3] / s[0] - mx * mx
-        period = self.nominal
-        if var > 1.0:  # anchors span more than a frame: fit the slope
-            period = (s[4] / s[0] - mx * my) / var
+        self._bounds.append((k, t_poll))
+        self._new_bounds += 1
+        if self._since_event <= self.block and self._events.n >= 2:
+            return  # interrupt anchors are recent: they are better than any envelope
+        if not self._solved or self._new_bounds >= self.block:
+            self._coarse.add(float(k), t_poll - 0.5 * self.period, 1.0)
+            if len(self._bounds) >= self.block and self._solve():
+                self._new_bounds = 0
+                self._solved = True
+            elif not self._solved:
+                self._use(self._coarse)
+            return
+        # between solutions: keep the line's offset inside the recent bounds' envelope
+        lo, hi = self._offset_interval(self.period, list(self._bounds)[-self.block:], self.k_ref)
+        if lo < hi and not lo <= self.t_ref <= hi:
+            self.t_ref = 0.5 * (lo + hi)
+
+    @staticmethod
+    def _offset_interval(b, bounds, k_ref):
+        lo, hi = -math.inf, math.inf
+        for kb, tb in bounds:
+            x = kb - k_ref
+            hi = min(hi, tb - b * x)
+            lo = max(lo, tb - b * (x + 1))
+        return lo, hi
+
+    def _solve(self) -> bool:
+        """Centroid of the feasible (period, offset) polygon of the stored bounds."""
+        kb = np.array([k for k, _ in self._bounds], np.float64)
+        tb = np.array([t for _, t in self._bounds], np.float64)
+        while len(kb) >= self.block:
+            k_ref, t0 = kb[-1], tb[-1]
+            x, y = kb - k_ref, tb - t0
+
+            def width(b, x=x, y=y):
+                return np.min(y - b * x) - np.max(y - b * (x + 1.0))
+
+            lo_b = self.nominal * (1 - self.max_rate_error)
+            hi_b = self.nominal * (1 + self.max_rate_error)
+            for _ in range(80):  # width(b) is concave: ternary search for its maximum
+                m1 = lo_b + (hi_b - lo_b) / 3
+                m2 = hi_b - (hi_b - lo_b) / 3
+                if width(m1) < width(m2):
+                    lo_b = m1
+                else:
+                    hi_b = m2
+            b_top = 0.5 * (lo_b + hi_b)
+            if width(b_top) > 0:
+                edges = []
+                for far in (self.nominal * (1 - self.max_rate_error), self.nominal * (1 + self.max_rate_error)):
+                    inside, outside = b_top, far
+                    if width(far) > 0:
+                        edges.append(far)
+                        continue
+                    for _ in range(60):  # bisection for the polygon's edge
+                        mid = 0.5 * (inside + outside)
+                        if width(mid) > 0:
+                            inside = mid
+                        else:
+                            outside = mid
+                    edges.append(inside)
+                grid = np.linspace(edges[0], edges[1], 65)
+                hi = np.min(y[None, :] - grid[:, None] * x[None, :], axis=1)
+                lo = np.max(y[None, :] - grid[:, None] * (x[None, :] + 1.0), axis=1)
+                wp = np.maximum(hi - lo, 0.0)
+                area = wp.sum()
+                if area > 0:
+                    self.period = float(np.dot(grid, wp) / area)
+                    self.k_ref, self.t_ref = float(k_ref), t0 + float(np.dot(0.5 * (hi + lo), wp) / area)
+                    self.envelope_width = float(wp.max())
+                    return True
+            kb, tb = kb[len(kb) // 2:], tb[len(tb) // 2:]  # inconsistent (rate changed): keep the recent half
+        return False
+
+    def _use(self, fit: _Fit) -> None:
+        k_ref, t_ref, period = fit.solve(self.nominal)
+        if period is not None:
             lo, hi = self.nominal * (1 - self.max_rate_error), self.nominal * (1 + self.max_rate_error)
-            period = min(max(period, lo), hi)
-        self.period = period
-        # Reference at the weighted mean anchor (best-determined point of the line).
-        self.k_ref = self._k0 + mx
-        self.t_ref = self._t0 + my
+            self.period = min(max(period, lo), hi)
+        self.k_ref, self.t_ref = k_ref, t_ref
 
     def time_of(self, k: float) -> float:
         """Host time (s) of frame ``k``."""

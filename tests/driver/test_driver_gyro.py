@@ -178,7 +178,7 @@ def test_bmi088_poll_only_times_without_interrupt():
         gyro.read(out)
     truth = model.popped_indices()
     err = out.t[1000:out.n] - model.sample_time(truth)[1000:]
-    assert np.max(np.abs(err)) < 0.4 * model.period  # bounded anchors only: a fraction of a period
+    assert np.max(np.abs(err)) < 0.2 * model.period  # poll bounds only (no interrupt): measured 43–279 µs
 
 
 def test_bmi088_saturation_flags():
