@@ -6,6 +6,11 @@ Input: a folder of FITS dark frames (``EXPTIME`` header, s) or an ``.npz`` with
 the read noise and the hot-pixel list (the driver masks them in centroiding; the
 firmware can be told to skip them).
 
+``--live``: the camera head on ``--port`` (lens capped) is set to each exposure, and for
+every frame a CAPTURE is followed by a FULL_FRAME read of the light plane
+(:class:`gyrostar.head.HeadClient`); the frames are saved in the report folder
+(``dark_frames.npz``) before they are reduced.
+
 ``--simulate``: the simulator's detector (:class:`gyrostar.mocks.sky.Sky` with an empty
 sky, lens capped) of the ``--preset`` renders ``--frames`` dark frames at each of the
 ``--exposures``; truth is its fixed pattern (dark rate, hot pixels) and read noise. The
@@ -32,6 +37,36 @@ def configure(parser) -> None:
     parser.add_argument("--hot-factor", type=float, default=5.0,
                         help="hot pixel: and above this multiple of the median dark current (default 5)")
     parser.add_argument("--temperature", type=float, default=None, help="sensor temperature, C (recorded)")
+    parser.add_argument("--port", default=None, help="--live: camera-head serial port or pyserial URL")
+
+
+def capture_stacks(client, exposures: list[float], n_frames: int, step=None, keep: dict | None = None):
+    """Dark stacks from a live head: per exposure (s) ``n_frames`` CAPTURE + FULL_FRAME reads
+    (a one-pixel window is set, since the head exposes only with windows defined).
+    The raw frames go into ``keep`` (``frames``, ``exposure``) when given."""
+    from ..errors import DeviceError
+    from .dark_frames import stack
+
+    stacks = []
+    client.set_windows(np.array([[0, 0, 0, 1]], np.int32))  # a CAPTURE needs a window; the frame is read whole
+    for t_exp in exposures:
+        got = client.set_exposure(int(round(t_exp * 1e6)))
+        t_real = got * 1e-6 if got else t_exp
+        frames, seen = [], set()
+        for _ in range(n_frames):
+            client.capture(fetch=False)
+            img, sensor_frame = client.full_frame()
+            if sensor_frame in seen:
+                raise DeviceError(f"dark capture: sensor frame {sensor_frame} read twice")
+            seen.add(sensor_frame)
+            frames.append(img)
+            if step is not None:
+                step()
+        if keep is not None:
+            keep.setdefault("frames", []).extend(frames)
+            keep.setdefault("exposure", []).extend([t_real] * len(frames))
+        stacks.append(stack(np.stack(frames), t_real))
+    return stacks
 
 
 def simulate(args):
@@ -78,20 +113,17 @@ def run(args) -> int:
     from .dark_frames import load_frames, solve, write_fits
 
     source = report.check_source(args)
+    folder = report.report_dir(args, "dark")
     truth = None
     if source == "simulate":
         stacks, truth = simulate(args)
     elif source == "live":
-        from ..errors import NotAvailableError
-
-        raise NotAvailableError("live dark capture needs the head client (gyrostar.head) full-frame readout; "
-                                "capture FITS frames with the lens capped and pass the folder as INPUT")
+        stacks = _live(args, folder)
     else:
         stacks = load_frames(args.input)
     res = solve(stacks, k_sigma=args.k_sigma, hot_factor=args.hot_factor)
     # ADC quantisation (1/12 DN²) is part of the measured temporal noise, not of the read noise
     read_noise = float(np.sqrt(max(res.read_noise**2 - 1.0 / 12.0, 0.0)))
-    folder = report.report_dir(args, "dark")
     fits_path = write_fits(folder / "dark.fits", res, args.temperature)
     table = report.ParamTable()
     extra = {"exposures_s": res.exposures, "frames": res.frames, "fits": str(fits_path),
@@ -127,6 +159,23 @@ def run(args) -> int:
     if not args.no_plots:
         _plots(folder, res)
     return report.finish(args, "dark", table, extra, folder, checks)
+
+
+def _live(args, folder):
+    from ..cli.output import progress
+    from ..errors import ConfigError
+    from ..head import HeadClient
+    from ..transport.serial_link import SerialLink
+
+    if not args.port:
+        raise ConfigError("--live needs --port (the camera head's serial port or URL)")
+    exposures = [float(x) for x in args.exposures.split(",")]
+    keep: dict = {}
+    with SerialLink(args.port) as link, progress(args, "capturing dark frames", len(exposures) * args.frames) as step:
+        stacks = capture_stacks(HeadClient(link), exposures, args.frames, step, keep)
+    np.savez_compressed(folder / "dark_frames.npz", frames=np.stack(keep["frames"]),
+                        exposure=np.asarray(keep["exposure"]))
+    return stacks
 
 
 def _plots(folder, res) -> None:

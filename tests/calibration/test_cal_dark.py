@@ -61,3 +61,35 @@ def test_dark_simulated_detector(tmp_path, capsys):
     cal = calfile.load(tmp_path / "calibration.toml")
     assert len(cal.dark.hot_pixels) == par["hot_pixels"]["value"]
     assert (tmp_path / "dark.fits").exists()
+
+
+def test_dark_live_path_through_the_head_client_and_emulator(tmp_path, capsys):
+    # --live: HeadClient over a pty to the head emulator (lens capped: empty sky)
+    import dataclasses
+
+    from gyrostar.catalog import StarCatalog
+    from gyrostar.mocks.head_emulator import ConstantRateScene, HeadEmulator
+    from gyrostar.mocks.sim_preset import load_preset
+    from gyrostar.mocks.sky import Sky
+
+    base = load_preset("qian2015")
+    preset = dataclasses.replace(base, photometry=dataclasses.replace(base.photometry, sky_mag_arcsec2=60.0))
+    empty = StarCatalog("none", np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0), 2025.0)
+    sky = Sky(empty, preset, seed=11)
+    em = HeadEmulator(sky, ConstantRateScene(np.array([0.0, 0.0, 0.0, 1.0])))
+    path = em.start()
+    try:
+        code = main(["calibrate", "dark", "--live", "--port", path, "--frames", "3", "--exposures", "0.005,0.08",
+                     "--json", "--no-plots", "--report", str(tmp_path)])
+    finally:
+        em.stop()
+    out = json.loads(capsys.readouterr().out)
+    assert code == 0
+    det = preset.detector
+    assert out["parameters"]["read_noise_dn"]["value"] == pytest.approx(det.read_noise_e / det.gain_e_per_adu, rel=0.1)
+    _, dark_e = sky.fixed_pattern
+    hot = np.argwhere(np.isclose(dark_e / det.exposure_s, det.hot_pixel_dark_e_s, rtol=1e-4))[:, ::-1]
+    found = read_hot_pixels(tmp_path / "dark.fits")
+    assert sorted(map(tuple, found.tolist())) == sorted(map(tuple, hot.tolist()))
+    with np.load(tmp_path / "dark_frames.npz") as z:
+        assert z["frames"].shape == (6, 512, 512)
