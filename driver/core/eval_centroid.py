@@ -65,6 +65,8 @@ def _human(r: dict) -> str:
         lost = r["lost_fraction"].get(m, r["lost_fraction_ekf"])
         lines.append(f"  {label:15s} RMS x {_fmt(ax[m][0])} y {_fmt(ax[m][1])} px   lost {lost:.1%}   "
                      f"tracks to {r['max_rate_tracked_dps'][m]:.2f} °/s")
+    g = r["ekf_gyro_rate_output_rms_px"]
+    lines.append(f"  C EKF 400 Hz output just before each image RMS x {_fmt(g[0])} y {_fmt(g[1])} px")
     b = r["bias_error_dps"]
     lines.append(f"  drift error (final) [{b[0]:+.4f}, {b[1]:+.4f}, {b[2]:+.4f}] °/s "
                  f"(true {r['bias_true_dps']}); x,y within 10 % after {r['bias_xy_within_10pct_after_s']} s")
