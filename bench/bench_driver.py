@@ -243,7 +243,7 @@ def bench_fifo(quick: bool) -> dict:
     assert np.allclose(out_p.rate, out_b.rate) and np.array_equal(out_p.flags, out_b.flags)
     t = _time_us(product, rep, inner)
     return {"us": t, "baseline_us": b, "ratio": b / t, "target_us": 100.0,
-            "note": "Bmi088Gyro.read, numba conversion vs per-sample Python; replay bus (no bus time)"}
+            "note": "Bmi088Gyro.read, polled (time-base solve amortised); numba vs per-sample Python; replay bus"}
 
 
 def run(quick: bool = False) -> dict:

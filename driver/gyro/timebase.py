@@ -24,6 +24,7 @@ import math
 from collections import deque
 
 import numpy as np
+from numba import njit
 
 
 class _Fit:
@@ -57,6 +58,75 @@ class _Fit:
         var = s[3] / s[0] - mx * mx
         period = (s[4] / s[0] - mx * my) / var if var > 1.0 else None
         return self.k0 + mx, self.t0 + my, period
+
+
+@njit(cache=True)
+def _width(x, y, b):
+    hi = np.inf
+    lo = -np.inf
+    for i in range(x.shape[0]):
+        u = y[i] - b * x[i]
+        if u < hi:
+            hi = u
+        v = u - b
+        if v > lo:
+            lo = v
+    return hi, lo
+
+
+@njit(cache=True)
+def polygon_centroid(x, y, b_min, b_max):
+    """Lines ``y = a + b·x`` with ``y_i − b(x_i+1) < a ≤ y_i − b·x_i`` for all i: the centroid
+    ``(b, a)`` of that convex polygon and its widest offset interval (≤ 0: infeasible)."""
+    lo_b, hi_b = b_min, b_max
+    for _ in range(60):  # the offset interval's width is concave in b: ternary search
+        m1 = lo_b + (hi_b - lo_b) / 3.0
+        m2 = hi_b - (hi_b - lo_b) / 3.0
+        h1, l1 = _width(x, y, m1)
+        h2, l2 = _width(x, y, m2)
+        if h1 - l1 < h2 - l2:
+            lo_b = m1
+        else:
+            hi_b = m2
+    b_top = 0.5 * (lo_b + hi_b)
+    h, l = _width(x, y, b_top)
+    if h - l <= 0.0:
+        return np.array([b_top, 0.5 * (h + l), h - l])
+    edges = np.empty(2)
+    for side in range(2):
+        inside = b_top
+        outside = b_min if side == 0 else b_max
+        h, l = _width(x, y, outside)
+        if h - l > 0.0:
+            edges[side] = outside
+            continue
+        for _ in range(50):  # bisection for the polygon's edge
+            mid = 0.5 * (inside + outside)
+            h, l = _width(x, y, mid)
+            if h - l > 0.0:
+                inside = mid
+            else:
+                outside = mid
+        edges[side] = inside
+    area = 0.0
+    sb = 0.0
+    sa = 0.0
+    widest = 0.0
+    n = 64
+    for j in range(n + 1):
+        b = edges[0] + (edges[1] - edges[0]) * j / n
+        h, l = _width(x, y, b)
+        w = h - l
+        if w > 0.0:
+            area += w
+            sb += w * b
+            sa += w * 0.5 * (h + l)
+            if w > widest:
+                widest = w
+    if area <= 0.0:
+        h, l = _width(x, y, b_top)
+        return np.array([b_top, 0.5 * (h + l), h - l])
+    return np.array([sb / area, sa / area, widest])
 
 
 class FrameTimebase:
@@ -128,47 +198,15 @@ class FrameTimebase:
         """Centroid of the feasible (period, offset) polygon of the stored bounds."""
         kb = np.array([k for k, _ in self._bounds], np.float64)
         tb = np.array([t for _, t in self._bounds], np.float64)
+        b_min = self.nominal * (1 - self.max_rate_error)
+        b_max = self.nominal * (1 + self.max_rate_error)
         while len(kb) >= self.block:
             k_ref, t0 = kb[-1], tb[-1]
-            x, y = kb - k_ref, tb - t0
-
-            def width(b, x=x, y=y):
-                return np.min(y - b * x) - np.max(y - b * (x + 1.0))
-
-            lo_b = self.nominal * (1 - self.max_rate_error)
-            hi_b = self.nominal * (1 + self.max_rate_error)
-            for _ in range(80):  # width(b) is concave: ternary search for its maximum
-                m1 = lo_b + (hi_b - lo_b) / 3
-                m2 = hi_b - (hi_b - lo_b) / 3
-                if width(m1) < width(m2):
-                    lo_b = m1
-                else:
-                    hi_b = m2
-            b_top = 0.5 * (lo_b + hi_b)
-            if width(b_top) > 0:
-                edges = []
-                for far in (self.nominal * (1 - self.max_rate_error), self.nominal * (1 + self.max_rate_error)):
-                    inside, outside = b_top, far
-                    if width(far) > 0:
-                        edges.append(far)
-                        continue
-                    for _ in range(60):  # bisection for the polygon's edge
-                        mid = 0.5 * (inside + outside)
-                        if width(mid) > 0:
-                            inside = mid
-                        else:
-                            outside = mid
-                    edges.append(inside)
-                grid = np.linspace(edges[0], edges[1], 65)
-                hi = np.min(y[None, :] - grid[:, None] * x[None, :], axis=1)
-                lo = np.max(y[None, :] - grid[:, None] * (x[None, :] + 1.0), axis=1)
-                wp = np.maximum(hi - lo, 0.0)
-                area = wp.sum()
-                if area > 0:
-                    self.period = float(np.dot(grid, wp) / area)
-                    self.k_ref, self.t_ref = float(k_ref), t0 + float(np.dot(0.5 * (hi + lo), wp) / area)
-                    self.envelope_width = float(wp.max())
-                    return True
+            out = polygon_centroid(kb - k_ref, tb - t0, b_min, b_max)
+            if out[2] > 0:
+                self.period, self.k_ref, self.t_ref = float(out[0]), float(k_ref), t0 + float(out[1])
+                self.envelope_width = float(out[2])
+                return True
             kb, tb = kb[len(kb) // 2:], tb[len(tb) // 2:]  # inconsistent (rate changed): keep the recent half
         return False
 
