@@ -138,10 +138,15 @@ def run(args) -> int:
                     raise ConfigError(f"{args.alignment} has no [alignment] table")
                 from ..attitude import quat_to_dcm
 
-                r = quat_to_dcm(np.asarray(al.q_gyro_to_camera, float))
-                rate = rate @ r.T
+                r_align = quat_to_dcm(np.asarray(al.q_gyro_to_camera, float))
+                rate = rate @ r_align.T
                 t_g = t_g + al.time_offset_s
         fit = _from_slews(t_g, rate, t_cam, q_cam)
+        if args.alignment and source != "simulate":  # back to gyro axes: S_g = Rᵀ S_cam R
+            from .scale_fit import ScaleFit
+
+            s_g = r_align.T @ fit.sensitivity @ r_align
+            fit = ScaleFit(s_g, np.linalg.inv(s_g), r_align.T @ fit.bias, fit.sensitivity_sigma, fit.residual_rms)
     table_out = report.ParamTable()
     ts = None if truth is None else truth["sensitivity"]
     table_out.add("scale_factor_ppm", fit.scale_factor_ppm, "ppm",

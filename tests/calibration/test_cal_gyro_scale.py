@@ -61,3 +61,39 @@ def test_gyro_scale_simulated_rate_table_within_200_ppm(tmp_path, capsys):
     assert truth.max() > 1000.0  # the simulated part really has scale errors to find
     assert out["misalignment_max_error_urad"] < 200.0
     assert code == 0
+
+
+def test_gyro_scale_from_slew_file_with_alignment(tmp_path, capsys):
+    # noiseless slews; gyro mounted 90° about z and 3 ms late; S recovered in gyro axes
+    from gyrostar.attitude import dcm_to_quat, quat_propagate
+    from gyrostar.calibration import calfile
+    from gyrostar.calibration.intrinsics import rotvec_dcm
+
+    fs = 1000.0
+    t = np.arange(0, 30, 1 / fs)
+    amp, per = np.radians([8, 6, 5]), np.array([2.0, 2.6, 3.1])
+
+    def omega(tt):
+        return amp * np.sin(2 * np.pi * tt[:, None] / per)
+
+    w = omega(t)
+    q = np.empty((len(t), 4))
+    q[0] = [0, 0, 0, 1]
+    for i in range(1, len(t)):
+        q[i] = quat_propagate(q[i - 1], 0.5 * (w[i] + w[i - 1]), 1 / fs)
+    r = rotvec_dcm(np.radians([[0.0, 0.0, 90.0]]))[0]
+    offset = 3e-3
+    tg = np.arange(0.1, 29.9, 1 / 400.0)
+    wg = omega(tg + offset) @ r @ S_TRUE.T + B_TRUE  # gyro axes: ω_g = Rᵀ ω_cam
+    k = np.arange(200, len(t) - 200, 10)
+    path = tmp_path / "slew.npz"
+    np.savez(path, t=tg, rate=wg, t_cam=t[k], q_cam=q[k])
+    cal = tmp_path / "al.toml"
+    calfile.write_section(cal, "alignment", calfile.AlignmentCal(tuple(float(v) for v in dcm_to_quat(r)), offset),
+                          source="test")
+    code = main(["calibrate", "gyro-scale", str(path), "--method", "slew", "--alignment", str(cal), "--json",
+                 "--no-plots", "--report", str(tmp_path / "r")])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 0
+    np.testing.assert_allclose(out["sensitivity"], S_TRUE, atol=5e-5)
+    np.testing.assert_allclose(np.radians(out["parameters"]["bias_dps"]["value"]), B_TRUE, atol=1e-5)
