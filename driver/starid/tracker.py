@@ -1,0 +1,77 @@
+"""Star-identification state machine: lost-in-space → tracking → back on failure.
+
+``LOST``: every image goes to the lost-in-space identifier (Pyramid). On an accepted
+result the tracker keeps its attitude and enters ``TRACKING``.
+``TRACKING``: the attitude is propagated to the new image with the gyro (body rate ω in
+rad/s over ``dt`` s, or an integrated body-frame rotation ``dq`` with
+``q_new = dq ⊗ q_old``) and the image goes to the tracking identifier (extended grid).
+If that is rejected, the same image goes to Pyramid; if Pyramid also fails the tracker
+is ``LOST`` and reports the failure. Every result it returns has passed the QUEST
+residual verification of its identifier; a rejected one is returned with ``ok`` False
+and no ids, never a guess.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+
+import numpy as np
+
+from ..attitude import quat_mult, quat_normalize, quat_propagate
+from ..errors import ConfigError
+from .result import StarIdResult
+
+
+class Mode(enum.Enum):
+    LOST = "lost"
+    TRACKING = "tracking"
+
+
+@dataclasses.dataclass
+class StarTracker:
+    """``lost_in_space``: identifier with ``identify(uv)`` (Pyramid); ``tracking``: with
+    ``identify(uv, q_pred)`` (extended grid). Counters say how often each path ran."""
+
+    lost_in_space: object
+    tracking: object
+    mode: Mode = Mode.LOST
+    q: np.ndarray | None = None
+    counts: dict = dataclasses.field(default_factory=lambda: {"tracked": 0, "acquired": 0, "fallback": 0,
+                                                                 "failed": 0})
+
+    def predict(self, omega=None, dt: float = 0.0, dq=None) -> np.ndarray:
+        """The attitude at the new image from the last one and the gyro."""
+        if self.q is None:
+            raise ConfigError("no attitude to propagate (tracker is lost)")
+        if dq is not None:
+            dq = np.asarray(dq, dtype=np.float64)
+            if dq.shape != (4,) or not np.all(np.isfinite(dq)):
+                raise ConfigError("dq must be a finite quaternion [x, y, z, w]")
+            return quat_normalize(quat_mult(dq, self.q))
+        w = np.zeros(3) if omega is None else np.asarray(omega, dtype=np.float64)
+        if w.shape != (3,) or not np.all(np.isfinite(w)) or not np.isfinite(dt) or dt < 0:
+            raise ConfigError("omega must be 3 finite rates (rad/s) and dt a finite time ≥ 0 (s)")
+        return quat_propagate(self.q, w, float(dt))
+
+    def update(self, uv, omega=None, dt: float = 0.0, dq=None) -> StarIdResult:
+        """Identify one image's centroids ``uv`` (n, 2) px, brightest first."""
+        if self.mode is Mode.TRACKING:
+            r = self.tracking.identify(uv, self.predict(omega, dt, dq))
+            if r.ok:
+                self.q = r.q
+                self.counts["tracked"] += 1
+                return r
+            self.counts["fallback"] += 1
+        r = self.lost_in_space.identify(uv)
+        if r.ok:
+            self.mode, self.q = Mode.TRACKING, r.q
+            self.counts["acquired"] += 1
+        else:
+            self.mode, self.q = Mode.LOST, None
+            self.counts["failed"] += 1
+        return r
+
+    def reset(self) -> None:
+        """Forget the attitude (next image goes to lost-in-space)."""
+        self.mode, self.q = Mode.LOST, None

@@ -1,0 +1,80 @@
+"""Catalog index: pairs, neighbour tables, voxel cones, thinning and the cache file."""
+
+import math
+
+import numpy as np
+import pytest
+from gyrostar.catalog import StarCatalog
+from gyrostar.errors import ConfigError
+from gyrostar.starid import index as sidx
+
+
+def _random_sky(n, seed=1):
+    rng = np.random.default_rng(seed)
+    v = rng.normal(size=(n, 3))
+    v /= np.linalg.norm(v, axis=1)[:, None]
+    mag = np.sort(rng.uniform(1.0, 7.0, n))
+    return StarCatalog("test", np.arange(n, dtype=np.int64) + 1, v, mag, 2025.0)
+
+
+def test_pairs_neighbours_and_cones_match_brute_force():
+    cat = _random_sky(1500)
+    ix = sidx.build_index(cat, 12.0, double_sep_deg=0.0)
+    dots = np.clip(cat.vectors @ cat.vectors.T, -1, 1)
+    ang = np.arccos(dots)
+    iu = np.triu_indices(len(cat), 1)
+    close = ang[iu] < math.radians(12.0)
+    assert ix.n_pairs == int(close.sum())
+    assert np.all(np.diff(ix.pair_theta) >= 0)
+    np.testing.assert_allclose(ix.pair_theta, np.arccos(np.einsum("ij,ij->i", ix.vectors[ix.pair_a],
+                                                                  ix.vectors[ix.pair_b]).clip(-1, 1)))
+    for s in (0, 17, 900):
+        want = np.flatnonzero((ang[s] < math.radians(12.0)) & (np.arange(len(cat)) != s))
+        assert sorted(ix.neighbours(s)) == list(want)
+    rng = np.random.default_rng(2)
+    for _ in range(20):
+        c = rng.normal(size=3)
+        c /= np.linalg.norm(c)
+        r = rng.uniform(0.01, 0.3)
+        got = ix.cone(c, r, mag_max=5.0)
+        want = np.flatnonzero((cat.vectors @ c >= math.cos(r)) & (cat.vmag <= 5.0))
+        assert list(got) == list(want)
+
+
+def test_thinning_spreads_navigation_stars_and_drops_doubles():
+    cat = _random_sky(4000)
+    vec = cat.vectors.copy()
+    vec[5] = vec[3] + np.array([1e-5, 0, 0])  # a 2″ double: star 5 is fainter than 3
+    vec[5] /= np.linalg.norm(vec[5])
+    cat = StarCatalog("test", cat.ids, vec, cat.vmag, 2025.0)
+    keep = sidx.select_navigation_stars(cat.vectors, 0, 0.0, math.radians(0.03))
+    assert 3 in keep and 5 not in keep
+    nav = sidx.select_navigation_stars(cat.vectors, 3, math.radians(5.0))
+    chord = 2 * math.sin(math.radians(5.0) / 2)
+    kept = np.zeros(len(cat), dtype=bool)
+    kept[nav] = True
+    for i in range(len(cat)):  # replay the rule: kept iff < 3 brighter kept stars within 5°
+        near = np.linalg.norm(cat.vectors[:i] - cat.vectors[i], axis=1) < chord
+        assert kept[i] == (np.count_nonzero(near & kept[:i]) < 3)
+    assert len(nav) < len(cat) / 2
+
+
+def test_load_index_writes_and_reads_the_cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("GYROSTAR_CACHE", str(tmp_path))
+    a = sidx.load_index("hip2", 4.0, 10.0, 0)
+    files = list((tmp_path / "starid").glob("index_hip2_*.npz"))
+    assert len(files) == 1
+    b = sidx.load_index("hip2", 4.0, 10.0, 0)
+    np.testing.assert_array_equal(a.pair_theta, b.pair_theta)
+    np.testing.assert_array_equal(a.ids, b.ids)
+    assert b.kv_m == a.kv_m and b.vox_g == a.vox_g
+    files[0].write_bytes(b"garbage")
+    c = sidx.load_index("hip2", 4.0, 10.0, 0)  # a corrupt cache is rebuilt
+    assert c.n_pairs == a.n_pairs
+
+
+def test_bad_parameters():
+    with pytest.raises(ConfigError):
+        sidx.build_index(_random_sky(100), 90.0)
+    with pytest.raises(ConfigError):
+        sidx.build_index(_random_sky(100), 5.0, per_field=-1)
