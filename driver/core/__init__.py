@@ -4,13 +4,14 @@ Modules (import the one you need; this package imports nothing heavy):
 
 * ``motion``       — spot motion on the image plane and trajectory prediction from gyro rates
 * ``windows``      — extraction windows as row spans (trajectory union of k×k squares; fixed)
-* ``centroid``     — windowed centre of gravity with background and threshold; weighted CoG
+* ``centroid``     — background, CoG, weighted CoG, smeared-PSF least-squares fit (EKF default)
 * ``spot_ekf``     — the 5-state spot EKF of paper 000 ([x, y, bx, by, bz])
 * ``joint_filter`` — all tracked spots sharing one gyro bias (state 2n + 3)
 * ``mekf``         — attitude multiplicative EKF (quaternion + gyro bias)
 * ``quest``        — QUEST snapshot attitude with covariance
 * ``crlb``         — Cramér–Rao bound of a centroid (Mortensen et al. 2010)
-* ``eval_centroid`` — ``gyrostar eval centroid`` (paper 000's simulations)
+* ``paper000_sim`` — paper 000's sim1..sim4 on the simulator (fixed window, gyro window, EKF)
+* ``eval_centroid`` — ``gyrostar eval centroid`` (CLI target over ``paper000_sim``)
 
 Frames: ``gyrostar.attitude`` (body = camera, +z boresight, x columns, y rows; q scalar
 last, ICRS → body). Image-plane coordinates in pixels from the principal point.

@@ -28,35 +28,33 @@ from ..attitude import quat_mult, quat_normalize
 
 
 @njit(cache=True)
-def _quest_core(b, r, w, flip):
-    """Unnormalised QUEST quaternion for references turned 180° about axis ``flip`` (-1: none)."""
-    bm = np.zeros((3, 3))
-    for i in range(b.shape[0]):
-        r0, r1, r2 = r[i, 0], r[i, 1], r[i, 2]
-        if flip == 0:
-            r1, r2 = -r1, -r2
-        elif flip == 1:
-            r0, r2 = -r0, -r2
-        elif flip == 2:
-            r0, r1 = -r0, -r1
+def _det3(m):
+    return (m[0, 0] * (m[1, 1] * m[2, 2] - m[1, 2] * m[2, 1]) - m[0, 1] * (m[1, 0] * m[2, 2] - m[1, 2] * m[2, 0])
+            + m[0, 2] * (m[1, 0] * m[2, 1] - m[1, 1] * m[2, 0]))
+
+
+@njit(cache=True)
+def _quest_core(b_all, lam0, flip):
+    """Unnormalised QUEST quaternion for the attitude profile matrix ``b_all`` with the
+    references turned 180° about axis ``flip`` (-1: none): B' = B · R_flip."""
+    bm = b_all.copy()
+    if flip >= 0:
         for j in range(3):
-            bm[j, 0] += w[i] * b[i, j] * r0
-            bm[j, 1] += w[i] * b[i, j] * r1
-            bm[j, 2] += w[i] * b[i, j] * r2
+            if j != flip:
+                for i in range(3):
+                    bm[i, j] = -bm[i, j]
     s = bm + bm.T
     sigma = bm[0, 0] + bm[1, 1] + bm[2, 2]
     z = np.array([bm[1, 2] - bm[2, 1], bm[2, 0] - bm[0, 2], bm[0, 1] - bm[1, 0]])
     kappa = (s[1, 1] * s[2, 2] - s[1, 2] * s[2, 1] + s[0, 0] * s[2, 2] - s[0, 2] * s[2, 0]
              + s[0, 0] * s[1, 1] - s[0, 1] * s[1, 0])
-    delta = np.linalg.det(s)
+    delta = _det3(s)
     sz = s @ z
     a = sigma * sigma - kappa
     bb = sigma * sigma + z @ z
     c = delta + z @ sz
     d = sz @ sz
-    lam = 0.0
-    for i in range(w.shape[0]):
-        lam += w[i]
+    lam = lam0
     for _ in range(50):
         f = lam ** 4 - (a + bb) * lam ** 2 - c * lam + (a * bb + c * sigma - d)
         fp = 4.0 * lam ** 3 - 2.0 * (a + bb) * lam - c
@@ -77,13 +75,20 @@ def _quest_core(b, r, w, flip):
 @njit(cache=True)
 def quest(body_vecs, ref_vecs, weights):
     """Attitude q (ICRS → body, scalar last) and its 3×3 error covariance (rad², body axes)."""
+    bm = np.zeros((3, 3))
+    lam0 = 0.0
+    for i in range(body_vecs.shape[0]):
+        lam0 += weights[i]
+        for j in range(3):
+            for k in range(3):
+                bm[j, k] += weights[i] * body_vecs[i, j] * ref_vecs[i, k]
     # The four candidates (no turn, 180° about x, y, z) share one scale factor (the
     # adjugate of λI − K), so the one with the largest |γ| is the best conditioned: its
     # scalar part is the largest component (≥ 1/2) of the unit quaternion.
-    q = _quest_core(body_vecs, ref_vecs, weights, -1)
+    q = _quest_core(bm, lam0, -1)
     best = abs(q[3])
     for axis in range(3):
-        qa = _quest_core(body_vecs, ref_vecs, weights, axis)
+        qa = _quest_core(bm, lam0, axis)
         if abs(qa[3]) > best:
             best = abs(qa[3])
             flip = np.zeros(4)
@@ -95,13 +100,22 @@ def quest(body_vecs, ref_vecs, weights):
     info = np.zeros((3, 3))
     for i in range(body_vecs.shape[0]):
         bi = body_vecs[i]
-        nb = np.sqrt(bi @ bi)
+        nb2 = bi[0] * bi[0] + bi[1] * bi[1] + bi[2] * bi[2]
         for j in range(3):
             for k in range(3):
-                info[j, k] -= weights[i] * bi[j] * bi[k] / (nb * nb)
+                info[j, k] -= weights[i] * bi[j] * bi[k] / nb2
             info[j, j] += weights[i]
-    if abs(np.linalg.det(info)) <= 1e-12 * max(1.0, (info[0, 0] + info[1, 1] + info[2, 2])) ** 3:
-        cov = np.full((3, 3), np.inf)
-    else:
-        cov = np.linalg.inv(info)
+    det = _det3(info)
+    tr = info[0, 0] + info[1, 1] + info[2, 2]
+    cov = np.empty((3, 3))
+    if abs(det) <= 1e-12 * max(1.0, tr) ** 3:
+        cov[:, :] = np.inf
+        return q, cov
+    inv = 1.0 / det
+    for j in range(3):
+        for k in range(3):
+            # cofactor (k, j) / det, indices cyclic
+            j1, j2 = (j + 1) % 3, (j + 2) % 3
+            k1, k2 = (k + 1) % 3, (k + 2) % 3
+            cov[j, k] = (info[k1, j1] * info[k2, j2] - info[k1, j2] * info[k2, j1]) * inv
     return q, cov
