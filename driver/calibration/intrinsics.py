@@ -30,7 +30,8 @@ NAMES = ("f_px", "cx_px", "cy_px", "k1", "k2", "k3", "p1", "p2")
 
 @dataclass
 class StarFields:
-    """Identified stars: ``field`` (N,) int 0..F-1, ``uv`` (N, 2) px, ``ref`` (N, 3) ICRS."""
+    """Identified stars: ``field`` (N,) int (any ids; renumbered 0..F-1 in order), ``uv`` (N, 2)
+    px, ``ref`` (N, 3) ICRS."""
 
     field: np.ndarray
     uv: np.ndarray
@@ -48,6 +49,7 @@ class StarFields:
             raise ConfigError("star table is empty or holds NaN/inf")
         if self.field.min() < 0:
             raise ConfigError("field ids must be non-negative")
+        self.field = np.unique(self.field, return_inverse=True)[1].astype(np.int64)  # ids 0..F-1, no gaps
         counts = np.bincount(self.field)
         if np.any((counts > 0) & (counts < 3)):
             raise ConfigError("every field needs at least 3 identified stars")

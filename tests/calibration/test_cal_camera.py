@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 from gyrostar.calibration.intrinsics import StarFields, model_difference, project
-from gyrostar.camera import project_many
+from gyrostar.camera import camera_preset, project_many
 from gyrostar.cli.main import main
 from gyrostar.errors import ConfigError
 
@@ -73,3 +73,35 @@ def test_camera_simulated_meets_acceptance(tmp_path, capsys):
     assert out["outliers_caught"] >= 0.9 * out["outliers_injected"]
     assert code == 0
     assert (tmp_path / "calibration.toml").exists()
+
+
+def test_camera_from_a_csv_star_table(tmp_path, capsys):
+    import dataclasses
+
+    from gyrostar.attitude import quat_to_dcm, random_attitudes
+    from gyrostar.calibration import calfile
+    from gyrostar.catalog import load_catalog
+
+    nominal = camera_preset("xing2012")
+    true = dataclasses.replace(nominal, focal_length_m=nominal.focal_length_m * 0.999, k1=-0.2)
+    cat = load_catalog("hip2", 6.5)
+    rng = np.random.default_rng(8)
+    rows = []
+    for j, q in enumerate(random_attitudes(300, rng)):
+        a = quat_to_dcm(q)
+        sel = cat.vectors @ a[2] > np.cos(np.radians(7.0))
+        uv, ok = project_many(true.as_array(), np.ascontiguousarray(cat.vectors[sel] @ a.T))
+        v = cat.vectors[sel][ok]
+        if ok.sum() < 4:
+            continue
+        uv = uv[ok] + 0.02 * rng.standard_normal((ok.sum(), 2))
+        ra, dec = np.degrees(np.arctan2(v[:, 1], v[:, 0])), np.degrees(np.arcsin(v[:, 2]))
+        rows += [(j, *p, r, d) for p, r, d in zip(uv, ra, dec)]
+    path = tmp_path / "stars.csv"
+    np.savetxt(path, np.array(rows), delimiter=",", header="field,u,v,ra_deg,dec_deg", comments="")
+    code = main(["calibrate", "camera", str(path), "--json", "--no-plots", "--report", str(tmp_path / "r")])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 0
+    assert out["parameters"]["f_px"]["value"] == pytest.approx(true.focal_length_px, rel=1e-4)
+    assert out["parameters"]["k1"]["value"] == pytest.approx(-0.2, abs=0.02)
+    assert calfile.load(tmp_path / "r" / "calibration.toml").camera.residual_rms_px < 0.03
