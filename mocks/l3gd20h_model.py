@@ -7,7 +7,9 @@ threshold bits 4:0); FIFO_SRC 0x2F (bit 7 ≥ threshold, bit 6 OVRN = completely
 bit 5 empty, bits 4:0 level, 31 when full); 32 levels; OUT_X_L..OUT_Z_H 0x28..0x2D — with
 the FIFO on, each 6 bytes read pops a frame and the address wraps 0x2D → 0x28; multi-byte
 access needs bit 7 of the sub-address on I2C, bit 6 of the command on SPI (else the
-address does not move); LOW_ODR 0x39 bit 2 software reset.
+address does not move); LOW_ODR 0x39 bit 2 software reset; self test: CTRL4 bits 2:1 =
+01 adds +``self_test_dps`` to every axis, 11 subtracts it (a model choice: the datasheet's
+self-test output change was not verifiable; set ``self_test_dps = 0`` for a failing part).
 """
 
 from __future__ import annotations
@@ -30,8 +32,9 @@ WRITABLE = set(range(0x20, 0x27)) | {0x2E, 0x30, 0x32, 0x33, 0x34, 0x35, 0x36, 0
 class L3gd20hModel(RegisterModelBase):
     default_address = 0x6A
 
-    def __init__(self, clock, source, odr_error_ppm: float = 0.0):
+    def __init__(self, clock, source, odr_error_ppm: float = 0.0, self_test_dps: float = 130.0):
         self.clock = clock
+        self.self_test_dps = self_test_dps
         self.source = source
         self.odr_error_ppm = odr_error_ppm
         self.lock = threading.RLock()
@@ -82,7 +85,11 @@ class L3gd20hModel(RegisterModelBase):
         pos = np.arange(j0, j0 + keep, dtype=np.int64)
         if keep == 0 or pos[-1] != n_new - 1:
             pos = np.append(pos, n_new - 1)
-        raw = quantize(self.source(k0 + pos, t_first + T * pos), MDPS[(int(self.regs[0x23]) >> 4) & 3])
+        rates = self.source(k0 + pos, t_first + T * pos)
+        st = (int(self.regs[0x23]) >> 1) & 3
+        if st in (1, 3):  # electrostatic self-test deflection
+            rates = rates + (1 if st == 1 else -1) * self.self_test_dps * math.pi / 180.0
+        raw = quantize(rates, MDPS[(int(self.regs[0x23]) >> 4) & 3])
         self.latest_raw = raw[-1].copy()
         if keep:
             self.fifo_idx = np.concatenate([self.fifo_idx, k0 + pos[:keep]])[-LEVELS:]

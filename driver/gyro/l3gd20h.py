@@ -15,6 +15,8 @@ time base, and no clearing is needed (unlike the BMI088's sticky overrun flag).
 
 from __future__ import annotations
 
+import struct
+
 from ..errors import DeviceError
 from ..transport.spi import SPIRegisters
 from .base import DPS, FifoGyro
@@ -72,9 +74,32 @@ class L3gd20hGyro(FifoGyro):
         self.watermark = watermark
         self.scale = dps_per_lsb * DPS
 
-    def self_test(self) -> bool:
-        """The L3GD20H self test needs a rate comparison with the part at rest; not run here."""
-        raise DeviceError(f"{self.describe()}: self test is not implemented for the L3GD20H driver")
+    def self_test(self, samples: int = 16, min_shift_dps: float = 20.0) -> bool:
+        """Electrostatic self test: CTRL4 ST bits (2:1) = 01 deflects the proof masses one way,
+        11 the other way. Averages ``samples`` output samples in each state (the part kept
+        still), passes when every axis moves by at least ``min_shift_dps`` with the sign
+        ST0 − ST1 > 0. Leaves the part reset (call :meth:`configure` again)."""
+        self.configure(400, 2000, 1)
+        self.regs.write(0x24, bytes([0x00]))  # FIFO off: read the output registers directly
+        means = []
+        for st_bits in (0b01, 0b11):
+            self.regs.write(0x23, bytes([0x80 | FULL_SCALE[2000][0] << 4 | st_bits << 1]))
+            self.clock.sleep(0.05)  # let the output settle in the new state
+            acc = [0.0, 0.0, 0.0]
+            for _ in range(samples):
+                self.clock.sleep(1.0 / self.odr_hz)
+                raw = struct.unpack("<3h", self.regs.read(0x28, 6))
+                for i in range(3):
+                    acc[i] += raw[i] / samples
+            means.append(acc)
+        self.regs.write(0x23, bytes([0x80 | FULL_SCALE[2000][0] << 4]))
+        self.low_odr = 0x04  # software reset
+        self.clock.sleep(RESET_WAIT_S)
+        self.odr_hz = 0.0
+        lsb = FULL_SCALE[2000][1]
+        shift = [(means[0][i] - means[1][i]) * lsb for i in range(3)]
+        self.last_self_test_dps = shift
+        return all(d >= min_shift_dps for d in shift)
 
     # --- FIFO hooks ---------------------------------------------------------------------
     def _fifo_level(self):

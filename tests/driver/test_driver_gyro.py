@@ -267,6 +267,14 @@ def test_l3gd20h_same_interface(wire):
     check_against_truth(model, out, ProfileRates(seed=7), 17.5e-3 * DPS, t_tol=0.5 / 400)
 
 
+def test_l3gd20h_self_test():
+    clock, model, bus, gyro = make("l3gd20h", "spi")
+    assert gyro.self_test() is True
+    assert all(abs(d - 2 * 130.0) < 3.0 for d in gyro.last_self_test_dps)  # ±130 °/s model deflection
+    model.self_test_dps = 0.0
+    assert gyro.self_test() is False
+
+
 def test_bad_arguments_are_clear():
     clock, model, bus, gyro = make("bmi088", "i2c")
     with pytest.raises(ValueError, match="range"):
