@@ -80,6 +80,15 @@ class Truth:
         self.t_origin = t_origin
         self._cache: dict = {}
         self._lock = threading.Lock()
+        self.on_restart: list = []
+
+    def restart(self, t_origin: float) -> None:
+        """Scenario time 0 is now ``t_origin`` (host s): call just before the loop starts."""
+        with self._lock:
+            self.t_origin = float(t_origin)
+            self._cache.clear()
+        for fn in self.on_restart:
+            fn(self.t_origin)
 
     def q_at(self, t_host: float, who: str = "") -> np.ndarray:
         """Attitude at one host time, integrated on from this caller's previous query."""
@@ -181,13 +190,14 @@ def star_index(cfg: hc.FlatsatConfig, camera):
     return load_index(cfg.sim.catalog, cfg.loop.mag_limit, max_sep_deg=math.ceil(diag * 10 + 1) / 10)
 
 
-def make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock=None, e_per_dn=None):
+def make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock=None, e_per_dn=None, irq=None):
     from ..loop.coupled import CoupledLoop
     from ..starid.pyramid import Pyramid
 
     idx = star_index(cfg, camera)
     ident = Pyramid(idx, camera)
-    return CoupledLoop(loop_params(cfg, e_per_dn), clock, gyro, head, camera, idx, ident, sinks, lat_clock=lat_clock)
+    return CoupledLoop(loop_params(cfg, e_per_dn), clock, gyro, head, camera, idx, ident, sinks, lat_clock=lat_clock,
+                       irq=irq)
 
 
 # ---------------------------------------------------------------------------- flatsat
@@ -207,10 +217,11 @@ class Flatsat:
     e_per_dn: float | None = None
     faults: object = None
     closers: tuple = ()
+    irq: object = None
 
     def make_loop(self, sinks):
         return make_loop(self.cfg, self.clock, self.gyro, self.head, self.camera, sinks, self.lat_clock,
-                         self.e_per_dn)
+                         self.e_per_dn, self.irq)
 
     def clock_now(self) -> float:
         return self.base_clock.now()
@@ -277,6 +288,7 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
     from ..transport import I2CBus, I2CRegisters
 
     wiring = {}
+    irq = None
     preset = scen.preset or cfg.sim.preset
     camera = camera_preset(preset)
     base = MONOTONIC
@@ -304,10 +316,13 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
 
         if cfg.gyro.model != "bmi088":
             raise ConfigError("the gyro emulator models the BMI088 (gyro.model = 'bmi088')")
-        model = Bmi088GyroModel(base, _SampleSource(gsamp, truth.t_origin))
+        model = Bmi088GyroModel(base, _SampleSource(gsamp, truth))
         smbus = FaultyBus(model.smbus(cfg.gyro.i2c_address, bus_hz=None), clock=base, seed=seed)
         faults.gyro_bus = smbus
         regs = I2CRegisters(I2CBus(smbus, name="emulated i2c"), cfg.gyro.i2c_address)
+        irq = _IrqLine(model)
+        if writer:
+            irq = taps.RecordingClock(irq, writer, channel=CH_IRQ)
         wiring["gyro"] = "BMI088 register model on a fake SMBus (mocks), driven by gyrostar.gyro.Bmi088Gyro"
     elif cfg.gyro.kind == "i2c":
         regs = I2CRegisters(I2CBus.open(cfg.gyro.i2c_bus), cfg.gyro.i2c_address)
@@ -348,19 +363,35 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
     wiring["loop"] = ("gyrostar.loop.coupled: spot EKF per star (gyrostar.core.spot_ekf) + QUEST attitude "
                       "(gyrostar.core.quest), Pyramid acquisition (gyrostar.starid.pyramid), trajectory windows "
                       "(gyrostar.core.windows), CoG centroids (gyrostar.core.centroid)")
+    wiring["gyro_time"] = ("FIFO watermark interrupt edges (emulated INT3 line) anchor the sample times"
+                           if irq is not None else "FIFO polls bound the sample times (no interrupt line wired)")
     return Flatsat(cfg, scen, camera, rec_clock, base, gyro, head, truth, simulated_clock=False, wiring=wiring,
-                   e_per_dn=e_per_dn, faults=faults, closers=tuple(closers))
+                   e_per_dn=e_per_dn, faults=faults, closers=tuple(closers), irq=irq)
+
+
+CH_IRQ = 5
+
+
+class _IrqLine:
+    """The emulated FIFO-watermark interrupt line: host time of its latest edge (nan: none)."""
+
+    def __init__(self, model):
+        self.model = model
+
+    def now(self) -> float:
+        t = self.model.watermark_time()
+        return float("nan") if t is None else float(t)
 
 
 class _SampleSource:
     """Rate source for the BMI088 register model: the simulator's gyro output at host time t."""
 
-    def __init__(self, gsamp, t_origin: float):
+    def __init__(self, gsamp, truth: Truth):
         self.g = gsamp
-        self.t_origin = t_origin
+        self.truth = truth
 
     def __call__(self, k, t):
-        ts = np.asarray(t) - self.t_origin
+        ts = np.maximum(np.asarray(t) - self.truth.t_origin, 0.0)
         i = np.clip(np.round(ts * self.g.params.odr_hz).astype(np.int64) - 1, 0, len(self.g.t) - 1)
         return self.g.omega_meas[i]
 
@@ -371,27 +402,33 @@ def _head_devices(cfg, scen, sim, truth, seed, faults):
 
     h = cfg.head
     if h.kind == "emulator":
-        from ..catalog import load_catalog
-        from ..mocks.head_emulator import HeadEmulator
-        from ..mocks.sky import Sky
+        from .emuproc import EmulatorProcess
 
-        cat = load_catalog(cfg.sim.catalog, scen.mag_limit or cfg.sim.mag_limit)
-        sky = Sky(cat, sim, seed=seed)
-        emu = HeadEmulator(sky, ScenarioScene(truth, sim.detector.exposure_s), noise=True)
-        # render once before the loop starts (numba load, fixed-pattern noise): the emulator
-        # shares this interpreter, and a first render would hold the loop off for ~0.5 s
-        warm = emu._sky_for(emu.exposure_us)
-        warm.render_frame(truth.q0, np.zeros(3), frame=0)
-        warm.render_windows(np.array([[0, 10, 10, 16]], np.int32), truth.q0, np.zeros(3), frame=0)
+        def make():
+            # runs in the child process
+            from ..catalog import load_catalog
+            from ..mocks.head_emulator import HeadEmulator
+            from ..mocks.sky import Sky
+
+            cat = load_catalog(cfg.sim.catalog, scen.mag_limit or cfg.sim.mag_limit)
+            emu = HeadEmulator(Sky(cat, sim, seed=seed), ScenarioScene(truth, sim.detector.exposure_s), noise=True)
+            # render once up front (numba load, fixed-pattern noise)
+            warm = emu._sky_for(emu.exposure_us)
+            warm.render_frame(truth.q0, np.zeros(3), frame=0)
+            warm.render_windows(np.array([[0, 10, 10, 16]], np.int32), truth.q0, np.zeros(3), frame=0)
+            return emu, truth
+
+        emu = EmulatorProcess(make)
         emu.start()
         faults.head_emulator = emu
+        truth.on_restart.append(emu.set_origin)
 
         def open_link():
-            if emu.master is None:
+            if not emu.connected:
                 raise DeviceError("head emulator is disconnected (pty closed)")
             return SerialLink(emu.path, baudrate=h.baudrate)
 
-        return open_link, f"Python head emulator (mocks) on pty {emu.path}", [emu.stop]
+        return open_link, f"Python head emulator (mocks) in a child process, on pty {emu.path}", [emu.stop]
     if h.kind == "firmware-host":
         from .fwhead import FirmwareHead
 
@@ -417,7 +454,6 @@ class FaultPlan:
         self.firmware_head = None
         self.active: set = set()
         self.in_eclipse = False
-        self._saved_electrons = None
 
     def stalled(self, t: float) -> bool:
         return any(f.kind == "gyro-fifo-overrun" and f.at_s <= t < f.at_s + f.seconds for f in self.faults)
@@ -454,25 +490,16 @@ class FaultPlan:
                 else:
                     dev.start()
         elif f.kind == "link-corruption":
-            from ..mocks.faults import ByteFaults
-
             dev = self.head_emulator or self.firmware_head
             if dev is not None:
-                dev.faults = ByteFaults(seed=7, corrupt_p=f.rate) if on else None
+                dev.set_corruption(f.rate if on else None)
 
     def _set_eclipse(self, on: bool) -> None:
         """No starlight reaches the sensor (stars' signal 0; background and noise stay)."""
         log.info("eclipse %s", "begins" if on else "ends")
-        if self.head_emulator is not None:
-            emu = self.head_emulator
-            sky = emu._sky_for(emu.exposure_us)
-            if on:
-                self._saved_electrons = sky.electrons.copy()
-                sky.electrons[:] = 0.0
-            elif self._saved_electrons is not None:
-                sky.electrons[:] = self._saved_electrons
-        if self.firmware_head is not None:
-            self.firmware_head.eclipse = on
+        dev = self.head_emulator or self.firmware_head
+        if dev is not None:
+            dev.eclipse(on)
 
 
 def replay_loop(meta: dict, records, sinks):
@@ -500,9 +527,11 @@ def replay_loop(meta: dict, records, sinks):
     from collections import deque
 
     polls = deque(r.payload[0] for r in records if r.kind == POLL and r.channel == CH_POLL)
+    irq_t = [float(np.frombuffer(r.payload, "<f8")[0]) for r in records if r.kind == lf.CLOCK and r.channel == CH_IRQ]
+    irq = taps.ReplayClock(irq_t) if irq_t else None
     gyro = make_gyro(cfg, regs, clock)
     head = make_head(cfg, link, clock, reconnect=None, head_clock=head_clock, replay_polls=polls)
-    loop = make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock, e_per_dn)
+    loop = make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock, e_per_dn, irq)
 
     def run_all():
         steps = 0

@@ -16,6 +16,7 @@ at the same steps.
 from __future__ import annotations
 
 import logging
+import queue
 import struct
 import threading
 from dataclasses import dataclass
@@ -42,6 +43,14 @@ class ImageResult:
     values: np.ndarray | None = None   # windows: pixels in span order
     image: np.ndarray | None = None    # frame: (H, W)
     error: Exception | None = None
+
+
+def _exposure_times(cap) -> tuple[float, float, float]:
+    """Host (start, end, mid) of the integration: it starts at ``t_start_us`` and lasts
+    ``exposure_us``; ``t_end_us`` also holds the readout/reply delay, so it is not used."""
+    t_start = cap.t_mid_host - 0.5 * (cap.t_end_us - cap.t_start_us) * 1e-6
+    t_end = t_start + cap.exposure_us * 1e-6
+    return t_start, t_end, 0.5 * (t_start + t_end)
 
 
 class _TimeShim:
@@ -78,6 +87,7 @@ class HeadPort:
         self._job = None
         self._thread = None
         self._done = threading.Event()
+        self._jobs: queue.SimpleQueue = queue.SimpleQueue()
         self._result: ImageResult | None = None
         self._patched = None
 
@@ -117,8 +127,7 @@ class HeadPort:
     def reconnect(self) -> None:
         """Reopen the link (the device came back) and redo the set-up; DeviceError if it is
         still away. The outcome of reopening is logged (replay answers it from the log)."""
-        if self._thread is not None and self._thread.is_alive():
-            self._thread.join(timeout=5.0)
+        self._wait_idle(5.0)
         self._job = None
         self._done.clear()
         if self._replay_polls is not None:
@@ -143,9 +152,15 @@ class HeadPort:
         if self._poll_log is not None:
             self._poll_log.append(POLL, struct.pack("<B", value), CH_POLL)
 
+    def _wait_idle(self, timeout: float) -> None:
+        if self._job is not None:
+            self._done.wait(timeout)
+
     def close(self) -> None:
         t = self._thread
         if t is not None and t.is_alive():
+            self._wait_idle(2.0)
+            self._jobs.put(None)
             t.join(timeout=2.0)
         self._unpatch_time()
 
@@ -166,15 +181,23 @@ class HeadPort:
         self._job = (kind, spans)
         self._done.clear()
         self._result = None
-        self._thread = threading.Thread(target=self._work, args=(kind, spans), name="head-port", daemon=True)
-        self._thread.start()
+        if self._thread is None or not self._thread.is_alive():
+            self._jobs = queue.SimpleQueue()
+            self._thread = threading.Thread(target=self._work, name="head-port", daemon=True)
+            self._thread.start()
+        self._jobs.put((kind, spans))
 
-    def _work(self, kind, spans) -> None:
-        try:
-            self._result = self._do(kind, spans)
-        except Exception as exc:  # noqa: BLE001 - every failure goes back to the loop as a result
-            self._result = ImageResult(kind, np.nan, np.nan, np.nan, error=exc)
-        self._done.set()
+    def _work(self) -> None:
+        while True:
+            job = self._jobs.get()
+            if job is None:
+                return
+            kind, spans = job
+            try:
+                self._result = self._do(kind, spans)
+            except Exception as exc:  # noqa: BLE001 - every failure goes back to the loop as a result
+                self._result = ImageResult(kind, np.nan, np.nan, np.nan, error=exc)
+            self._done.set()
 
     def _do(self, kind, spans) -> ImageResult:
         c = self.client
@@ -193,9 +216,8 @@ class HeadPort:
             n = int(np.sum(spans[:, 3] - spans[:, 2]))
             if len(values) != n:
                 raise DeviceError(f"window data has {len(values)} pixels, the spans {n}")
-            half = 0.5 * cap.exposure_us * 1e-6
-            return ImageResult("windows", cap.t_mid_host - half, cap.t_mid_host + half, cap.t_mid_host,
-                               values=values)
+            t0, t1, tm = _exposure_times(cap)
+            return ImageResult("windows", t0, t1, tm, values=values)
         # full frame: one small window keeps CAPTURE legal; the frame is read in chunks
         w, h = int(self.info["width"]), int(self.info["height"])
         c.set_windows(np.array([[0, h // 2, w // 2, w // 2 + 1]], np.int32))
@@ -205,8 +227,8 @@ class HeadPort:
             img, _ = c.full_frame()
         finally:
             c.timeout = saved
-        half = 0.5 * cap.exposure_us * 1e-6
-        return ImageResult("frame", cap.t_mid_host - half, cap.t_mid_host + half, cap.t_mid_host, image=img)
+        t0, t1, tm = _exposure_times(cap)
+        return ImageResult("frame", t0, t1, tm, image=img)
 
     def poll(self) -> ImageResult | None:
         """The finished job's result (and the port is free again), or None while in flight."""
@@ -225,7 +247,6 @@ class HeadPort:
             self._log_poll(int(done))
         if not done:
             return None
-        self._thread.join()
         res = self._result
         self._job = None
         self._result = None

@@ -123,6 +123,8 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
     t_wall0 = time.perf_counter()
     cpu0 = time.process_time()
     try:
+        if fs.truth is not None:
+            fs.truth.restart(fs.clock_now())
         loop.start()
         period = 1.0 / loop.gyro.odr_hz
         sched = PeriodicScheduler(period)

@@ -24,7 +24,8 @@ class StatusLine:
             from rich.console import Console
             from rich.live import Live
 
-            self._live = Live("", console=Console(stderr=True), refresh_per_second=8, transient=False)
+            # refreshed from the loop thread only (no rich refresh thread competing for the GIL)
+            self._live = Live("", console=Console(stderr=True), auto_refresh=False, transient=False)
             self._live.start()
 
     def update(self, rec, truth=None, step_us: float | None = None, overruns: int = 0,
@@ -35,7 +36,7 @@ class StatusLine:
         if not force and now - self._last < self.period_s:
             return
         self._last = now
-        self._live.update(self.render(rec, truth, step_us, overruns, duration_s, t0))
+        self._live.update(self.render(rec, truth, step_us, overruns, duration_s, t0), refresh=True)
 
     @staticmethod
     def render(rec, truth=None, step_us=None, overruns=0, duration_s=None, t0: float = 0.0) -> str:

@@ -4,15 +4,19 @@ One :meth:`CoupledLoop.step` (called every gyro period by a scheduler, or as fas
 possible on a simulated clock):
 
 1. read the gyro FIFO (:class:`gyrostar.gyro.GyroDevice`); for every new sample predict
-   every tracked spot's EKF (paper 000, :mod:`gyrostar.core.spot_ekf`) and the attitude,
+   the attitude MEKF (quaternion + gyro drift, :mod:`gyrostar.core.mekf`) and every tracked
+   star's centroid (its catalog vector through the predicted attitude and the camera),
    and emit one output record (:mod:`gyrostar.loop.record`) to the sinks — before any image
    work, so the sample-to-output latency is the predict cost only;
-2. image cycle at ``frame_hz``: when the exposure commanded one cycle earlier has ended,
-   fetch its windows' pixels, centroid each window (:mod:`gyrostar.core.centroid`), bring
-   the centroid from exposure mid-time to now along the spot's predicted path, update the
-   spot EKF (χ² gated), verify the identifications by their QUEST residuals; then predict
-   each spot's trajectory over the next exposure from the latest bias-corrected rate
-   (:mod:`gyrostar.core.motion`), build its window (union of k×k squares,
+2. image cycle at ``frame_hz`` (through :class:`gyrostar.hil.headport.HeadPort`, a worker
+   thread, so the gyro path never waits for an exposure): when the windows' pixels of the
+   last exposure arrive, centroid each window (CoG to find the spot, then the smeared-PSF
+   fit of :mod:`gyrostar.core.centroid` along the predicted trajectory), carry the
+   measured direction from exposure mid-time to now with the gyro-propagated attitude,
+   update the MEKF with all stars at once (χ² gated per star), drop stars that keep failing
+   the gate (wrong or lost identification); then predict each star's trajectory over the
+   next exposure from the latest bias-corrected rate (:mod:`gyrostar.core.motion`, the
+   spot motion of paper 000), build its window (union of k×k squares,
    :mod:`gyrostar.core.windows`), command the windows and the next exposure.
 
 Modes: ACQUIRE (full frame → spot detection → Pyramid, :mod:`gyrostar.starid.pyramid`) →
@@ -39,7 +43,7 @@ from . import record as R
 
 log = logging.getLogger(__name__)
 
-HIST = 256               # gyro samples of history (0.64 s at 400 Hz) for delayed measurements
+HIST = 2048              # gyro samples of history (5 s at 400 Hz) for delayed measurements
 GATE = 13.815510557964274  # χ² 2 dof, P = 0.001
 MODEL = 1                # core.motion.MODEL_PINHOLE
 
@@ -57,18 +61,16 @@ class LoopParams:
     acquire_every_s: float = 0.5
     mag_limit: float = 6.5
     e_per_dn: float = 5.0             # detector gain, e⁻ per DN (shot noise in centroid variances)
-    gyro_noise_density: float = 2.44e-4  # gyro rate noise density, rad/s/√Hz (BMI088: 0.014 °/s/√Hz);
-    #                                      per-sample σ in the spot EKF is density/√Δt (angle random walk)
+    gyro_noise_density: float = 2.44e-4  # gyro rate noise density, rad/s/√Hz (BMI088: 0.014 °/s/√Hz)
     sigma_bias_rw: float = 1e-6       # drift random walk, rad/s/√s
+    psf_sigma_px: float = 0.85        # PSF σ of the optics (px), for the smeared-spot fit
     bias_prior: float = 0.02          # initial drift uncertainty, rad/s (≈ 1.1 °/s: BMI088 offset ±1 °/s)
     min_signal: float = 30.0          # window flux (DN above background) to accept a centroid
     thresh_sigma: float = 4.0         # CoG threshold above the window background, in noise σ
-    residual_px: float = 1.5          # identification check: residual after QUEST (px)
     max_misses: int = 50              # frames without a centroid before a spot is dropped (TRACK)
     pixel_budget: int = 8192          # head limits (GET_INFO)
     max_window_pixels: int = 2048
     max_spans: int = 512
-    chunks_per_step: int = 64         # full-frame chunks fetched per loop step (ACQUIRE)
     pyramid_sigma_px: float = 0.5
 
 
@@ -96,9 +98,10 @@ class CoupledLoop:
     """The loop. ``sinks`` get each step's output records (``put(records, t_ns)``)."""
 
     def __init__(self, params: LoopParams, clock, gyro, head, camera, star_index, identifier, sinks=(),
-                 lat_clock=None):
+                 lat_clock=None, irq=None):
         from ..gyro import GyroSamples
 
+        self.irq = irq           # FIFO-watermark interrupt line: irq.now() = host time of the last edge
         self.p = params
         self.clock = clock
         self.lat_clock = clock if lat_clock is None else lat_clock
@@ -115,24 +118,23 @@ class CoupledLoop:
         self.c = Counters()
         self.samples = GyroSamples(256)
         S = R.MAX_STARS
-        self.X = np.zeros((S, 5))
-        self.P = np.zeros((S, 5, 5))
         self.active = np.zeros(S, np.bool_)
-        self.valid = np.zeros(S, np.bool_)
         self.ref = np.zeros((S, 3))
         self.star_nav = -np.ones(S, np.int64)      # navigation-star index of each slot
         self.star_id = -np.ones(S, np.int32)       # catalog id
         self.misses = np.zeros(S, np.int64)
         self.rejects = np.zeros(S, np.int64)
+        self.seen = np.zeros(S, np.bool_)          # accepted by the filter at least once
+        self.uv = np.zeros((S, 2))                 # predicted centroid (col, row) px
         self.hist_t = np.full(HIST, -np.inf)
-        self.hist_xy = np.zeros((S, HIST, 2))
-        self.hist_q = np.zeros((HIST, 4))          # attitude estimate (or gyro-relative attitude)
+        self.hist_q = np.zeros((HIST, 4))          # attitude estimate at each gyro sample
         self.h = -1
         self.q = np.array([0.0, 0.0, 0.0, 1.0])   # ACQUIRE: gyro-relative attitude from the start
         self.q_valid = False
         self.bias = np.zeros(3)
-        self.bias_cov = np.eye(3) * params.bias_prior ** 2
-        self.att_cov = np.eye(3) * 1e-2
+        self.P = np.zeros((6, 6))
+        self.P[:3, :3] = np.eye(3) * 1e-2
+        self.P[3:, 3:] = np.eye(3) * params.bias_prior ** 2
         self.omega = np.zeros(3)
         self.mode = R.MODE_ACQUIRE
         self.t_last: float | None = None
@@ -141,9 +143,10 @@ class CoupledLoop:
         self.last_image_flags = R.FLAG_FEW_STARS
         self.id_verified = False
         self.coast_since: float | None = None
+        self.confirm_failures = 0
         self.next_frame_t = -np.inf
         self.next_acquire_t = -np.inf
-        self.pending = None            # dict describing the exposure in flight
+        self.pending = None            # the windows in flight: spans and slots
         self.head_down_since: float | None = None
         self.next_reconnect_t = -np.inf
         self.out_buf = R.empty(256)
@@ -169,7 +172,7 @@ class CoupledLoop:
         return time.perf_counter() - t0
 
     def start(self) -> None:
-        """Configure and start the devices (gyro FIFO, head exposure)."""
+        """Configure and start the devices (head exposure, gyro FIFO)."""
         self.head.start(self.p.exposure_s)
         self.gyro.start()
         self.t_last = None
@@ -196,12 +199,14 @@ class CoupledLoop:
         return n_out
 
     def _gyro_phase(self) -> int:
-        from .kernels import attitude_from_stars, coast_attitude, fuse_bias, predict_stars
+        from ..core.mekf import mekf_predict
+        from .kernels import project_refs
 
         smp = self.samples
         smp.clear()
         try:
-            self.gyro.read(smp)
+            edge = self.irq.now() if self.irq is not None else None
+            self.gyro.read(smp, event_time=edge if edge is not None and edge == edge else None)
         except DeviceError as exc:
             self.c.gyro_errors += 1
             self.flags_pending |= R.FLAG_GYRO_GAP
@@ -216,6 +221,7 @@ class CoupledLoop:
         out = self.out_buf[:n]
         out[:] = self._blank
         period = 1.0 / self.gyro.odr_hz
+        act = np.flatnonzero(self.active)
         for i in range(n):
             t = smp.t[i]
             w = smp.rate[i]
@@ -223,26 +229,9 @@ class CoupledLoop:
             if not 0.0 < dt < 0.1:
                 dt = period
             self.t_last = t
+            mekf_predict(self.q, self.bias, self.P, w, dt, self.p.gyro_noise_density, self.p.sigma_bias_rw)
             self.h = (self.h + 1) % HIST
             self.hist_t[self.h] = t
-            predict_stars(self.X, self.P, self.active, w, dt, self.f_px, self.p.gyro_noise_density / math.sqrt(dt),
-                          self.p.sigma_bias_rw,
-                          MODEL, self.hist_xy, self.h)
-            use = self.active & self.valid
-            q_prev = self.q
-            if np.count_nonzero(use) >= 2:
-                b, bcov = fuse_bias(self.X, self.P, use, self.bias, self.p.bias_prior ** 2)
-                self.bias, self.bias_cov = b, bcov
-                q, cov, _ = attitude_from_stars(self.X, self.P, use, self.ref, self.cam)
-                if np.all(np.isfinite(q)):
-                    if np.dot(q, q_prev) < 0:
-                        q = -q
-                    self.q, self.att_cov = q, cov
-                else:
-                    self.q = coast_attitude(q_prev, w, self.bias, dt)
-            else:
-                self.q = coast_attitude(q_prev, w, self.bias, dt)
-                self.att_cov = self.att_cov + np.eye(3) * self.p.gyro_noise_density ** 2 * dt
             self.hist_q[self.h] = self.q
             self.omega = w - self.bias
             flags = self.flags_pending | self.last_image_flags
@@ -251,11 +240,11 @@ class CoupledLoop:
                 flags |= R.FLAG_GYRO_GAP
             if smp.flags[i] & 0x07:
                 flags |= R.FLAG_GYRO_SATURATED
-            if self.q_valid:
+            if self.q_valid and self.mode != R.MODE_ACQUIRE:
                 flags |= R.FLAG_ATTITUDE_VALID
             if self.id_verified:
                 flags |= R.FLAG_ID_VERIFIED
-            if np.max(np.diag(self.bias_cov)) < (1e-4) ** 2:
+            if max(self.P[3, 3], self.P[4, 4], self.P[5, 5]) < (1e-4) ** 2:
                 flags |= R.FLAG_BIAS_CONVERGED
             if self.head_down_since is not None:
                 flags |= R.FLAG_HEAD_LOST
@@ -268,16 +257,14 @@ class CoupledLoop:
             o["q"] = self.q
             o["omega"] = self.omega
             o["bias"] = self.bias
-            cov = o["cov"]
-            cov[:3, :3] = self.att_cov
-            cov[3:, 3:] = self.bias_cov
-            k = 0
-            for s in np.flatnonzero(self.active):
-                o["star_id"][k] = self.star_id[s]
-                o["centroid_px"][k, 0] = self.X[s, 0] + self.cam[1]
-                o["centroid_px"][k, 1] = self.X[s, 1] + self.cam[2]
-                k += 1
-            o["n_stars"] = k
+            o["cov"] = self.P
+            if len(act) and self.q_valid:
+                uv, _ = project_refs(self.cam, self.q, self.ref[act])
+                self.uv[act] = uv
+                k = len(act)
+                o["star_id"][:k] = self.star_id[act]
+                o["centroid_px"][:k] = uv
+                o["n_stars"] = k
         self.c.gyro_samples += n
         t_out = self.lat_clock.now()
         out["latency_us"] = (t_out - t_read) * 1e6
@@ -303,6 +290,15 @@ class CoupledLoop:
             log.info("head link back after %.2f s", now - self.head_down_since)
             self.head_down_since = None
         res = self.head.poll()
+        pend = None
+        if res is not None:
+            pend, self.pending = self.pending, None
+        if res is not None and res.error is None and res.kind == "windows" and self.mode != R.MODE_ACQUIRE \
+                and now >= self.next_frame_t - 0.5 / self.p.frame_hz:
+            # next exposure first (windows from the prediction), then this image's update:
+            # the head exposes while the loop centroids
+            self.next_frame_t = max(self.next_frame_t + 1.0 / self.p.frame_hz, now)
+            self._command_windows(now)
         if res is not None:
             if res.error is not None:
                 self.c.frames_failed += 1
@@ -317,11 +313,10 @@ class CoupledLoop:
                 self.c.full_frames += 1
                 self._acquire(res, now)
             else:
-                self._process_windows(self.pending, res, now)
-            self.pending = None
+                self._process_windows(pend, res, now)
         if self.head.busy:
             return
-        if self.mode == R.MODE_ACQUIRE:
+        if self.mode == R.MODE_ACQUIRE and not self.q_valid:
             if now >= self.next_acquire_t:
                 self.next_acquire_t = now + self.p.acquire_every_s
                 self.head.submit_frame()
@@ -366,37 +361,49 @@ class CoupledLoop:
         dq = quat_mult(self.q, quat_conj(q_rel_mid))          # rotation mid → now
         self.q = quat_normalize(quat_mult(dq, np.asarray(ident.q, np.float64)))
         self.q_valid = True
-        self.att_cov = np.eye(3) * (self.p.pyramid_sigma_px / self.f_px) ** 2
+        # error now = error at mid-exposure − Δb·Δt: the unknown drift acted since then
+        lag = max(now - res.t_mid, 0.0)
+        pbb = self.P[3:, 3:].copy()
+        self.P[:3, :3] = np.eye(3) * (2.0 * self.p.pyramid_sigma_px / self.f_px) ** 2 + pbb * lag * lag
+        self.P[:3, 3:] = -pbb * lag
+        self.P[3:, :3] = -pbb * lag
         self._clear_stars()
-        self._add_stars_from_catalog(now, sigma_px=3.0)
+        self._add_stars_from_catalog(now)
         log.info("acquired: %d stars identified (p_false %.2g)", ident.n_identified, ident.p_false)
-        self._set_mode(R.MODE_TRACK, now)
+        # the mode turns to TRACK at the first image whose stars pass the filter's gate
+        self.confirm_failures = 0
         self.next_frame_t = now
 
     # -- TRACK / COAST --------------------------------------------------------------
     def _command_windows(self, now: float) -> None:
         from ..core.motion import predict_trajectory, substeps_for
         from ..core.windows import concat_windows, span_pixel_count, trajectory_window
+        from .kernels import project_refs
 
-        self._add_stars_from_catalog(now, sigma_px=None)
+        self._add_stars_from_catalog(now)
+        act = np.flatnonzero(self.active)
+        if not len(act):
+            self._after_image(now, updated=0)
+            return
+        uv, _ = project_refs(self.cam, self.q, self.ref[act])
         m = max(1, int(round(self.p.exposure_s * self.gyro.odr_hz)))
         rates = np.repeat((self.omega + self.bias)[None, :], m, axis=0)
         dt = self.p.exposure_s / m
         sub = substeps_for(rates - self.bias, dt, self.f_px, 0.25)
+        sig_px = math.sqrt(max(self.P[0, 0], self.P[1, 1])) * self.f_px
+        k = min(self.p.window_k + 2 * int(math.ceil(3.0 * sig_px)), 40)
         parts = []
         slots = []
+        trajs = {}
         budget = self.p.pixel_budget
         n_spans = 0
-        order = np.flatnonzero(self.active)
-        order = order[np.argsort(self._slot_mag(order))]
-        for s in order:
-            sig = math.sqrt(max(self.P[s, 0, 0], self.P[s, 1, 1]))
-            k = self.p.window_k + 2 * int(math.ceil(3.0 * sig))
-            k = min(k, 40)
-            traj = predict_trajectory(self.X[s, 0], self.X[s, 1], rates, dt, self.bias, self.f_px, MODEL, sub)
+        for j in np.argsort(self._slot_mag(act)):
+            s = int(act[j])
+            traj = predict_trajectory(uv[j, 0] - self.cam[1], uv[j, 1] - self.cam[2], rates, dt, self.bias,
+                                      self.f_px, MODEL, sub)
             traj[:, 0] += self.cam[1]
             traj[:, 1] += self.cam[2]
-            spans = trajectory_window(traj, k, self.camera.height_px, self.camera.width_px, int(s))
+            spans = trajectory_window(traj, k, self.camera.height_px, self.camera.width_px, s)
             npx = span_pixel_count(spans)
             if len(spans) == 0 or npx > self.p.max_window_pixels or npx > budget \
                     or n_spans + len(spans) > self.p.max_spans:
@@ -405,92 +412,85 @@ class CoupledLoop:
             n_spans += len(spans)
             parts.append(spans)
             slots.append(s)
+            trajs[s] = traj - traj.mean(axis=0)
         if not parts:
             self._after_image(now, updated=0)
             return
         spans = concat_windows(parts)
         self.head.submit_windows(spans)
-        self.pending = {"spans": spans, "slots": slots}
+        self.pending = {"spans": spans, "slots": slots, "offsets": trajs}
 
     def _process_windows(self, pend: dict, res, now: float) -> None:
-        from ..core.centroid import centroid_variance, cog, window_background, window_spans_of
-        from .kernels import star_residuals
+        from ..attitude import quat_conj, quat_mult, quat_to_dcm
+        from ..camera import unproject_point
+        from ..core.centroid import cog, smear_fit, window_background, window_spans_of
+        from ..core.mekf import mekf_update
 
         self.c.frames += 1
         spans = pend["spans"]
         vals = np.asarray(res.values, dtype=np.float64)
-        t_mid = res.t_mid
-        hm = self._hist_index(t_mid)
-        updated = 0
+        # rotation body(t_mid) → body(now) from the gyro-propagated attitude history
+        q_mid = self._hist_q_at(res.t_mid)
+        rot = quat_to_dcm(quat_mult(self.q, quat_conj(q_mid)))
+        slots, bvecs, sig = [], [], []
         for s in pend["slots"]:
             if not self.active[s]:
                 continue
             a, b, v0 = window_spans_of(spans, s)
             if b <= a:
                 continue
-            sp = spans[a:b]
+            sp = np.ascontiguousarray(spans[a:b])
             npx = int(np.sum(sp[:, 3] - sp[:, 2]))
             wv = vals[v0: v0 + npx]
             bg, noise = window_background(wv, 3.0)
-            thr = bg + self.p.thresh_sigma * noise
-            u, v, flux, npix = cog(sp, wv, bg, thr)
+            u, v, flux, npix = cog(sp, wv, bg, bg + self.p.thresh_sigma * noise)
             if npix < 2 or flux < self.p.min_signal:
                 self.misses[s] += 1
                 continue
-            var_u, var_v = centroid_variance(sp, wv, bg, thr, u, v, noise, self.p.e_per_dn)
-            var_u = max(var_u, 0.03 ** 2)
-            var_v = max(var_v, 0.03 ** 2)
-            # measured at t_mid: carry it to now along the spot's predicted path
-            if hm >= 0:
-                zx = u - self.cam[1] + (self.X[s, 0] - self._hist_xy_at(s, t_mid, hm)[0])
-                zy = v - self.cam[2] + (self.X[s, 1] - self._hist_xy_at(s, t_mid, hm)[1])
+            off = pend["offsets"][s]
+            fu, fv, fflux, var_u, var_v, _ = smear_fit(sp, wv, bg, u, v, off, self.p.psf_sigma_px,
+                                                       noise * noise, self.p.e_per_dn, 10, 1e-3)
+            if np.isfinite(fu) and np.isfinite(fv) and abs(fu - u) < 2.0 and abs(fv - v) < 2.0:
+                u, v = fu, fv
+                var = max(0.5 * (var_u + var_v), 0.02 ** 2)
             else:
-                zx, zy = u - self.cam[1], v - self.cam[2]
-            if not self.valid[s]:
-                d2 = (zx - self.X[s, 0]) ** 2 + (zy - self.X[s, 1]) ** 2
-                lim = 9.0 * (self.P[s, 0, 0] + self.P[s, 1, 1]) + 4.0
-                if d2 > lim:
+                var = 0.3 ** 2
+            bvecs.append(rot @ unproject_point(self.cam, u, v))
+            sig.append(math.sqrt(var) / self.f_px)
+            slots.append(s)
+        updated = 0
+        if slots:
+            acc = np.zeros(len(slots), np.uint8)
+            updated = mekf_update(self.q, self.bias, self.P, np.array(bvecs), np.ascontiguousarray(self.ref[slots]),
+                                  np.array(sig), GATE, acc)
+            self.c.updates += int(updated)
+            for j, s in enumerate(slots):
+                if acc[j]:
+                    self.misses[s] = 0
+                    self.rejects[s] = 0
+                    self.seen[s] = True
+                else:
                     self.rejects[s] += 1
                     self.c.rejected_updates += 1
-                    continue
-                from ..core.spot_ekf import spot_ekf_reset
-
-                spot_ekf_reset(self.X[s], self.P[s], zx, zy, var_u, var_v)
-                self.valid[s] = True
-                ok = True
-            else:
-                from ..core.spot_ekf import spot_ekf_update
-
-                ok, _nis = spot_ekf_update(self.X[s], self.P[s], zx, zy, var_u, var_v, GATE)
-            if ok:
-                updated += 1
-                self.c.updates += 1
-                self.misses[s] = 0
-                self.rejects[s] = 0
-            else:
-                self.rejects[s] += 1
-                self.c.rejected_updates += 1
-                if self.rejects[s] >= 5:
-                    self.valid[s] = False   # re-acquire this spot from its next window
-        # verify identifications: residuals after QUEST over the valid spots
-        use = self.active & self.valid
-        self.id_verified = False
-        if np.count_nonzero(use) >= 3:
-            from .kernels import attitude_from_stars
-
-            q, _, _ = attitude_from_stars(self.X, self.P, use, self.ref, self.cam)
-            if np.all(np.isfinite(q)):
-                res = star_residuals(self.X, use, self.ref, self.cam, q) * self.f_px
-                bad = np.flatnonzero(use & (np.nan_to_num(res, nan=0.0) > self.p.residual_px))
-                if len(bad) and len(bad) < np.count_nonzero(use) / 2:
-                    worst = bad[np.argmax(res[bad])]
-                    self._drop(worst)
-                    self.c.wrong_ids_dropped += 1
-                else:
-                    self.id_verified = len(bad) == 0
-        self._after_image(now, updated)
+                    if self.rejects[s] >= 5 and updated >= self.p.min_stars:
+                        self._drop(s)
+                        self.c.wrong_ids_dropped += 1
+        self.id_verified = updated >= 3 and updated == len(slots)
+        self._after_image(now, int(updated))
 
     def _after_image(self, now: float, updated: int) -> None:
+        if self.mode == R.MODE_ACQUIRE:
+            # confirming a fresh identification: TRACK once an image passes the gate,
+            # back to a full frame if none does within 20 images
+            if updated >= self.p.min_stars:
+                self._set_mode(R.MODE_TRACK, now)
+            else:
+                self.confirm_failures += 1
+                if self.confirm_failures >= 20:
+                    self.q_valid = False
+                    self._clear_stars()
+                    self.c.acquisition_failures += 1
+            return
         few = updated < self.p.min_stars
         self.last_image_flags = R.FLAG_IMAGE_UPDATE if updated else 0
         if few:
@@ -503,13 +503,11 @@ class CoupledLoop:
                 self._clear_stars()
                 self.q_valid = False
                 self.next_acquire_t = now
-        else:
-            if self.mode != R.MODE_TRACK:
-                self._set_mode(R.MODE_TRACK, now)
-        # drop spots that left the sensor or were not seen for long
+        elif self.mode != R.MODE_TRACK:
+            self._set_mode(R.MODE_TRACK, now)
+        # drop stars that left the sensor, or were not seen for long while others were
         for s in np.flatnonzero(self.active):
-            u = self.X[s, 0] + self.cam[1]
-            v = self.X[s, 1] + self.cam[2]
+            u, v = self.uv[s]
             off = u < 2 or v < 2 or u > self.camera.width_px - 3 or v > self.camera.height_px - 3
             if off or (self.mode == R.MODE_TRACK and self.misses[s] > self.p.max_misses):
                 self._drop(s)
@@ -524,44 +522,39 @@ class CoupledLoop:
     # -- star slots ----------------------------------------------------------------
     def _clear_stars(self) -> None:
         self.active[:] = False
-        self.valid[:] = False
+        self.seen[:] = False
         self.star_nav[:] = -1
         self.star_id[:] = -1
 
     def _drop(self, s: int) -> None:
         self.active[s] = False
-        self.valid[s] = False
+        self.seen[s] = False
         self.star_nav[s] = -1
         self.star_id[s] = -1
 
     def _slot_mag(self, slots) -> np.ndarray:
         return np.array([self.index.vmag[self.star_nav[s]] for s in slots]) if len(slots) else np.zeros(0)
 
-    def _add_stars_from_catalog(self, now: float, sigma_px: float | None) -> None:
-        """Fill free slots with catalog stars the current attitude puts on the sensor."""
+    def _add_stars_from_catalog(self, now: float) -> None:
+        """Fill free slots with catalog stars the current attitude puts on the sensor
+        (the gyro-extended field: the attitude is propagated by the gyro between images)."""
         from ..attitude import quat_to_dcm
         from .kernels import project_refs
 
-        free = np.flatnonzero(~self.active[: self.p.max_stars])
-        if not len(free) or not self.q_valid:
+        free = [s for s in range(self.p.max_stars) if not self.active[s]]
+        if not free or not self.q_valid:
             return
-        a = quat_to_dcm(self.q)
-        boresight = a[2]
+        boresight = quat_to_dcm(self.q)[2]
         radius = math.atan(0.5 * math.hypot(self.camera.width_px, self.camera.height_px) / self.f_px)
         cand = self.index.cone(boresight, radius, self.p.mag_limit)
         if len(cand) == 0:
             return
-        cand = cand[np.argsort(self.index.vmag[cand])]
+        cand = cand[np.argsort(self.index.vmag[cand], kind="stable")]
         uv, ok = project_refs(self.cam, self.q, np.ascontiguousarray(self.index.vectors[cand]))
-        margin = self.p.window_k + 4
+        margin = self.p.window_k + 8
         inside = ok & (uv[:, 0] > margin) & (uv[:, 1] > margin) \
             & (uv[:, 0] < self.camera.width_px - 1 - margin) & (uv[:, 1] < self.camera.height_px - 1 - margin)
         tracked = set(self.star_nav[self.active].tolist())
-        if sigma_px is None:
-            sigma_px = math.sqrt(max(np.max(np.diag(self.att_cov)), 0.0)) * self.f_px + 0.5
-        sigma_px = min(sigma_px, 10.0)
-        from ..core.spot_ekf import spot_ekf_init
-
         fi = 0
         for j in np.flatnonzero(inside):
             if fi >= len(free):
@@ -569,48 +562,35 @@ class CoupledLoop:
             nav = int(cand[j])
             if nav in tracked:
                 continue
-            # keep spots apart so that windows hold one star each
+            # a neighbour closer than two windows would share pixels: skip the fainter
+            if any(abs(uv[j, 0] - self.uv[t, 0]) < 12 and abs(uv[j, 1] - self.uv[t, 1]) < 12
+                   for t in np.flatnonzero(self.active)):
+                continue
             s = free[fi]
-            X, P = spot_ekf_init(uv[j, 0] - self.cam[1], uv[j, 1] - self.cam[2], self.bias, sigma_px,
-                                 math.sqrt(max(np.max(np.diag(self.bias_cov)), 1e-14)))
-            self.X[s] = X
-            self.P[s] = P
-            self.P[s, 2:, 2:] = self.bias_cov
             self.ref[s] = self.index.vectors[nav]
             self.star_nav[s] = nav
             self.star_id[s] = int(self.index.ids[nav])
             self.active[s] = True
-            self.valid[s] = False
+            self.seen[s] = False
             self.misses[s] = 0
             self.rejects[s] = 0
-            self.hist_xy[s, :, 0] = X[0]
-            self.hist_xy[s, :, 1] = X[1]
+            self.uv[s] = uv[j]
             fi += 1
 
     # -- history --------------------------------------------------------------------
-    def _hist_index(self, t: float) -> int:
-        """Ring index of the newest sample at or before ``t`` (-1 if out of the history)."""
-        if self.h < 0:
-            return -1
-        best = -1
-        best_t = -np.inf
-        for i in range(HIST):
-            ti = self.hist_t[i]
-            if best_t < ti <= t:
-                best, best_t = i, ti
-        return best
-
-    def _hist_xy_at(self, s: int, t: float, i: int) -> np.ndarray:
-        j = (i + 1) % HIST
-        ti, tj = self.hist_t[i], self.hist_t[j]
-        if tj > ti and tj >= t:
-            f = (t - ti) / (tj - ti)
-            return (1 - f) * self.hist_xy[s, i] + f * self.hist_xy[s, j]
-        return self.hist_xy[s, i]
-
     def _hist_q_at(self, t: float) -> np.ndarray:
-        i = self._hist_index(t)
-        return self.hist_q[i] if i >= 0 else self.q
+        """Attitude estimate at the newest gyro sample at or before ``t`` (history ring)."""
+        if self.h < 0:
+            return self.q
+        masked = np.where(self.hist_t <= t, self.hist_t, -np.inf)
+        best = int(np.argmax(masked))
+        best_t = masked[best]
+        if not np.isfinite(best_t):
+            return self.q
+        # propagate from that sample to t with the current rate (≤ one gyro period)
+        from ..attitude import quat_propagate
+
+        return quat_propagate(self.hist_q[best], self.omega, t - best_t)
 
     # ------------------------------------------------------------------ summary
     def counters(self) -> dict:
@@ -628,46 +608,37 @@ def _link_down(exc: Exception) -> bool:
 
 def warmup() -> dict:
     """Compile or load every numba function of the loop's hot path, timed (see warmup.py)."""
-    from ..core.centroid import centroid_variance, cog, window_background, window_spans_of
+    from ..attitude import quat_propagate
+    from ..camera import unproject_point
+    from ..core.centroid import cog, smear_fit, window_background, window_spans_of
+    from ..core.mekf import mekf_init, mekf_predict, mekf_update
     from ..core.motion import predict_trajectory, substeps_for
-    from ..core.spot_ekf import spot_ekf_init, spot_ekf_reset, spot_ekf_update
     from ..core.windows import trajectory_window
     from . import acquire, kernels
     from .warmup import warm
 
-    S = R.MAX_STARS
-    X = np.zeros((S, 5))
-    X[:, 0] = np.arange(S) * 10.0
-    P = np.tile(np.eye(5), (S, 1, 1))
-    act = np.ones(S, np.bool_)
-    ref = np.tile(np.array([0.0, 0.0, 1.0]), (S, 1))
-    ref[:, 0] = np.arange(S) * 1e-3
-    ref /= np.linalg.norm(ref, axis=1)[:, None]
     cam = np.array([6666.0, 511.5, 511.5, 0, 0, 0, 0, 0, 1024, 1024])
-    hist = np.zeros((S, HIST, 2))
+    ref = np.array([[0.0, 0.0, 1.0], [0.01, 0.0, 0.99995]])
     w = np.zeros(3)
     spans = np.array([[0, 10, 10, 16], [0, 11, 10, 16]], np.int32)
     vals = np.arange(12, dtype=np.float64)
     rates = np.zeros((4, 3))
-    q = np.array([0.0, 0.0, 0.0, 1.0])
+    q0 = np.array([0.0, 0.0, 0.0, 1.0])
+    q, b, P = mekf_init(q0, w, 1e-3, 1e-3)
     img = np.zeros((64, 64))
-    x0, p0 = spot_ekf_init(0.0, 0.0, w, 1.0, 1e-3)
     calls = [
-        (kernels.predict_stars, (X, P, act, w, 0.0025, 6666.0, 1e-4, 1e-6, MODEL, hist, 0)),
-        (kernels.fuse_bias, (X, P, act, w, 1e-4)),
-        (kernels.attitude_from_stars, (X, P, act, ref, cam)),
-        (kernels.star_residuals, (X, act, ref, cam, q)),
-        (kernels.coast_attitude, (q, w, w, 0.0025)),
+        (mekf_predict, (q, b, P, w, 0.0025, 1e-4, 1e-6)),
+        (mekf_update, (q, b, P, ref, ref, np.array([1e-5, 1e-5]), GATE, np.zeros(2, np.uint8))),
         (kernels.project_refs, (cam, q, ref)),
+        (quat_propagate, (q, w, 0.001)),
+        (unproject_point, (cam, 10.0, 10.0)),
         (substeps_for, (rates, 0.0025, 6666.0, 0.25)),
         (predict_trajectory, (0.0, 0.0, rates, 0.0025, w, 6666.0, MODEL, 1)),
         (trajectory_window, (np.zeros((3, 2)) + 20.0, 6, 1024, 1024, 0)),
         (window_background, (vals, 3.0)),
         (cog, (spans, vals, 0.0, 1.0)),
-        (centroid_variance, (spans, vals, 0.0, 1.0, 12.0, 10.5, 1.0, 1.0)),
+        (smear_fit, (spans, vals, 0.0, 12.0, 10.5, np.zeros((2, 2)), 0.85, 1.0, 5.0, 5, 1e-3)),
         (window_spans_of, (spans, 0)),
-        (spot_ekf_update, (x0, p0, 0.1, 0.1, 0.01, 0.01, GATE)),
-        (spot_ekf_reset, (x0, p0, 0.1, 0.1, 0.01, 0.01)),
         (acquire.detect_spots, (img, 6.0, 40, 7)),
     ]
     return warm(calls)

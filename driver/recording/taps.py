@@ -59,7 +59,7 @@ class RecordingClock:
     def now(self) -> float:
         t = float(self._clock.now())
         self.last = t
-        self._w.append(lf.CLOCK, struct.pack("<d", t), self._ch, t_ns=int(round(t * 1e9)))
+        self._w.append(lf.CLOCK, struct.pack("<d", t), self._ch, t_ns=int(round(t * 1e9)) if t == t else 0)
         return t
 
     def sleep(self, dt: float) -> None:

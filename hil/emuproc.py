@@ -1,0 +1,108 @@
+"""The Python head emulator in a child process, so its rendering never holds the loop's GIL.
+
+The child (``fork``) builds the :class:`gyrostar.mocks.head_emulator.HeadEmulator` and serves
+its pty exactly as in-process; the parent drives it through a pipe: start (open a pty,
+returns its path), disconnect, byte faults, eclipse (stars' signal off) and the scenario's
+time origin. The emulator's clock is the host monotonic clock in both processes.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+
+from ..errors import DeviceError
+
+
+def _child(conn, make):
+    emu, truth = make()
+    saved = None
+    while True:
+        try:
+            cmd, arg = conn.recv()
+        except (EOFError, OSError):
+            break
+        try:
+            if cmd == "start":
+                reply = emu.start()
+            elif cmd == "disconnect":
+                emu.disconnect()
+                if emu._thread is not None:
+                    emu._thread.join(timeout=1.0)
+                reply = None
+            elif cmd == "faults":
+                from ..mocks.faults import ByteFaults
+
+                emu.faults = None if arg is None else ByteFaults(seed=7, corrupt_p=float(arg))
+                reply = None
+            elif cmd == "eclipse":
+                sky = emu._sky_for(emu.exposure_us)
+                if arg:
+                    saved = sky.electrons.copy()
+                    sky.electrons[:] = 0.0
+                elif saved is not None:
+                    sky.electrons[:] = saved
+                reply = None
+            elif cmd == "origin":
+                truth.restart(arg)
+                reply = None
+            elif cmd == "stop":
+                emu.stop()
+                conn.send(("ok", None))
+                break
+            else:
+                raise ValueError(f"unknown emulator command {cmd!r}")
+            conn.send(("ok", reply))
+        except Exception as exc:  # noqa: BLE001 - reported to the parent
+            conn.send(("error", repr(exc)))
+
+
+class EmulatorProcess:
+    """Parent-side handle. ``make()`` runs in the child and returns (emulator, truth)."""
+
+    def __init__(self, make):
+        ctx = mp.get_context("fork")
+        self.conn, child = ctx.Pipe()
+        self.proc = ctx.Process(target=_child, args=(child, make), name="head-emulator", daemon=True)
+        self.proc.start()
+        self.path = None
+        self.connected = False
+        self.faults = None
+
+    def _call(self, cmd, arg=None):
+        if not self.proc.is_alive():
+            raise DeviceError("head emulator process has exited")
+        self.conn.send((cmd, arg))
+        if not self.conn.poll(30.0):
+            raise DeviceError(f"head emulator process did not answer {cmd}")
+        status, reply = self.conn.recv()
+        if status != "ok":
+            raise DeviceError(f"head emulator: {cmd} failed: {reply}")
+        return reply
+
+    def start(self) -> str:
+        self.path = self._call("start")
+        self.connected = True
+        return self.path
+
+    def disconnect(self) -> None:
+        self.connected = False
+        self._call("disconnect")
+
+    def set_corruption(self, p: float | None) -> None:
+        self._call("faults", p)
+
+    def eclipse(self, on: bool) -> None:
+        self._call("eclipse", bool(on))
+
+    def set_origin(self, t0: float) -> None:
+        self._call("origin", float(t0))
+
+    def stop(self) -> None:
+        try:
+            if self.proc.is_alive():
+                self._call("stop")
+        except DeviceError:
+            pass
+        self.proc.join(timeout=2.0)
+        if self.proc.is_alive():
+            self.proc.kill()
