@@ -232,11 +232,15 @@ def digitise_run(signal, gain_fp, dark, lam_bg, exp_bg, fkey, row, col0, det, no
     ``lam, u, p, f, cnt`` (float64) and ``hs`` (uint64), each ≥ len, are scratch buffers.
     """
     m = signal.shape[0]
+    # detector constants as locals: indexing ``det`` inside the pixel loops stops LLVM from
+    # hoisting them (stores to ``out`` may alias) and cost ~60x in the ADC loop
+    sky_e, full_well, read_e = det[D_SKY_E], det[D_FULLWELL], det[D_READ]
+    inv_gain, bias, adc_max = 1.0 / det[D_GAIN], det[D_BIAS], det[D_ADCMAX]
     for i in range(m):
         if signal[i] == 0.0:
             lam[i] = lam_bg[i]
         else:
-            lam[i] = (signal[i] + det[D_SKY_E]) * gain_fp[i] + dark[i]
+            lam[i] = (signal[i] + sky_e) * gain_fp[i] + dark[i]
     if noise:
         rkey = fkey ^ (np.uint64(row) << np.uint64(20))
         for i in range(m):
@@ -245,15 +249,19 @@ def digitise_run(signal, gain_fp, dark, lam_bg, exp_bg, fkey, row, col0, det, no
             u[i] = (np.float64(h & _M32) + 0.5) * (1.0 / 4294967296.0)
         for i in range(m):
             p[i] = exp_bg[i] if signal[i] == 0.0 else math.exp(-min(lam[i], _POISSON_EXACT))
-        for i in range(m):
-            f[i] = p[i]
-            cnt[i] = 1.0 if u[i] > f[i] else 0.0
-        for n in range(1, _K_VEC + 1):
-            inv_n = _INV_N[n]
-            for i in range(m):
-                p[i] = p[i] * (lam[i] * inv_n)
-                f[i] = f[i] + p[i]
-                cnt[i] += 1.0 if u[i] > f[i] else 0.0
+        for i in range(m):  # fixed trip count, no branches: unrolled and vectorised across pixels
+            pi = p[i]
+            fi = pi
+            ui = u[i]
+            li = lam[i]
+            ci = 1.0 if ui > fi else 0.0
+            for n in range(1, _K_VEC + 1):
+                pi = pi * (li * _INV_N[n])
+                fi = fi + pi
+                ci += 1.0 if ui > fi else 0.0
+            p[i] = pi
+            f[i] = fi
+            cnt[i] = ci
         for i in range(m):
             lm = lam[i]
             if lm <= 0.0:
@@ -271,20 +279,21 @@ def digitise_run(signal, gain_fp, dark, lam_bg, exp_bg, fkey, row, col0, det, no
                         pp *= lm * _INV_N[n]
                         ff += pp
                     k = float(n)
-            e = min(k, det[D_FULLWELL]) + det[D_READ] * table_normal(hs[i] >> _S32, table)
-            out[i] = _adc(e, det)
+            e = min(k, full_well) + read_e * table_normal(hs[i] >> _S32, table)
+            out[i] = _adc(e, inv_gain, bias, adc_max)
     else:
         for i in range(m):
-            out[i] = _adc(min(lam[i], det[D_FULLWELL]), det)
+            out[i] = _adc(min(lam[i], full_well), inv_gain, bias, adc_max)
 
 
 @njit(cache=True, inline="always")
-def _adc(e, det):
-    adu = math.floor(e * (1.0 / det[D_GAIN]) + det[D_BIAS] + 0.5)
+def _adc(e, inv_gain, bias, adc_max):
+    """Electrons → ADU: round(e / gain + bias), clipped to [0, adc_max]."""
+    adu = math.floor(e * inv_gain + bias + 0.5)
     if adu < 0.0:
         adu = 0.0
-    elif adu > det[D_ADCMAX]:
-        adu = det[D_ADCMAX]
+    elif adu > adc_max:
+        adu = adc_max
     return np.uint16(adu)
 
 
