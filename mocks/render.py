@@ -43,6 +43,7 @@ def star_paths(params, vecs_icrs, quats):
     """
     n, m = vecs_icrs.shape[0], quats.shape[0]
     out = np.empty((n, m, 2))
+    cx, cy, f = params[P_CX], params[P_CY], params[P_F]
     for k in range(m):
         a = quat_to_dcm(quats[k])
         for s in range(n):
@@ -54,8 +55,8 @@ def star_paths(params, vecs_icrs, quats):
                 out[s, k, 1] = np.nan
                 continue
             xd, yd = distort(params, x / z, y / z)
-            out[s, k, 0] = params[P_CX] + params[P_F] * xd
-            out[s, k, 1] = params[P_CY] + params[P_F] * yd
+            out[s, k, 0] = cx + f * xd
+            out[s, k, 1] = cy + f * yd
     return out
 
 
