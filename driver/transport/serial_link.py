@@ -50,6 +50,34 @@ class _Packets(serial.threaded.Packetizer):
         self.sink.put((time.monotonic(), None))
 
 
+class _Reader(serial.threaded.ReaderThread):
+    """``ReaderThread`` that also treats an ``OSError`` (a pty or USB device gone: EIO from
+    ``in_waiting``) as the connection lost, instead of dying with an unhandled exception."""
+
+    def run(self):
+        if not hasattr(self.serial, "cancel_read"):
+            self.serial.timeout = 1
+        self.protocol = self.protocol_factory()
+        self.protocol.connection_made(self)
+        self._connection_made.set()
+        error = None
+        while self.alive and self.serial.is_open:
+            try:
+                data = self.serial.read(self.serial.in_waiting or 1)
+            except (serial.SerialException, OSError, TypeError) as exc:
+                error = exc
+                break
+            if data:
+                try:
+                    self.protocol.data_received(data)
+                except Exception as exc:  # noqa: BLE001 - reported as the reason the link went down
+                    error = exc
+                    break
+        self.alive = False
+        self.protocol.connection_lost(error)
+        self.protocol = None
+
+
 class SerialLink:
     """Send raw (already framed) bytes; receive 0x00-delimited packets with arrival times."""
 
@@ -66,7 +94,7 @@ class SerialLink:
         self._queue: queue.Queue = queue.Queue()
         self._proto = _Packets(self._queue, max_packet)
         self._write_lock = threading.Lock()
-        self._thread = serial.threaded.ReaderThread(self.port, lambda: self._proto)
+        self._thread = _Reader(self.port, lambda: self._proto)
         self._thread.daemon = True
         self._thread.start()
         self._thread.connect()

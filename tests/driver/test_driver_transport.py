@@ -4,7 +4,6 @@ import errno
 import sys
 import time
 
-import numpy as np
 import pytest
 from gyrostar.errors import DeviceError, NotAvailableError
 from gyrostar.mocks.fake_smbus import FakeSMBus
@@ -146,9 +145,10 @@ def test_serial_link_bad_url_and_closed_pty():
     assert link.recv(1.0) is not None
     os.close(master)
     os.close(slave)
-    with pytest.raises(DeviceError, match="closed|down|failed"):
-        for _ in range(20):
-            link.recv(0.1)
-            link.send(b"\x01\x00")
+    t0 = time.monotonic()
+    with pytest.raises(DeviceError, match="closed"):  # the reader thread reports the hang-up
+        link.recv(5.0)
+    assert time.monotonic() - t0 < 2.0
+    with pytest.raises(DeviceError, match="down"):
+        link.send(b"\x01\x00")
     link.close()
-    assert np.isfinite(time.monotonic())
