@@ -183,10 +183,13 @@ class Sky:
         """Span pixels: (uint16 (m,) ADU in span order, StarTruth)."""
         spans = render.check_spans(spans, self.camera.width_px, self.camera.height_px)
         exp = self.expose(q_start, omega, quats)
-        return self.readout_windows(exp, spans, frame, noise), exp.truth
+        return self._readout(exp, spans, frame, noise), exp.truth
 
     def readout_windows(self, exp: Exposure, spans: np.ndarray, frame: int = 0, noise: bool = True) -> np.ndarray:
-        """Span pixels of an already computed exposure (``spans`` checked by the caller)."""
+        """Span pixels (uint16, span order) of an already computed exposure; ``spans`` are validated."""
+        return self._readout(exp, render.check_spans(spans, self.camera.width_px, self.camera.height_px), frame, noise)
+
+    def _readout(self, exp: Exposure, spans: np.ndarray, frame: int, noise: bool) -> np.ndarray:
         npx = int(np.sum(spans[:, 3].astype(np.int64) - spans[:, 2]))
         sig = np.zeros(npx)
         render.add_stars_spans(sig, spans, exp.paths, exp.truth.electrons, exp.boxes,
