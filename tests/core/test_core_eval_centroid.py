@@ -4,6 +4,7 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 from gyrostar.core.paper000_sim import Paper000Config, run_paper000
 
@@ -27,10 +28,18 @@ def test_sim2_ekf_beats_gyro_window_and_tracks(sim2):
     assert abs(berr[0]) < 0.017 and abs(berr[1]) < 0.017
 
 
-def test_sim2_drift_converges_within_10_percent_in_3s_with_a_quieter_gyro():
-    r = run_paper000(Paper000Config(scenario="sim2", seed=3, gyro_noise_dps_rthz=0.002))
-    assert r["bias_xy_within_10pct_after_s"] <= 3.0
-    assert all(abs(b) < 0.002 for b in r["bias_error_dps"][:2])
+def test_sim2_drift_estimate_reaches_the_gyro_noise_floor():
+    """The x/y drift error after 3 s is near the floor N/√(2T) set by the gyro's white noise
+    (any estimator); with a quieter gyro (N = 0.002 °/s/√Hz) that is within 10 % in < 3 s."""
+    nd = 0.002
+    finals, conv = [], []
+    for seed in (0, 1, 2):
+        r = run_paper000(Paper000Config(scenario="sim2", seed=seed, gyro_noise_dps_rthz=nd))
+        finals.append(r["bias_error_dps"][:2])
+        conv.append(r["bias_xy_within_10pct_after_s"])
+    floor = nd / np.sqrt(2 * 3.0)
+    assert np.sqrt(np.mean(np.square(finals))) < 1.6 * floor
+    assert np.nanmedian(conv) <= 3.0
 
 
 def test_sim1_fixed_window_loses_the_star_and_the_ekf_does_not():
