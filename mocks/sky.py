@@ -102,7 +102,7 @@ class Sky:
         self.seed = int(seed) & 0x7FFFFFFFFFFFFFFF
         self.electrons = np.asarray(self.preset.star_electrons(catalog.vmag), dtype=np.float64)
         self._fpn = None
-        self._sig = None
+        self._sig_pool: list[np.ndarray] = []
         f = self.camera.focal_length_px
         half_diag = math.hypot(self.camera.width_px, self.camera.height_px) / 2.0 + 20.0
         self._field_radius = math.atan(half_diag / f)
@@ -163,21 +163,21 @@ class Sky:
         """Whole frame: (uint16 (H, W) ADU, StarTruth)."""
         exp = self.expose(q_start, omega, quats)
         gain, dark, lam_bg, exp_bg = self._noise_maps()
-        sig = self._signal_buffer()
-        render.add_stars_full(sig, exp.paths, exp.truth.electrons, exp.boxes, self.preset.optics.psf_sigma_px)
+        # zero-filled (H, W) buffers reused between frames, cleared box by box after use;
+        # a pool (list.pop/append are atomic) so threads sharing one Sky never share a buffer
         try:
+            sig = self._sig_pool.pop()
+        except IndexError:
+            sig = np.zeros((self.camera.height_px, self.camera.width_px))
+        try:
+            render.add_stars_full(sig, exp.paths, exp.truth.electrons, exp.boxes, self.preset.optics.psf_sigma_px)
             img = pixel_noise.digitise_frame(sig, gain, dark, lam_bg, exp_bg, self.seed, int(frame), self.det,
                                              bool(noise), pixel_noise.normal_table(),
                                              render.lit_rows(exp.boxes, self.camera.height_px))
         finally:
             render.clear_boxes(sig, exp.boxes)
+            self._sig_pool.append(sig)
         return img, exp.truth
-
-    def _signal_buffer(self) -> np.ndarray:
-        # zero-filled (H, W) float64 reused between frames (cleared box by box after use)
-        if self._sig is None:
-            self._sig = np.zeros((self.camera.height_px, self.camera.width_px))
-        return self._sig
 
     def render_windows(self, spans, q_start, omega=None, frame: int = 0, noise: bool = True, quats=None):
         """Span pixels: (uint16 (m,) ADU in span order, StarTruth)."""

@@ -76,3 +76,14 @@ def test_bad_spans_rejected(sky):
             sky.render_windows(np.asarray(bad), q, np.zeros(3))
     with pytest.raises(ConfigError):
         sky.render_frame(np.array([0, 0, 0, 2.0]), np.zeros(3))
+
+
+def test_threads_sharing_one_sky_get_serial_results(sky):
+    from concurrent.futures import ThreadPoolExecutor
+
+    q = quat_from_boresight(math.radians(83.8), math.radians(-5.4), 0.4)
+    omega = np.radians([2.0, 1.0, 0.5])
+    serial = [sky.render_frame(q, omega, frame=k)[0] for k in range(4)]
+    with ThreadPoolExecutor(4) as pool:
+        threaded = list(pool.map(lambda k: sky.render_frame(q, omega, frame=k)[0], range(4)))
+    assert all(np.array_equal(a, b) for a, b in zip(serial, threaded))
