@@ -456,6 +456,7 @@ static void header_rejections(void **state)
     assert_int_equal(gs_frame_decode(r->f.out, r->f.out_len - 1, r->raw, sizeof r->raw, &f), GS_FRAME_OK);
     assert_int_equal(f.type, GS_MSG_ERROR);
     assert_int_equal(gs_get_u16(f.payload), GS_ERR_BAD_VERSION);
+    g_codes_seen[GS_ERR_BAD_VERSION]++;
     assert_int_equal(gs_get_u32(f.payload + GS_ERROR_REP_DETAIL), GS_PROTO_VERSION + 1);
     uint8_t lie[16] = {GS_PROTO_VERSION, GS_MSG_PING, 6, 0, 4, 0, 'a', 'b'};
     gs_put_u32(lie + 8, gs_crc32c(lie, 8));
@@ -464,6 +465,7 @@ static void header_rejections(void **state)
     assert_int_equal(rig_feed(r, enc, n), 1);
     assert_int_equal(gs_frame_decode(r->f.out, r->f.out_len - 1, r->raw, sizeof r->raw, &f), GS_FRAME_OK);
     assert_int_equal(gs_get_u16(f.payload), GS_ERR_FRAME_LENGTH);
+    g_codes_seen[GS_ERR_FRAME_LENGTH]++;
     assert_int_equal(f.seq, 6);
 }
 
@@ -476,6 +478,15 @@ static void back_to_back_frames_in_one_read(void **state)
     for (uint16_t s = 1; s <= 3; s++)
         n += gs_frame_encode(GS_MSG_PING, s, NULL, 0, scratch, sizeof scratch, enc + n, sizeof enc - n);
     assert_int_equal(rig_feed(r, enc, n), 3);
+}
+
+/* Runs last in this group: every error code of protocol.toml was provoked above. */
+static void every_error_code_was_exercised(void **state)
+{
+    (void)state;
+    for (unsigned code = 1; code <= GS_ERR_COUNT; code++)
+        if (!g_codes_seen[code])
+            fail_msg("error code %u was never provoked by a test", code);
 }
 
 int run_head_tests(void)
@@ -496,6 +507,7 @@ int run_head_tests(void)
         cmocka_unit_test(reset_restores_defaults),
         cmocka_unit_test(header_rejections),
         cmocka_unit_test(back_to_back_frames_in_one_read),
+        cmocka_unit_test(every_error_code_was_exercised),
     };
     return cmocka_run_group_tests_name("head", tests, NULL, NULL);
 }

@@ -5,6 +5,7 @@
 #include "test_util.h"
 
 rig g_rig;
+unsigned g_codes_seen[GS_ERR_COUNT + 1];
 
 rig *rig_boot(uint16_t width, uint16_t height, uint8_t planes)
 {
@@ -47,6 +48,8 @@ uint16_t rig_reject(rig *r, uint8_t type, const uint8_t *payload, size_t n, uint
     assert_int_equal(f->payload[GS_ERROR_REP_REQUEST_TYPE], type);
     assert_int_equal(r->head.cnt.rejected, rejected + 1);
     uint16_t code = (uint16_t)(f->payload[0] | f->payload[1] << 8);
+    if (code >= 1 && code <= GS_ERR_COUNT)
+        g_codes_seen[code]++;
     assert_int_equal(r->head.cnt.last_error, code);
     if (detail)
         *detail = (uint32_t)f->payload[4] | (uint32_t)f->payload[5] << 8 | (uint32_t)f->payload[6] << 16 |

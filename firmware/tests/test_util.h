@@ -21,6 +21,8 @@ typedef struct {
 } rig;
 
 extern rig g_rig;
+/* How often rig_reject saw each error code (index = code; codes are 1..GS_ERR_COUNT). */
+extern unsigned g_codes_seen[GS_ERR_COUNT + 1];
 
 rig *rig_boot(uint16_t width, uint16_t height, uint8_t planes);
 /* Send one request frame; return the reply frame (asserts exactly one frame came back). */

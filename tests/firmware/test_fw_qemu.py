@@ -7,7 +7,8 @@ import time
 import numpy as np
 import pytest
 from gyrostar.fwtools import qemu, wirecount
-from gyrostar.protocol import PixelFormat
+from gyrostar.protocol import MsgType, PixelFormat
+from gyrostar.protocol.payloads import encode_request
 
 pytestmark = pytest.mark.qemu
 MISSING = qemu.missing_tools()
@@ -43,6 +44,12 @@ def test_arm_image_boots_pings_and_captures(tmp_path):
                 want = np.concatenate([light[r, c0:c1] for _, r, c0, c1 in rows])
                 assert np.array_equal(w.pixels, want)
                 assert w.sum == int(want.sum())
+            # the SysTick microsecond clock runs at real time (QEMU's virtual clock)
+            a = client.request(MsgType.TIME_SYNC, encode_request(MsgType.TIME_SYNC, host_us=0))
+            time.sleep(0.5)
+            b = client.request(MsgType.TIME_SYNC, encode_request(MsgType.TIME_SYNC, host_us=0))
+            host_dt = (b[1] + b[2] - a[1] - a[2]) / 2
+            assert abs((b[0]["mcu_rx_us"] - a[0]["mcu_rx_us"]) * 1e-6 / host_dt - 1) < 0.05
             tel = client.telemetry()
             assert tel["captures"] == 1 and tel["crc_errors"] == 0 and tel["rejected"] == 0
         finally:

@@ -24,9 +24,11 @@
 #define SYST_CSR REG(0xE000E010u)
 #define SYST_RVR REG(0xE000E014u)
 #define SYST_CVR REG(0xE000E018u)
-#define SCB_ICSR REG(0xE000ED04u)
-#define ICSR_PENDSTSET (1u << 26)
 #define NVIC_ISER0 REG(0xE000E100u)
+/* CMSDK APB timer 0: free-running 32-bit down counter on the 25 MHz peripheral clock */
+#define TIMER0_CTRL REG(0x40000000u)
+#define TIMER0_VALUE REG(0x40000004u)
+#define TIMER0_RELOAD REG(0x40000008u)
 /* CMSDK APB watchdog */
 #define WDOG_LOAD REG(0x40008000u)
 #define WDOG_CTRL REG(0x40008008u)
@@ -37,7 +39,8 @@
 #define CYCLES_PER_US (MPS2_SYSCLK_HZ / 1000000u)
 #define PIXFILE_HEADER 64u
 
-static volatile uint64_t g_ms;
+static volatile uint64_t g_ticks;   /* 25 MHz ticks since boot */
+static volatile uint32_t g_last_raw; /* TIMER0 value at the last update */
 static volatile uint8_t g_ring[MPS2_RX_RING];
 static volatile uint32_t g_head, g_tail, g_overruns;
 
@@ -49,7 +52,12 @@ static inline uint32_t irq_save(void)
 }
 static inline void irq_restore(uint32_t primask) { __asm__ volatile("msr primask, %0" ::"r"(primask) : "memory"); }
 
-void SysTick_Handler(void) { g_ms++; }
+static uint64_t time_us(void *ctx);
+
+/* The 1 ms tick only wakes the core (exposure waits) and keeps the timer accumulation
+ * current; time itself comes from TIMER0, so ticks lost while the host (or QEMU) is late
+ * do not slow the clock. */
+void SysTick_Handler(void) { (void)time_us(NULL); }
 
 void UART0_RX_Handler(void)
 {
@@ -94,14 +102,12 @@ static uint64_t time_us(void *ctx)
 {
     (void)ctx;
     uint32_t pm = irq_save();
-    uint64_t ms = g_ms;
-    uint32_t val = SYST_CVR;
-    if (SCB_ICSR & ICSR_PENDSTSET) { /* wrapped but not yet counted */
-        val = SYST_CVR;
-        ms++;
-    }
+    uint32_t raw = TIMER0_VALUE;
+    g_ticks += (uint32_t)(g_last_raw - raw); /* down counter: elapsed ticks mod 2^32 (wraps every 171 s) */
+    g_last_raw = raw;
+    uint64_t t = g_ticks / CYCLES_PER_US;
     irq_restore(pm);
-    return ms * 1000u + (TICK_CYCLES - 1u - val) / CYCLES_PER_US;
+    return t;
 }
 
 static void sleep_until_us(void *ctx, uint64_t t)
@@ -201,7 +207,14 @@ void mps2_watchdog_start(uint32_t timeout_ms)
 
 void mps2_hal_init(gs_hal *hal, mps2_sensor *s, const char *sensor_path)
 {
-    /* clock: 1 ms SysTick on the core clock */
+    /* clock: TIMER0 free-running from 0xFFFFFFFF, no interrupt */
+    TIMER0_CTRL = 0;
+    TIMER0_RELOAD = 0xFFFFFFFFu;
+    TIMER0_VALUE = 0xFFFFFFFFu;
+    TIMER0_CTRL = 0x1u;
+    g_last_raw = TIMER0_VALUE;
+    g_ticks = 0;
+    /* wake-up tick: 1 ms SysTick on the core clock */
     SYST_RVR = TICK_CYCLES - 1u;
     SYST_CVR = 0;
     SYST_CSR = 0x7u; /* enable, interrupt, processor clock */

@@ -1,5 +1,5 @@
 /* hal_mps2.h - HAL for QEMU mps2-an385/an386: CMSDK APB UART0 (RX interrupt), SysTick
- * microsecond clock (25 MHz core clock), CMSDK APB watchdog, sensor array read from a
+ * 1 ms wake-up tick, TIMER0 free-running microsecond clock (25 MHz), CMSDK APB watchdog, sensor array read from a
  * host pixel file (firmware/README.md layout) through semihosting. */
 #ifndef HAL_MPS2_H
 #define HAL_MPS2_H
