@@ -20,7 +20,7 @@ from .trajectory import random_attitudes
 BINS = ("0", "1", "2", "3", "4", "5", "6", ">6")
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def count_in_square(vecs, quats, tan_half):
     """Stars of ``vecs`` (n, 3) ICRS in the square field of each attitude of ``quats`` (m, 4)."""
     m = quats.shape[0]

@@ -219,7 +219,7 @@ def background_maps(gain_fp, dark, det):
     return lam_bg, exp_bg
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def digitise_run(signal, gain_fp, dark, lam_bg, exp_bg, fkey, row, col0, det, noise, table, out,
                  lam, u, p, f, cnt, hs):
     """ADU of a run of pixels ``row, col0 .. col0 + len − 1`` (1-D views); see the module docstring.
@@ -297,7 +297,7 @@ def _adc(e, inv_gain, bias, adc_max):
     return np.uint16(adu)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def digitise_frame(signal, gain_fp, dark, lam_bg, exp_bg, seed, frame, det, noise, table, row_lit):
     """Whole frame: mean photo-signal (H, W) float64 → uint16 ADU (H, W).
 
@@ -318,7 +318,7 @@ def digitise_frame(signal, gain_fp, dark, lam_bg, exp_bg, seed, frame, det, nois
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def digitise_spans(signal, spans, gain_fp, dark, lam_bg, exp_bg, seed, frame, det, noise, table):
     """Span pixels: mean photo-signal (m,) in span order → uint16 ADU (m,)."""
     out = np.empty(signal.shape[0], dtype=np.uint16)

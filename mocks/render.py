@@ -34,7 +34,7 @@ MAX_STEP_PX = 0.25
 MAX_SUBSTEPS = 2000
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def star_paths(params, vecs_icrs, quats):
     """Image positions (n_stars, n_sub, 2) [col, row] of ICRS unit vectors at each attitude.
 
@@ -60,7 +60,7 @@ def star_paths(params, vecs_icrs, quats):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def star_boxes(paths, sigma, width, height):
     """Per star pixel box int64 (n, 4) ``[r0, r1, c0, c1)`` clipped to the sensor (empty if off)."""
     n, m = paths.shape[0], paths.shape[1]
@@ -93,7 +93,7 @@ def _edge_erf(edge_index, centre, inv):
     return math.erf((np.float64(edge_index) - 0.5 - centre) * inv)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def add_stars_full(signal, paths, electrons, boxes, sigma):
     """Add every star's smeared spot to ``signal`` (H, W) float64, in place."""
     n, m = paths.shape[0], paths.shape[1]
@@ -117,7 +117,7 @@ def add_stars_full(signal, paths, electrons, boxes, sigma):
                     signal[r, c] += a * (0.5 * (ex[c - c0 + 1] - ex[c - c0]))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def add_stars_spans(signal, spans, paths, electrons, boxes, sigma):
     """Add every star's spot to the span pixels ``signal`` (m,) (span order), in place.
 
@@ -164,7 +164,7 @@ def add_stars_spans(signal, spans, paths, electrons, boxes, sigma):
                     signal[base + c] += a * (0.5 * (ex[k, c - c0 + 1] - ex[k, c - c0]))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def lit_rows(boxes, height):
     """bool (height,): rows inside at least one star box."""
     lit = np.zeros(height, dtype=np.bool_)
@@ -174,7 +174,7 @@ def lit_rows(boxes, height):
     return lit
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def clear_boxes(signal, boxes):
     """Zero the star boxes of ``signal`` (H, W) again, so the buffer can be reused."""
     for s in range(boxes.shape[0]):
