@@ -25,6 +25,7 @@ import numpy as np
 from numba import njit
 
 from ..attitude import quat_mult, quat_normalize
+from ..errors import ConfigError
 
 
 @njit(cache=True)
@@ -75,6 +76,13 @@ def _quest_core(b_all, lam0, flip):
 @njit(cache=True)
 def quest(body_vecs, ref_vecs, weights):
     """Attitude q (ICRS → body, scalar last) and its 3×3 error covariance (rad², body axes)."""
+    n = body_vecs.shape[0]
+    if n < 1 or ref_vecs.shape[0] != n or weights.shape[0] != n or body_vecs.shape[1] != 3 \
+            or ref_vecs.shape[1] != 3:
+        raise ConfigError("quest needs body (n, 3), ref (n, 3) and weights (n,) with n >= 1")
+    for i in range(n):
+        if not weights[i] > 0.0:
+            raise ConfigError("quest weights must be positive (1/σ², rad⁻²)")
     bm = np.zeros((3, 3))
     lam0 = 0.0
     for i in range(body_vecs.shape[0]):

@@ -17,6 +17,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ..errors import ConfigError
+
 MAX_WINDOW_SIDE = 512  # px: bound on a window's bounding box (a 20 °/s smear is ~25 px)
 
 
@@ -34,6 +36,10 @@ def trajectory_window(traj_uv, k, n_rows, n_cols, window_id):
     the whole trajectory is off the sensor. The bounding box is capped at
     ``MAX_WINDOW_SIDE`` px (larger requests are clipped around the trajectory's start).
     """
+    if k < 1 or k > MAX_WINDOW_SIDE:
+        raise ConfigError("window square side k must be 1..512 px")
+    if traj_uv.shape[0] < 1 or traj_uv.shape[1] != 2:
+        raise ConfigError("trajectory must be (m >= 1, 2) [col, row] px")
     m = traj_uv.shape[0]
     u0 = traj_uv[0, 0]
     v0 = traj_uv[0, 1]
@@ -99,6 +105,10 @@ def trajectory_window(traj_uv, k, n_rows, n_cols, window_id):
 @njit(cache=True)
 def fixed_window(u, v, k, n_rows, n_cols, window_id):
     """Row spans of one k×k square centred on (u, v) = (col, row), clipped to the sensor."""
+    if k < 1 or k > MAX_WINDOW_SIDE:
+        raise ConfigError("window square side k must be 1..512 px")
+    if not (np.isfinite(u) and np.isfinite(v)):
+        raise ConfigError("window centre must be finite")
     c0 = _square_origin(u, k)
     r0 = _square_origin(v, k)
     c_lo, c_hi = max(0, c0), min(n_cols, c0 + k)

@@ -64,3 +64,13 @@ def test_covariance_matches_monte_carlo():
 def test_single_vector_is_unobservable():
     q, cov = quest(np.array([[0.0, 0.0, 1.0]]), np.array([[0.0, 0.0, 1.0]]), np.ones(1))
     assert not np.all(np.isfinite(cov))
+
+
+def test_bad_inputs_are_config_errors():
+    from gyrostar.errors import ConfigError
+
+    v = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
+    with pytest.raises(ConfigError):
+        quest(v, v[:1], np.ones(2))
+    with pytest.raises(ConfigError):
+        quest(v, v, np.array([1.0, -1.0]))

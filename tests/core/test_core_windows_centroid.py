@@ -179,3 +179,14 @@ def test_smear_fit_is_unbiased_beats_iwcog_and_knows_its_variance():
     assert np.abs(e_fit.mean(axis=0)).max() < 0.03
     assert np.sqrt((e_fit ** 2).mean()) < 0.9 * np.sqrt((e_iw ** 2).mean())
     np.testing.assert_allclose(np.mean(v_fit, axis=0), e_fit.var(axis=0), rtol=0.25)
+
+
+def test_window_bad_inputs_are_config_errors():
+    from gyrostar.errors import ConfigError
+
+    with pytest.raises(ConfigError):
+        trajectory_window(np.zeros((3, 2)), 0, 64, 64, 0)
+    with pytest.raises(ConfigError):
+        trajectory_window(np.zeros((3, 3)), 6, 64, 64, 0)
+    with pytest.raises(ConfigError):
+        fixed_window(np.nan, 3.0, 6, 64, 64, 0)
