@@ -393,7 +393,11 @@ class HeadEmulator:
                 frame, buf = bytes(buf[:end]), buf[end + 1:]
                 if not frame:
                     continue
-                reply = self.handle(frame, self.mcu_us())
+                try:
+                    reply = self.handle(frame, self.mcu_us())
+                except Exception:  # noqa: BLE001 - a malformed frame must never stop the head
+                    self.cnt["framing_errors"] += 1
+                    reply = None
                 if reply is not None:
                     try:
                         if self.faults is not None:

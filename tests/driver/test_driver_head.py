@@ -269,3 +269,21 @@ def test_telemetry_and_reset(head):
         head.capture()
     head.set_windows(spans_grid(1, 1))
     assert head.capture(fetch=False).exposure_us == LIMITS["exposure_default_us"]
+
+
+def test_corrupted_requests_are_dropped_by_the_head_and_retried(leg):
+    from gyrostar.mocks.faults import ByteFaults, JitteredLink
+
+    link = SerialLink(leg.path)
+    faults = ByteFaults(seed=3, corrupt_p=0.01)  # ~28 % of the requests damaged
+    head = HeadClient(JitteredLink(link, faults), timeout=0.1, retries=12)
+    try:
+        before = HeadClient(link).telemetry()
+        for i in range(40):
+            assert head.ping(bytes([i]) * 20) < 1.0
+        after = HeadClient(link).telemetry()
+        assert faults.injected["corrupt"] > 0 and head.stats["retries"] > 0
+        dropped = (after["crc_errors"] - before["crc_errors"]) + (after["framing_errors"] - before["framing_errors"])
+        assert dropped > 0  # the head counted the damaged requests and did not answer them
+    finally:
+        link.close()
