@@ -103,6 +103,7 @@ class Sky:
         self.electrons = np.asarray(self.preset.star_electrons(catalog.vmag), dtype=np.float64)
         self._fpn = None
         self._sig_pool: list[np.ndarray] = []
+        self._cand = None  # (boresight, radius, catalog indexes) of the last wide selection
         f = self.camera.focal_length_px
         half_diag = math.hypot(self.camera.width_px, self.camera.height_px) / 2.0 + 20.0
         self._field_radius = math.atan(half_diag / f)
@@ -140,7 +141,7 @@ class Sky:
         # stars near the field: within the field radius + the rotation of the exposure
         bore = quat_to_dcm(q_mid)[2]
         reach = self._field_radius + w_max * t_exp
-        sel = np.flatnonzero(self.catalog.vectors @ bore > math.cos(min(reach, math.pi)))
+        sel = self._near(bore, reach)
         vecs = np.ascontiguousarray(self.catalog.vectors[sel])
         grid_paths = render.star_paths(self.params, vecs, qs)
         paths = np.ascontiguousarray(grid_paths[:, 2::4])
@@ -152,6 +153,24 @@ class Sky:
         truth = StarTruth(self.catalog.ids[sel], self.catalog.vmag[sel], uv, in_field, self.electrons[sel],
                           q_start.copy(), q_mid, q_fin, t_exp)
         return Exposure(paths, boxes, truth)
+
+    def _near(self, bore: np.ndarray, reach: float) -> np.ndarray:
+        """Catalog indexes (ascending) within ``reach`` rad of ``bore``.
+
+        Keeps a candidate set for a cone 2° wider than asked; while later boresights stay
+        inside it (tracking), only the candidates are tested, not the whole catalog.
+        """
+        cand = self._cand
+        if cand is not None:
+            c_bore, c_radius, c_idx = cand
+            off = math.acos(max(-1.0, min(1.0, float(c_bore @ bore))))
+            if off + reach <= c_radius:
+                keep = self.catalog.vectors[c_idx] @ bore > math.cos(min(reach, math.pi))
+                return c_idx[keep]
+        radius = min(reach + math.radians(2.0), math.pi)
+        c_idx = np.flatnonzero(self.catalog.vectors @ bore > math.cos(radius))
+        self._cand = (bore.copy(), radius, c_idx)
+        return c_idx[self.catalog.vectors[c_idx] @ bore > math.cos(min(reach, math.pi))]
 
     def signal_frame(self, exp: Exposure) -> np.ndarray:
         """Mean photo-signal of the stars (e⁻) over the whole sensor, float64 (H, W)."""

@@ -87,3 +87,18 @@ def test_threads_sharing_one_sky_get_serial_results(sky):
     with ThreadPoolExecutor(4) as pool:
         threaded = list(pool.map(lambda k: sky.render_frame(q, omega, frame=k)[0], range(4)))
     assert all(np.array_equal(a, b) for a, b in zip(serial, threaded))
+
+
+def test_near_field_selection_matches_brute_force(sky):
+    rng = np.random.default_rng(4)
+    bore = np.array([0.3, -0.2, 0.93])
+    bore /= np.linalg.norm(bore)
+    for step in range(30):  # a slow drift (tracking), then a jump (re-selection)
+        if step == 20:
+            bore = -bore
+        bore = bore + rng.normal(0, 0.003, 3)
+        bore /= np.linalg.norm(bore)
+        reach = math.radians(6.5)
+        got = sky._near(bore, reach)
+        ref = np.flatnonzero(sky.catalog.vectors @ bore > math.cos(reach))
+        assert np.array_equal(got, ref)
