@@ -14,7 +14,10 @@ body-rate convention of ``gyrostar.attitude`` (``V_x = ω_z·y − ω_y·f``,
 (the paper's matrix with the roll-term signs of our frame; ω = measured rates) and
 ``H = [I₂ 0]`` (eq. 3.10). ``model = MODEL_PINHOLE`` instead propagates the exact
 projection of the rotation (``motion.step_spot``) with Φ = I + J·Δt, J the Jacobian of
-the full pinhole velocity (off-axis x·y/f, x²/f terms).
+the full pinhole velocity (off-axis x·y/f, x²/f terms). Measured on the xing2012 preset
+(``gyrostar eval centroid``), the pinhole terms change the EKF error by ≤ 0.002 px even
+for a star 570 px off-axis at 20 °/s (0.0581/0.1395 vs 0.0588/0.1408 px): the per-frame
+update absorbs the ≤ 0.1 px/frame model error. Same cost; the pinhole model is the default.
 
 Process noise: gyro white noise σ_ω (rad/s per sample) enters the position through
 ``G = ∂V/∂ω``: ``Q_pos = Δt² σ_ω² G Gᵀ``; the drift is a random walk of density
