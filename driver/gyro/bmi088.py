@@ -13,10 +13,12 @@ The overrun flag is cleared by writing FIFO_CONFIG_1, which also empties the FIF
 
 from __future__ import annotations
 
+import numpy as np
+
 from ..errors import DeviceError
 from ..transport.spi import SPIRegisters
 from .base import DPS, FifoGyro
-from .registers import ROBits, ROByte, RWByte, WOByte
+from .registers import ROBits, ROByte, ROStruct, RWByte, WOByte
 
 CHIP_ID = 0x0F
 I2C_ADDRESSES = (0x68, 0x69)
@@ -44,6 +46,7 @@ class Bmi088Gyro(FifoGyro):
     fifo_capacity = FIFO_CAPACITY
 
     chip_id = ROByte(0x00)
+    rate_raw = ROStruct(0x02, "<3h")  # RATE_X_LSB..RATE_Z_MSB in one burst (LSB reads latch the MSBs)
     int_status_1 = ROByte(0x0A)
     fifo_status = ROByte(0x0E)
     fifo_frames = ROBits(7, 0x0E, 0)
@@ -64,6 +67,12 @@ class Bmi088Gyro(FifoGyro):
         if got != CHIP_ID:
             raise DeviceError(f"{self.describe()}: chip id 0x{got:02X}, expected 0x{CHIP_ID:02X} "
                               "(not a BMI088 gyro die, wrong address/chip select, or a stuck bus)")
+
+    def rate_now(self) -> np.ndarray:
+        """The current output registers as body rates (rad/s), bypassing the FIFO."""
+        if self.scale <= 0:
+            raise DeviceError(f"{self.describe()}: configure() before reading rates")
+        return self.mounting @ (np.array(self.rate_raw, np.float64) * self.scale)
 
     def soft_reset(self) -> None:
         self.softreset = SOFTRESET_CMD

@@ -233,6 +233,11 @@ def test_bmi088_rate_registers_latch_msb():
     gyro.configure(400, 2000, 10)
     x, y, z = np.frombuffer(gyro.regs.read(0x02, 6), "<i2")
     assert (x, y, z) == tuple(int(round(v * 16.384)) for v in (100.0, -50.0, 25.0))
+    assert np.allclose(gyro.rate_now(), np.array([100.0, -50.0, 25.0]) * DPS, atol=2000 / 32768 * DPS)
+    # an MSB read alone returns the value latched by the last LSB read, not the newest sample
+    model.source = ProfileRates(mean_dps=(-100.0, 0, 0), amp_dps=(0, 0, 0), bias_dps=(0, 0, 0), noise_dps_rt_hz=0.0)
+    clock.advance(0.01)
+    assert gyro.regs.read(0x03, 1)[0] == (int(round(100.0 * 16.384)) >> 8) & 0xFF
 
 
 def test_stuck_fifo_status_is_a_device_error_and_keeps_rows():
