@@ -202,3 +202,22 @@ def spot_ekf_reset(X, P, zx, zy, r_var_x, r_var_y):
         P[j, 1] = 0.0
     P[0, 0] = r_var_x
     P[1, 1] = r_var_y
+
+
+@njit(cache=True)
+def spot_ekf_update_delayed(X, P, X_mid, P_mid, zx, zy, r_var_x, r_var_y, gate, rates_since_mid, dt, f_px,
+                            sigma_rate, sigma_bias_rw, model):
+    """Image update when the image arrives after its exposure: returns (accepted, NIS).
+
+    A smeared spot's centroid is the exposure-averaged position, i.e. the state at
+    mid-exposure. The loop saves (X_mid, P_mid) at that gyro sample and keeps predicting
+    (X, P); when the centroid arrives, the saved state is updated and re-propagated over
+    the gyro samples since mid-exposure ``rates_since_mid`` (m, 3) into X, P (in place).
+    On rejection X, P are left as predicted.
+    """
+    ok, nis = spot_ekf_update(X_mid, P_mid, zx, zy, r_var_x, r_var_y, gate)
+    if ok:
+        X[:] = X_mid
+        P[:, :] = P_mid
+        spot_ekf_propagate(X, P, rates_since_mid, dt, f_px, sigma_rate, sigma_bias_rw, model)
+    return ok, nis

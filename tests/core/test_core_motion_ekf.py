@@ -138,3 +138,23 @@ def test_gate_rejects_outlier_and_reset_reacquires():
     assert P[0, 0] == 0.01 and P[0, 2] == 0.0
     spot_ekf_propagate(X, P, np.zeros((4, 3)), 1 / 400, F_PX, 1e-3, 1e-7, MODEL_FIRST_ORDER)
     assert P[0, 0] > 0.01  # uncertainty grows between images
+
+
+def test_delayed_update_equals_update_at_mid_exposure():
+    from gyrostar.core.spot_ekf import spot_ekf_update_delayed
+
+    rng = np.random.default_rng(8)
+    rates = rng.normal(0, 0.05, (4, 3))
+    X, P = spot_ekf_init(120.0, -80.0, np.zeros(3), 0.2, 1e-3)
+    args = (1 / 400, F_PX, 1e-3, 1e-7, MODEL_PINHOLE)
+    spot_ekf_propagate(X, P, rates[:2], *args)
+    Xa, Pa = X.copy(), P.copy()  # reference: update at mid, then propagate
+    spot_ekf_update(Xa, Pa, X[0] + 0.1, X[1] - 0.1, 0.01, 0.01, CHI2_2DOF_999)
+    spot_ekf_propagate(Xa, Pa, rates[2:], *args)
+    X_mid, P_mid = X.copy(), P.copy()  # loop: keep predicting, image arrives later
+    spot_ekf_propagate(X, P, rates[2:], *args)
+    ok, _ = spot_ekf_update_delayed(X, P, X_mid, P_mid, X_mid[0] + 0.1, X_mid[1] - 0.1, 0.01, 0.01,
+                                    CHI2_2DOF_999, rates[2:], *args)
+    assert ok
+    np.testing.assert_allclose(X, Xa, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(P, Pa, rtol=1e-12, atol=1e-18)
