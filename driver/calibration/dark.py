@@ -38,6 +38,8 @@ def configure(parser) -> None:
                         help="hot pixel: and above this multiple of the median dark current (default 5)")
     parser.add_argument("--temperature", type=float, default=None, help="sensor temperature, C (recorded)")
     parser.add_argument("--port", default=None, help="--live: camera-head serial port or pyserial URL")
+    parser.add_argument("--head-timeout", type=float, default=2.0,
+                        help="--live: seconds to wait for each head reply before a retry (default 2)")
 
 
 def capture_stacks(client, exposures: list[float], n_frames: int, step=None, keep: dict | None = None):
@@ -172,7 +174,7 @@ def _live(args, folder):
     exposures = [float(x) for x in args.exposures.split(",")]
     keep: dict = {}
     with SerialLink(args.port) as link, progress(args, "capturing dark frames", len(exposures) * args.frames) as step:
-        stacks = capture_stacks(HeadClient(link), exposures, args.frames, step, keep)
+        stacks = capture_stacks(HeadClient(link, timeout=args.head_timeout), exposures, args.frames, step, keep)
     np.savez_compressed(folder / "dark_frames.npz", frames=np.stack(keep["frames"]),
                         exposure=np.asarray(keep["exposure"]))
     return stacks

@@ -80,11 +80,13 @@ def test_dark_live_path_through_the_head_client_and_emulator(tmp_path, capsys):
     path = em.start()
     try:
         code = main(["calibrate", "dark", "--live", "--port", path, "--frames", "3", "--exposures", "0.005,0.08",
+                     "--head-timeout", "5",
                      "--json", "--no-plots", "--report", str(tmp_path)])
     finally:
         em.stop()
-    out = json.loads(capsys.readouterr().out)
-    assert code == 0
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    out = json.loads(captured.out)
     det = preset.detector
     assert out["parameters"]["read_noise_dn"]["value"] == pytest.approx(det.read_noise_e / det.gain_e_per_adu, rel=0.1)
     _, dark_e = sky.fixed_pattern
