@@ -35,7 +35,8 @@
 #define WDOG_INTCLR REG(0x4000800Cu)
 #define WDOG_LOCK REG(0x40008C00u)
 
-#define TICK_CYCLES (MPS2_SYSCLK_HZ / 1000u) /* SysTick period: 1 ms */
+#define TICK_FAST (MPS2_SYSCLK_HZ / 1000u) /* SysTick 1 ms while waiting out an exposure */
+#define TICK_IDLE (MPS2_SYSCLK_HZ / 2u)    /* SysTick 0.5 s otherwise (watchdog kick, clock upkeep) */
 #define CYCLES_PER_US (MPS2_SYSCLK_HZ / 1000000u)
 #define PIXFILE_HEADER 64u
 
@@ -54,9 +55,9 @@ static inline void irq_restore(uint32_t primask) { __asm__ volatile("msr primask
 
 static uint64_t time_us(void *ctx);
 
-/* The 1 ms tick only wakes the core (exposure waits) and keeps the timer accumulation
- * current; time itself comes from TIMER0, so ticks lost while the host (or QEMU) is late
- * do not slow the clock. */
+/* SysTick only wakes the core (1 ms during exposure waits, 0.5 s when idle) and keeps the
+ * TIMER0 accumulation current; time itself comes from TIMER0, so ticks lost while the host
+ * (or QEMU) is late do not slow the clock. */
 void SysTick_Handler(void) { (void)time_us(NULL); }
 
 void UART0_RX_Handler(void)
@@ -110,15 +111,23 @@ static uint64_t time_us(void *ctx)
     return t;
 }
 
+static void tick_period(uint32_t cycles)
+{
+    SYST_RVR = cycles - 1u;
+    SYST_CVR = 0; /* restart the count with the new period */
+}
+
 static void sleep_until_us(void *ctx, uint64_t t)
 {
+    tick_period(TICK_FAST);
     for (;;) {
         uint64_t now = time_us(ctx);
         if (now >= t)
-            return;
+            break;
         if (t - now > 1000u)
             __asm__ volatile("wfi"); /* the 1 ms tick wakes us */
     }
+    tick_period(TICK_IDLE);
 }
 
 static void uart_write(void *ctx, const uint8_t *d, size_t n)
@@ -214,9 +223,8 @@ void mps2_hal_init(gs_hal *hal, mps2_sensor *s, const char *sensor_path)
     TIMER0_CTRL = 0x1u;
     g_last_raw = TIMER0_VALUE;
     g_ticks = 0;
-    /* wake-up tick: 1 ms SysTick on the core clock */
-    SYST_RVR = TICK_CYCLES - 1u;
-    SYST_CVR = 0;
+    /* wake-up tick on the core clock */
+    tick_period(TICK_IDLE);
     SYST_CSR = 0x7u; /* enable, interrupt, processor clock */
     /* UART0: 115200 8N1 nominal (QEMU ignores the rate), RX interrupt */
     UART0_BAUDDIV = MPS2_SYSCLK_HZ / MPS2_BAUD;
