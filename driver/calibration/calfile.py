@@ -200,3 +200,16 @@ def gyro_to_camera(cal: Calibration):
         m = quat_to_dcm(np.asarray(cal.alignment.q_gyro_to_camera, float)) @ m
         dt = cal.alignment.time_offset_s
     return m, b, dt
+
+
+def hot_pixel_mask(cal: Calibration, width: int, height: int):
+    """Boolean (height, width) mask, True at the [dark] hot pixels (for centroiding to skip)."""
+    import numpy as np
+
+    mask = np.zeros((height, width), bool)
+    if cal.dark is not None and cal.dark.hot_pixels:
+        hp = np.asarray(cal.dark.hot_pixels, np.int64)
+        if hp.min() < 0 or hp[:, 0].max() >= width or hp[:, 1].max() >= height:
+            raise ConfigError(f"hot pixels fall outside a {width}×{height} sensor")
+        mask[hp[:, 1], hp[:, 0]] = True
+    return mask

@@ -54,3 +54,12 @@ def test_driver_helpers_apply_the_calibration(tmp_path):
     # x gyro axis scaled by 1.001 after bias removal, then turned 90° about z (A(q) convention)
     np.testing.assert_allclose(np.abs(w), [0.0, 0.99 * 1.001, 0.0], atol=1e-12)
     assert dt == -0.002
+
+
+def test_hot_pixel_mask(tmp_path):
+    path = tmp_path / "cal.toml"
+    calfile.write_section(path, "dark", calfile.DarkCal("d.fits", 3.0, 100.0, 20.0, [(5, 2), (0, 7)]), source="t")
+    mask = calfile.hot_pixel_mask(calfile.load(path), 8, 8)
+    assert mask.sum() == 2 and mask[2, 5] and mask[7, 0]
+    with pytest.raises(ConfigError):
+        calfile.hot_pixel_mask(calfile.load(path), 4, 4)
