@@ -7,7 +7,8 @@ the same run as its baseline (plain numpy or a peer). Benchmarks need a source c
 
 from __future__ import annotations
 
-import importlib.util
+import importlib
+import sys
 import time
 
 from ..errors import ConfigError, NotAvailableError
@@ -31,10 +32,12 @@ def discover() -> dict:
 
 
 def _load(path):
-    spec = importlib.util.spec_from_file_location(f"gyrostar_bench_{path.stem}", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    """Import a suite by its plain module name from bench/ (so numba's on-disk cache of
+    the suite's own jitted baselines can be found again on the next run)."""
+    folder = str(path.parent)
+    if folder not in sys.path:
+        sys.path.insert(0, folder)
+    return importlib.import_module(path.stem)
 
 
 def run(args) -> int:
