@@ -34,11 +34,11 @@ import numpy as np
 from numba import njit
 
 from ..attitude import quat_error_angles, quat_to_dcm
-from ..camera import project_point
+from ..camera import project_point, unproject_many
 from ..errors import ConfigError
-from .grid import GridParams, cells_from, grid_pattern, nth_neighbour, tangent_coords
+from .grid import GridParams, cells_from, nth_neighbour, tangent_coords_into
 from .index import cone_query
-from .result import StarIdResult, to_body_vectors
+from .result import StarIdResult
 from .verify import drop_ambiguous, verify_matches
 
 M_GRID, M_TRIANGLE = 0, 1
@@ -97,8 +97,11 @@ def build_images(b, q_pred, cam, vec, vmag, vstart, vstars, vh, vg, mag_max, hal
     a_real = np.empty(m, dtype=np.bool_)
     k = 0
     n_ring = 0
+    p = np.empty(3)
     for t in range(m):
-        p = a @ vec[near[t]]
+        v = vec[near[t]]
+        for r in range(3):
+            p[r] = a[r, 0] * v[0] + a[r, 1] * v[1] + a[r, 2] * v[2]
         if p[2] <= 0.0 or abs(p[0] / p[2]) > half_ext or abs(p[1] / p[2]) > half_ext:
             continue
         _, _, ok = project_point(cam, p)
@@ -162,8 +165,12 @@ def extended_core(b, q_pred, cam, vec, vmag, vstart, vstars, vh, vg, mag_max, ha
         npat = ncand * n_orient
         cells = np.empty((npat, na + 1), dtype=np.int64)
         ncell = np.zeros(npat, dtype=np.int64)
+        xs = np.empty(na)
+        ys = np.empty(na)
+        idx = np.empty(na, dtype=np.int64)
+        dots = np.empty(na)
         for c in range(ncand):
-            xs, ys, idx, dots, kk = tangent_coords(a_vecs, cand[c], br, pr)
+            kk = tangent_coords_into(a_vecs, cand[c], br, pr, xs, ys, idx, dots)
             for o in range(n_orient):
                 u = c * n_orient + o
                 nb = nth_neighbour(dots, kk, o)
@@ -173,10 +180,18 @@ def extended_core(b, q_pred, cam, vec, vmag, vstart, vstars, vh, vg, mag_max, ha
                 pat_nb[c, o] = a_cat[idx[nb]]
         buf = np.empty(nc + 1, dtype=np.int64)
         occupied = np.zeros(g * g, dtype=np.bool_)
+        cx = np.empty(nc)
+        cy = np.empty(nc)
+        cidx = np.empty(nc, dtype=np.int64)
+        cdots = np.empty(nc)
         for r in range(nr):
-            k, nb = grid_pattern(c_vecs, r, br, pr, g, cell, buf)
-            nb_c[r] = nb
-            if nb < 0 or k < xi:
+            kk = tangent_coords_into(c_vecs, r, br, pr, cx, cy, cidx, cdots)
+            nbp = nth_neighbour(cdots, kk, 0)
+            if nbp < 0:
+                continue
+            nb_c[r] = cidx[nbp]
+            k = cells_from(cx, cy, kk, nbp, g, cell, buf)
+            if k < xi:
                 continue
             for t in range(k):
                 occupied[buf[t]] = True
@@ -236,9 +251,24 @@ def extended_core(b, q_pred, cam, vec, vmag, vstart, vstars, vh, vg, mag_max, ha
     return match, nb_c, c_cat, cand_cat, pat_nb
 
 
-ST_OK, ST_FEW, ST_GATE = 0, 1, 2
+ST_OK, ST_FEW, ST_GATE, ST_BAD = 0, 1, 2, 3
 STATUS_TEXT = {ST_OK: "ok", ST_FEW: "fewer than 2 verified matches",
-               ST_GATE: "attitude disagrees with the prediction"}
+               ST_GATE: "attitude disagrees with the prediction", ST_BAD: "non-finite centroid"}
+
+
+@njit(cache=True)
+def extended_identify_uv(uv, q_pred, cam, vec, vmag, vstart, vstars, vh, vg, mag_max, half_ext, br, pr, g, cell,
+                         xi, max_ref, method, tri_eps, n_orient, tol, fov_radius, gate, mag_deep):
+    """:func:`extended_identify` from centroids ``uv`` (n, 2) px (status ``ST_BAD`` and no
+    matches when any is not finite)."""
+    for i in range(uv.shape[0]):
+        if not (np.isfinite(uv[i, 0]) and np.isfinite(uv[i, 1])):
+            e = np.empty(0, dtype=np.int64)
+            return (-np.ones(uv.shape[0], dtype=np.int64), np.array([0.0, 0.0, 0.0, 1.0]), ST_BAD, e, e, e,
+                    np.empty((0, max(n_orient, 1)), dtype=np.int64))
+    b = unproject_many(cam, uv)
+    return extended_identify(b, q_pred, cam, vec, vmag, vstart, vstars, vh, vg, mag_max, half_ext, br, pr, g, cell,
+                             xi, max_ref, method, tri_eps, n_orient, tol, fov_radius, gate, mag_deep)
 
 
 @njit(cache=True)
@@ -283,7 +313,7 @@ class ExtendedIdentifier:
     mag_max: float = 7.5
     sigma_px: float = 1.0
     n_sigma: float = 4.0
-    max_ref: int = 12
+    max_ref: int = 8
     gate_px: float = 20.0
     n_orient: int = 3
     deep_mag: float = 0.3
@@ -306,17 +336,36 @@ class ExtendedIdentifier:
 
     def identify_vectors(self, b: np.ndarray, q_pred: np.ndarray) -> StarIdResult:
         """Identify body unit vectors (n, 3), brightest first, given the predicted attitude."""
-        ix = self.index
-        p = self.params
-        b = np.ascontiguousarray(b, dtype=np.float64)
-        q_pred = np.ascontiguousarray(q_pred, dtype=np.float64)
-        out = extended_identify(b, q_pred, self._cam, ix.vectors, ix.vmag, ix.vox_start, ix.vox_stars, ix.vox_h,
-                                ix.vox_g, self.mag_max, self.half_ext, p.br, p.pr, p.g, p.cell, p.xi, self.max_ref,
-                                self._code, self.tri_eps, self.n_orient, self.tol, self.fov_radius, self.gate,
-                                self.mag_max + self.deep_mag)
-        match, q, st = out[0], out[1], int(out[2])
-        self.last = (match,) + out[3:]
-        return StarIdResult.make(ix, match, q, st == ST_OK, STATUS_TEXT[st], math.nan, "extended-" + self.method)
+        ix, p = self.index, self.params
+        out = extended_identify(np.ascontiguousarray(b, dtype=np.float64), self._q(q_pred), self._cam, ix.vectors,
+                                ix.vmag, ix.vox_start, ix.vox_stars, ix.vox_h, ix.vox_g, self.mag_max, self.half_ext,
+                                p.br, p.pr, p.g, p.cell, p.xi, self.max_ref, self._code, self.tri_eps, self.n_orient,
+                                self.tol, self.fov_radius, self.gate, self.mag_max + self.deep_mag)
+        return self._result(out)
 
     def identify(self, uv: np.ndarray, q_pred: np.ndarray) -> StarIdResult:
-        return self.identify_vectors(to_body_vectors(self._cam, uv), q_pred)
+        """Identify centroids ``uv`` (n, 2) [col, row] px, brightest first (one compiled call)."""
+        ix, p = self.index, self.params
+        pts = np.asarray(uv, dtype=np.float64)
+        if pts.ndim != 2 or (pts.size and pts.shape[1] != 2):
+            pts = pts.reshape(-1, 2) if pts.size % 2 == 0 and pts.size else np.empty((0, 2))
+        out = extended_identify_uv(np.ascontiguousarray(pts), self._q(q_pred), self._cam, ix.vectors, ix.vmag,
+                                   ix.vox_start, ix.vox_stars, ix.vox_h, ix.vox_g, self.mag_max, self.half_ext,
+                                   p.br, p.pr, p.g, p.cell, p.xi, self.max_ref, self._code, self.tri_eps,
+                                   self.n_orient, self.tol, self.fov_radius, self.gate, self.mag_max + self.deep_mag)
+        if int(out[2]) == ST_BAD:
+            raise ConfigError("centroids must be finite pixel coordinates")
+        return self._result(out)
+
+    @staticmethod
+    def _q(q_pred) -> np.ndarray:
+        q = np.ascontiguousarray(q_pred, dtype=np.float64)
+        if q.shape != (4,) or not np.all(np.isfinite(q)) or abs(q @ q - 1.0) > 1e-6:
+            raise ConfigError("q_pred must be a finite unit quaternion [x, y, z, w]")
+        return q
+
+    def _result(self, out) -> StarIdResult:
+        match, q, st = out[0], out[1], int(out[2])
+        self.last = (match,) + out[3:]
+        return StarIdResult.make(self.index, match, q, st == ST_OK, STATUS_TEXT[st], math.nan,
+                                 "extended-" + self.method)

@@ -69,6 +69,18 @@ def tangent_coords(vecs, ref, br, pr):
 
     Returns ``(xs, ys, idx, dots, k)``: the first ``k`` entries are valid; ``dots`` is cos of
     the distance for stars outside ``br`` and -2 for those inside (not neighbour material)."""
+    m = vecs.shape[0]
+    xs = np.empty(m)
+    ys = np.empty(m)
+    idx = np.empty(m, dtype=np.int64)
+    dots = np.empty(m)
+    k = tangent_coords_into(vecs, ref, br, pr, xs, ys, idx, dots)
+    return xs, ys, idx, dots, k
+
+
+@njit(cache=True)
+def tangent_coords_into(vecs, ref, br, pr, xs, ys, idx, dots):
+    """:func:`tangent_coords` into caller buffers (≥ len(vecs) each); returns ``k``."""
     r = vecs[ref]
     if abs(r[0]) < 0.9:
         e1 = np.array([0.0, -r[2], r[1]])
@@ -79,10 +91,6 @@ def tangent_coords(vecs, ref, br, pr):
     cos_pr = np.cos(pr)
     cos_br = np.cos(br)
     m = vecs.shape[0]
-    xs = np.empty(m)
-    ys = np.empty(m)
-    idx = np.empty(m, dtype=np.int64)
-    dots = np.empty(m)
     k = 0
     for s in range(m):
         if s == ref:
@@ -96,7 +104,7 @@ def tangent_coords(vecs, ref, br, pr):
         idx[k] = s
         dots[k] = d if d < cos_br else -2.0
         k += 1
-    return xs, ys, idx, dots, k
+    return k
 
 
 @njit(cache=True)

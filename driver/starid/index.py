@@ -33,8 +33,8 @@ from ..errors import ConfigError
 from ..paths import cache_dir
 from . import kvector
 
-INDEX_VERSION = 5
-DOUBLE_SEP_DEG = 0.03  # 108″: closer pairs are one spot for any preset sensor (≥ 3 px)
+INDEX_VERSION = 6
+DOUBLE_SEP_DEG = 0.02  # 72″: closer pairs are one spot for every preset sensor (blend ≥ 3 px ≥ 84″)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

@@ -87,15 +87,29 @@ def _confirm(b, i, j, k, x, y, z, vec, nbs, nbi, eps, max_sep):
             continue
         found = -1
         nfound = 0
+        # angle windows as cosine windows: |θ − t| ≤ ε  ⇔  cos(t+ε) ≤ cos θ ≤ cos(t−ε)
+        ci_lo, ci_hi = np.cos(tri + eps), np.cos(max(tri - eps, 0.0))
+        cj_lo, cj_hi = np.cos(trj + eps), np.cos(max(trj - eps, 0.0))
+        ck_lo, ck_hi = np.cos(trk + eps), np.cos(max(trk - eps, 0.0))
+        vx, vy, vz = vec[x], vec[y], vec[z]
+        hand = np.sign(_triple(b[i], b[j], b[r]))
         for p in range(nbs[x], nbs[x + 1]):
             w = nbi[p]
             if w == y or w == z:
                 continue
-            if (abs(_angle(vec[w], vec[x]) - tri) <= eps and abs(_angle(vec[w], vec[y]) - trj) <= eps
-                    and abs(_angle(vec[w], vec[z]) - trk) <= eps):
-                if np.sign(_triple(b[i], b[j], b[r])) == np.sign(_triple(vec[x], vec[y], vec[w])):
-                    found = w
-                    nfound += 1
+            vw = vec[w]
+            d = vw[0] * vx[0] + vw[1] * vx[1] + vw[2] * vx[2]
+            if d < ci_lo or d > ci_hi:
+                continue
+            d = vw[0] * vy[0] + vw[1] * vy[1] + vw[2] * vy[2]
+            if d < cj_lo or d > cj_hi:
+                continue
+            d = vw[0] * vz[0] + vw[1] * vz[1] + vw[2] * vz[2]
+            if d < ck_lo or d > ck_hi:
+                continue
+            if np.sign(_triple(vx, vy, vw)) == hand:
+                found = w
+                nfound += 1
         if nfound == 1:
             return r, found
     return -1, -1
@@ -103,17 +117,14 @@ def _confirm(b, i, j, k, x, y, z, vec, nbs, nbi, eps, max_sep):
 
 @njit(cache=True)
 def pyramid_core(b, vec, vmag, pt, pa, pb, kv, km, kq, nbs, nbi, vstart, vstars, vh, vg, eps, label_tol, max_sep,
-                 fov_radius, p_false_max, max_triangles, mark):
+                 fov_radius, p_false_max, max_triangles, mark, nnav):
     """Numba core. ``b`` (n,3) body unit vectors, brightest first; ``mark`` int64 (2N,) zeros (work, left zeroed).
 
+    ``nnav``: number of navigation stars (the N of the triangle/pyramid probabilities).
     Returns ``(match (n,), q (4,), p_false, status, triangles_tried)``.
     """
     n = b.shape[0]
     nstar = vec.shape[0]
-    nnav = 0
-    for p in range(nbs.shape[0] - 1):
-        if nbs[p + 1] > nbs[p]:
-            nnav += 1
     match = -np.ones(n, dtype=np.int64)
     q = np.array([0.0, 0.0, 0.0, 1.0])
     if n < 3:
@@ -288,7 +299,8 @@ def label_rest(b, q, vec, vmag, vstart, vstars, vh, vg, fov_radius, tol, match):
     cos_tol = np.cos(tol)
     obs_icrs = np.empty((n, 3))
     for i in range(n):
-        obs_icrs[i] = a.T @ b[i]
+        for j in range(3):
+            obs_icrs[i, j] = a[0, j] * b[i, 0] + a[1, j] * b[i, 1] + a[2, j] * b[i, 2]
     count_obs = np.zeros(m, dtype=np.int64)
     used = np.zeros(m, dtype=np.bool_)
     for t in range(m):
@@ -345,6 +357,7 @@ class Pyramid:
             raise ConfigError(f"index pairs reach {math.degrees(self.index.max_sep):.2f}° but the camera "
                               f"diagonal is {math.degrees(2 * self.fov_radius):.2f}°")
         self._mark = np.zeros(2 * len(self.index), dtype=np.int64)
+        self._nnav = int(np.count_nonzero(self.index.is_nav))
 
     def identify_vectors(self, b: np.ndarray) -> StarIdResult:
         """Identify body unit vectors (n, 3), brightest first."""
@@ -353,7 +366,8 @@ class Pyramid:
         match, q, pf, st, tried = pyramid_core(
             np.ascontiguousarray(b[:nb]), ix.vectors, ix.vmag, ix.pair_theta, ix.pair_a, ix.pair_b, ix.kv,
             ix.kv_m, ix.kv_q, ix.nb_start, ix.nb_idx, ix.vox_start, ix.vox_stars, ix.vox_h, ix.vox_g, self.eps,
-            self.label_tol, ix.max_sep, self.fov_radius, self.p_false_max, self.max_triangles, self._mark)
+            self.label_tol, ix.max_sep, self.fov_radius, self.p_false_max, self.max_triangles, self._mark,
+            self._nnav)
         full = -np.ones(b.shape[0], dtype=np.int64)
         full[:nb] = match
         if st == ST_OK and b.shape[0] > nb:

@@ -28,8 +28,10 @@ def residuals(q, b, ref, match):
         s = match[i]
         if s < 0:
             continue
-        p = a @ ref[s]
-        d = b[i, 0] * p[0] + b[i, 1] * p[1] + b[i, 2] * p[2]
+        r = ref[s]
+        d = 0.0
+        for j in range(3):
+            d += b[i, j] * (a[j, 0] * r[0] + a[j, 1] * r[1] + a[j, 2] * r[2])
         res[i] = np.arccos(min(1.0, max(-1.0, d)))
     return res
 
@@ -112,11 +114,13 @@ def drop_ambiguous(b, q, vec, vmag, vstart, vstars, vh, vg, fov_radius, tol, mat
     for i in range(b.shape[0]):
         if match[i] < 0:
             continue
-        v = a.T @ b[i]
+        v0 = a[0, 0] * b[i, 0] + a[1, 0] * b[i, 1] + a[2, 0] * b[i, 2]
+        v1 = a[0, 1] * b[i, 0] + a[1, 1] * b[i, 1] + a[2, 1] * b[i, 2]
+        v2 = a[0, 2] * b[i, 0] + a[1, 2] * b[i, 1] + a[2, 2] * b[i, 2]
         hits = 0
         for t in range(near.shape[0]):
             s = near[t]
-            if v[0] * vec[s, 0] + v[1] * vec[s, 1] + v[2] * vec[s, 2] >= cos_tol:
+            if v0 * vec[s, 0] + v1 * vec[s, 1] + v2 * vec[s, 2] >= cos_tol:
                 hits += 1
         if hits > 1:
             match[i] = -1
