@@ -175,7 +175,7 @@ def setup(cfg: TrialConfig) -> dict:
         params = GridParams(xi=cfg.xi)
         sep = round(max(diag, math.degrees(params.pr) * 2 ** 0.5) + 0.01, 3)
         index = load_index(cfg.catalog, cfg.mag_limit, sep, 0)
-        db = load_grid_database(index, params, f"{cfg.catalog}_m{cfg.mag_limit:.3f}_f{sep:.3f}")
+        db = load_grid_database(index, params)
         out["ident"] = GridIdentifier(index, db, cam, sigma_px=sigma)
     else:
         # index deeper than the sensor: the ambiguity check sees faint close companions

@@ -256,10 +256,14 @@ def build_grid_database(index, params: GridParams) -> GridDatabase:
     return GridDatabase(params, start, cells, nbr, inv_start, star_of[order])
 
 
-def load_grid_database(index, params: GridParams, index_key: str) -> GridDatabase:
+def load_grid_database(index, params: GridParams) -> GridDatabase:
     """:func:`build_grid_database`, cached under ``cache_dir("starid")`` by index and params."""
+    from .index import INDEX_VERSION
+
     p = params
-    path = cache_dir("starid") / (f"grid_{index_key}_g{p.g}_c{p.cell_deg:.4f}_b{p.br_deg:.4f}"
+    key = (f"{index.catalog}_m{index.mag_limit:.3f}_e{index.epoch:.3f}_f{math.degrees(index.max_sep):.4f}"
+           f"_n{index.per_field}_s{len(index)}_i{INDEX_VERSION}")
+    path = cache_dir("starid") / (f"grid_{key}_g{p.g}_c{p.cell_deg:.4f}_b{p.br_deg:.4f}"
                                   f"_p{math.degrees(p.pr):.4f}_v{GRID_DB_VERSION}.npz")
     if path.exists():
         try:

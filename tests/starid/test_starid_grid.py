@@ -48,7 +48,7 @@ def test_pattern_is_invariant_to_attitude():
 def test_lost_in_space_grid_identifies_rich_fields():
     cam = camera_preset("qian2015")
     ix = load_index("hip2", 7.5, 5.67, 0)
-    db = load_grid_database(ix, GridParams(), "hip2_m7.500_f5.670")
+    db = load_grid_database(ix, GridParams())
     sky = Sky(load_catalog("hip2", 8.0))
     gid = GridIdentifier(ix, db, cam, sigma_px=0.3)
     rng = np.random.default_rng(8)
