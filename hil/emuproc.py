@@ -2,7 +2,8 @@
 
 The child (``fork``) builds the :class:`gyrostar.mocks.head_emulator.HeadEmulator` and serves
 its pty exactly as in-process; the parent drives it through a pipe: start (open a pty,
-returns its path), disconnect, byte faults, eclipse (stars' signal off) and the scenario's
+returns its path), disconnect, byte faults (corruption, drops, garbage bursts) and their
+counters, eclipse (stars' signal off) and the scenario's
 time origin. The emulator's clock is the host monotonic clock in both processes.
 """
 
@@ -32,8 +33,16 @@ def _child(conn, make):
             elif cmd == "faults":
                 from ..mocks.faults import ByteFaults
 
-                emu.faults = None if arg is None else ByteFaults(seed=7, corrupt_p=float(arg))
+                if arg is None:
+                    emu.faults = None
+                elif isinstance(arg, dict):      # {corrupt_p, drop_p, garbage_p, seed}
+                    emu.faults = ByteFaults(**({"seed": 7} | arg))
+                else:
+                    emu.faults = ByteFaults(seed=7, corrupt_p=float(arg))
                 reply = None
+            elif cmd == "fault_counts":
+                f = emu.faults
+                reply = None if f is None else {"writes": f.writes, "mangled": f.mangled} | dict(f.injected)
             elif cmd == "eclipse":
                 sky = emu._sky_for(emu.exposure_us)
                 if arg:
@@ -90,6 +99,15 @@ class EmulatorProcess:
 
     def set_corruption(self, p: float | None) -> None:
         self._call("faults", p)
+
+    def set_byte_faults(self, settings: dict | None) -> None:
+        """Reply-stream faults: :class:`~gyrostar.mocks.faults.ByteFaults` keyword arguments
+        (``corrupt_p``, ``drop_p``, ``garbage_p``, ``seed``), or None to stop injecting."""
+        self._call("faults", settings)
+
+    def byte_fault_counts(self) -> dict | None:
+        """The active ByteFaults' counters (writes, mangled, injected bytes/bursts), or None."""
+        return self._call("fault_counts")
 
     def eclipse(self, on: bool) -> None:
         self._call("eclipse", bool(on))

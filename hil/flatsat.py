@@ -25,7 +25,7 @@ from ..errors import ConfigError, DeviceError
 from ..recording import logfile as lf
 from ..recording import taps
 from . import config as hc
-from .headport import CH_HEAD_CLOCK, CH_POLL, POLL
+from .headport import CH_HEAD_CLOCK, CH_POLL, CH_RECONNECT, POLL
 
 log = logging.getLogger(__name__)
 DEG = math.pi / 180.0
@@ -173,13 +173,14 @@ def make_gyro(cfg: hc.FlatsatConfig, regs, clock):
 
 
 def make_head(cfg: hc.FlatsatConfig, link, clock, reconnect=None, head_clock=None, poll_log=None,
-              replay_polls=None):
+              replay_polls=None, replay_reconnects=None):
     """The head port the loop drives (see :mod:`gyrostar.hil.headport`), on a packet link."""
     from .headport import HeadPort
 
     return HeadPort(link, clock, timeout_s=cfg.head.timeout_s, retries=cfg.head.retries,
                     exposure_s=cfg.head.exposure_ms * 1e-3, gain=cfg.head.gain, reconnect=reconnect,
-                    head_clock=head_clock, poll_log=poll_log, replay_polls=replay_polls)
+                    head_clock=head_clock, poll_log=poll_log, replay_polls=replay_polls,
+                    replay_reconnects=replay_reconnects)
 
 
 def star_index(cfg: hc.FlatsatConfig, camera):
@@ -527,10 +528,12 @@ def replay_loop(meta: dict, records, sinks):
     from collections import deque
 
     polls = deque(r.payload[0] for r in records if r.kind == POLL and r.channel == CH_POLL)
+    reconnects = deque(r.payload[0] for r in records if r.kind == POLL and r.channel == CH_RECONNECT)
     irq_t = [float(np.frombuffer(r.payload, "<f8")[0]) for r in records if r.kind == lf.CLOCK and r.channel == CH_IRQ]
     irq = taps.ReplayClock(irq_t) if irq_t else None
     gyro = make_gyro(cfg, regs, clock)
-    head = make_head(cfg, link, clock, reconnect=None, head_clock=head_clock, replay_polls=polls)
+    head = make_head(cfg, link, clock, reconnect=None, head_clock=head_clock, replay_polls=polls,
+                     replay_reconnects=reconnects)
     loop = make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock, e_per_dn, irq)
 
     def run_all():

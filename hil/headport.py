@@ -30,13 +30,14 @@ log = logging.getLogger(__name__)
 
 CH_HEAD_CLOCK = 3
 CH_POLL = 4
+CH_RECONNECT = 6
 POLL = 10
 lf.KIND_NAMES[POLL] = "poll"
 
 
 @dataclass
 class ImageResult:
-    kind: str                 # "windows" | "frame"
+    kind: str                 # "windows" | "frame" | "reconnect"
     t_start: float            # exposure start, host s
     t_end: float              # exposure end, host s
     t_mid: float
@@ -71,7 +72,7 @@ class HeadPort:
     """Jobs for the head on a worker thread; ``poll()`` returns finished results."""
 
     def __init__(self, link, clock, timeout_s=0.05, retries=2, exposure_s=0.010, gain=1, reconnect=None,
-                 head_clock=None, poll_log=None, replay_polls=None):
+                 head_clock=None, poll_log=None, replay_polls=None, replay_reconnects=None):
         self.link = link
         self.clock = clock
         self.head_clock = head_clock if head_clock is not None else clock
@@ -82,6 +83,7 @@ class HeadPort:
         self._reconnect = reconnect
         self._poll_log = poll_log              # LogWriter when recording
         self._replay_polls = replay_polls      # deque of recorded poll answers when replaying
+        self._replay_reconnects = replay_reconnects
         self.client = None
         self.info = None
         self._job = None
@@ -124,29 +126,33 @@ class HeadPort:
         return {k: i.get(k) for k in ("width", "height", "max_windows", "max_spans", "max_window_pixels",
                                       "pixel_budget", "frame_chunk_max")}
 
-    def reconnect(self) -> None:
-        """Reopen the link (the device came back) and redo the set-up; DeviceError if it is
-        still away. The outcome of reopening is logged (replay answers it from the log)."""
-        self._wait_idle(5.0)
-        self._job = None
-        self._done.clear()
-        if self._replay_polls is not None:
-            if not self._replay_polls:
+    def submit_reconnect(self) -> None:
+        """Reopen the link and redo the set-up, on the worker (the loop keeps running).
+        The result is a job of kind "reconnect" (``error`` set while the head is away)."""
+        self._submit("reconnect", None)
+
+    def _reconnect_now(self) -> None:
+        if self._replay_reconnects is not None:
+            if not self._replay_reconnects:
                 from ..recording.taps import ReplayExhausted
 
                 raise ReplayExhausted("head reconnects")
-            if not self._replay_polls.popleft():
+            if not self._replay_reconnects.popleft():
                 raise DeviceError("head still away (replayed reconnect failure)")
         elif self._reconnect is not None:
             try:
                 link = self._reconnect()
             except DeviceError:
-                self._log_poll(0)
+                self._log_reconnect(0)
                 raise
-            self._log_poll(1)
+            self._log_reconnect(1)
             if link is not None:
                 self.link = link
         self.start(self.exposure_s)
+
+    def _log_reconnect(self, value: int) -> None:
+        if self._poll_log is not None:
+            self._poll_log.append(POLL, struct.pack("<B", value), CH_RECONNECT)
 
     def _log_poll(self, value: int) -> None:
         if self._poll_log is not None:
@@ -200,6 +206,9 @@ class HeadPort:
             self._done.set()
 
     def _do(self, kind, spans) -> ImageResult:
+        if kind == "reconnect":
+            self._reconnect_now()
+            return ImageResult("reconnect", np.nan, np.nan, np.nan)
         c = self.client
         if kind == "windows":
             c.set_windows(spans)

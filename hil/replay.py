@@ -37,8 +37,9 @@ def load_log(path: str | Path) -> dict:
     tr = [r.payload for r in recs if r.kind == lf.TRUTH]
     truth = np.frombuffer(b"".join(tr), TRUTH_DTYPE) if tr else None
     events = [json.loads(r.payload) for r in recs if r.kind == lf.EVENT]
+    t0 = next((e["scenario_t0"] for e in events if "scenario_t0" in e), float(out["t"][0]) if len(out) else 0.0)
     return {"meta": metas[0], "records": recs, "outputs": out, "truth": truth, "events": events,
-            "report": report}
+            "report": report, "t0": t0}
 
 
 def replay(path: str | Path) -> dict:

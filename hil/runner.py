@@ -125,6 +125,8 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
     try:
         if fs.truth is not None:
             fs.truth.restart(fs.clock_now())
+        if writer:
+            writer.event({"scenario_t0": fs.truth.t_origin if fs.truth is not None else fs.clock_now()})
         loop.start()
         period = 1.0 / loop.gyro.odr_hz
         sched = PeriodicScheduler(period)
@@ -181,6 +183,9 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
     res_top["realtime"] = realtime
     res_top["latency_clock"] = "host monotonic clock, FIFO read complete → output emitted"
     res_top["counters"] = counters
+    client = getattr(loop.head, "client", None)
+    if client is not None:
+        res_top["link"] = dict(client.stats)
     res_top["numba_startup"] = warm
     res_top["wiring"] = wiring
     if rt is not None:

@@ -148,6 +148,9 @@ class CoupledLoop:
         self.next_acquire_t = -np.inf
         self.pending = None            # the windows in flight: spans and slots
         self.head_down_since: float | None = None
+        self.timeouts = 0              # consecutive head jobs without an answer
+        self.exposure_lag = 0.002      # s from commanding windows to the exposure start (EMA)
+        self.lag_jitter = 0.001        # s, mean deviation of that lag
         self.next_reconnect_t = -np.inf
         self.out_buf = R.empty(256)
         self._blank = R.empty(1)[0]
@@ -226,7 +229,7 @@ class CoupledLoop:
             t = smp.t[i]
             w = smp.rate[i]
             dt = period if self.t_last is None else t - self.t_last
-            if not 0.0 < dt < 0.1:
+            if not 0.0 < dt < 2.0:      # across a FIFO gap: propagate over it (P grows accordingly)
                 dt = period
             self.t_last = t
             mekf_predict(self.q, self.bias, self.P, w, dt, self.p.gyro_noise_density, self.p.sigma_bias_rw)
@@ -277,19 +280,22 @@ class CoupledLoop:
     # ------------------------------------------------------------------ images
     def _image_phase(self) -> None:
         now = self.clock.now()
-        if self.head_down_since is not None:
-            if now < self.next_reconnect_t:
-                return
-            self.next_reconnect_t = now + 0.25
-            try:
-                self.head.reconnect()
-            except DeviceError as exc:
-                log.debug("head still away: %s", exc)
-                return
-            self.c.head_reconnects += 1
-            log.info("head link back after %.2f s", now - self.head_down_since)
-            self.head_down_since = None
         res = self.head.poll()
+        if res is not None and res.kind == "reconnect":
+            if res.error is None:
+                self.c.head_reconnects += 1
+                log.info("head link back after %.2f s", now - self.head_down_since)
+                self.head_down_since = None
+                self.timeouts = 0
+            else:
+                log.debug("head still away: %s", res.error)
+            res = None
+        if self.head_down_since is not None:
+            if not self.head.busy and now >= self.next_reconnect_t:
+                self.next_reconnect_t = now + 0.25
+                self.pending = None
+                self.head.submit_reconnect()
+            return
         pend = None
         if res is not None:
             pend, self.pending = self.pending, None
@@ -304,15 +310,18 @@ class CoupledLoop:
                 self.c.frames_failed += 1
                 self.last_image_flags |= R.FLAG_LINK_ERROR
                 self._count_head_error(res.error)
-                if _link_down(res.error):
+                self.timeouts = self.timeouts + 1 if type(res.error).__name__ == "HeadTimeoutError" else 0
+                if _link_closed(res.error) or self.timeouts >= 3:
                     self._head_failed(res.error)
                     return
                 if res.kind == "windows":
                     self._after_image(now, updated=0)
             elif res.kind == "frame":
+                self.timeouts = 0
                 self.c.full_frames += 1
                 self._acquire(res, now)
             else:
+                self.timeouts = 0
                 self._process_windows(pend, res, now)
         if self.head.busy:
             return
@@ -386,12 +395,16 @@ class CoupledLoop:
             self._after_image(now, updated=0)
             return
         uv, _ = project_refs(self.cam, self.q, self.ref[act])
+        # the exposure starts when the head gets CAPTURE, ~lat s from now (measured)
         m = max(1, int(round(self.p.exposure_s * self.gyro.odr_hz)))
-        rates = np.repeat((self.omega + self.bias)[None, :], m, axis=0)
+        m_lat = int(round(self.exposure_lag * self.gyro.odr_hz))
+        rates = np.repeat((self.omega + self.bias)[None, :], m + m_lat, axis=0)
         dt = self.p.exposure_s / m
         sub = substeps_for(rates - self.bias, dt, self.f_px, 0.25)
         sig_px = math.sqrt(max(self.P[0, 0], self.P[1, 1])) * self.f_px
-        k = min(self.p.window_k + 2 * int(math.ceil(3.0 * sig_px)), 40)
+        speed = float(np.linalg.norm(self.omega)) * self.f_px          # px/s near the boresight
+        margin = 3.0 * sig_px + speed * self.lag_jitter
+        k = min(self.p.window_k + 2 * int(math.ceil(margin)), 40)
         parts = []
         slots = []
         trajs = {}
@@ -401,6 +414,7 @@ class CoupledLoop:
             s = int(act[j])
             traj = predict_trajectory(uv[j, 0] - self.cam[1], uv[j, 1] - self.cam[2], rates, dt, self.bias,
                                       self.f_px, MODEL, sub)
+            traj = traj[m_lat * sub:]
             traj[:, 0] += self.cam[1]
             traj[:, 1] += self.cam[2]
             spans = trajectory_window(traj, k, self.camera.height_px, self.camera.width_px, s)
@@ -418,7 +432,7 @@ class CoupledLoop:
             return
         spans = concat_windows(parts)
         self.head.submit_windows(spans)
-        self.pending = {"spans": spans, "slots": slots, "offsets": trajs}
+        self.pending = {"spans": spans, "slots": slots, "offsets": trajs, "t_submit": now}
 
     def _process_windows(self, pend: dict, res, now: float) -> None:
         from ..attitude import quat_conj, quat_mult, quat_to_dcm
@@ -427,6 +441,10 @@ class CoupledLoop:
         from ..core.mekf import mekf_update
 
         self.c.frames += 1
+        lag = res.t_start - pend["t_submit"]
+        if 0.0 <= lag < 0.1:
+            self.lag_jitter = 0.9 * self.lag_jitter + 0.1 * abs(lag - self.exposure_lag)
+            self.exposure_lag = 0.9 * self.exposure_lag + 0.1 * lag
         spans = pend["spans"]
         vals = np.asarray(res.values, dtype=np.float64)
         # rotation body(t_mid) → body(now) from the gyro-propagated attitude history
@@ -599,11 +617,10 @@ class CoupledLoop:
             "mode_changes": list(c.mode_changes)}
 
 
-def _link_down(exc: Exception) -> bool:
-    """A failure that means the link is gone (closed port, no answer after every retry)."""
-    name = type(exc).__name__
+def _link_closed(exc: Exception) -> bool:
+    """A failure that means the link itself is gone (port closed or failing)."""
     text = str(exc)
-    return name == "HeadTimeoutError" or "closed" in text or "is down" in text
+    return "closed" in text or "is down" in text or "failed" in text and "write" in text
 
 
 def warmup() -> dict:

@@ -11,7 +11,10 @@ from __future__ import annotations
 
 import os
 import time
+from collections import deque
 from dataclasses import dataclass, field
+
+LATE_KEEP = 4096   # wake-up lateness values kept (≈ 10 s at 400 Hz)
 
 
 @dataclass
@@ -46,7 +49,8 @@ class PeriodicScheduler:
     """Wake at ``t0 + k·period`` on ``time.monotonic``; count overruns.
 
     Use: ``s.start(); while ...: s.wait(); step(); s.done()``. ``late_s`` holds how late
-    each wake-up was (s); ``overruns`` how many deadlines were missed in total.
+    each of the last ``LATE_KEEP`` wake-ups was (s, a bounded ring so a long run's memory stays
+    flat); ``overruns`` how many deadlines were missed in total.
     """
 
     def __init__(self, period_s: float, clock=time.monotonic, sleep=time.sleep, spin_s: float = 0.0002):
@@ -60,7 +64,7 @@ class PeriodicScheduler:
         self.k = 0
         self.overruns = 0
         self.steps = 0
-        self.late_s: list[float] = []
+        self.late_s: deque[float] = deque(maxlen=LATE_KEEP)
 
     def start(self, t0: float | None = None) -> None:
         self.t0 = self.clock() if t0 is None else t0

@@ -96,13 +96,15 @@ class ReplayExhausted(GyrostarError):
 # --------------------------------------------------------------------------- link
 _RX = struct.Struct("<Bd")   # status, arrival time (s)
 RX_PACKET, RX_TIMEOUT, RX_CLOSED = 0, 1, 2
+TX_OK, TX_FAILED = 0, 1
 
 
 class RecordingLink:
     """Wrap a packet link (:class:`gyrostar.transport.SerialLink` interface: ``send``,
     ``recv``, ``drain``); record every frame's raw bytes in both directions.
 
-    TX payload: f8 send time + the bytes written. RX payload: u8 status (packet, timeout,
+    TX payload: u8 status (ok, failed) + f8 send time + the bytes written (+ 0x00 and the
+    error text when the write failed). RX payload: u8 status (packet, timeout,
     closed) + f8 arrival time + the bytes between two 0x00 delimiters, as received.
     """
 
@@ -114,8 +116,13 @@ class RecordingLink:
 
     def send(self, data) -> float:
         data = bytes(data)
-        t = self._link.send(data)
-        self._w.append(lf.TX, struct.pack("<d", t) + data, self._ch, _t_ns(self._clock))
+        try:
+            t = self._link.send(data)
+        except GyrostarError as exc:
+            self._w.append(lf.TX, _RX.pack(TX_FAILED, 0.0) + data + b"\x00" + str(exc).encode(), self._ch,
+                           _t_ns(self._clock))
+            raise
+        self._w.append(lf.TX, _RX.pack(TX_OK, t) + data, self._ch, _t_ns(self._clock))
         return t
 
     def recv(self, timeout: float):
@@ -160,10 +167,17 @@ class ReplayLink:
     def send(self, data) -> float:
         data = bytes(data)
         rec = self._next(lf.TX, f"send of {len(data)} bytes")
-        if rec.payload[8:] != data:
+        status, t = _RX.unpack_from(rec.payload)
+        body = rec.payload[_RX.size:]
+        sent = body[: len(data)]
+        if sent != data:
             raise ReplayDivergence(f"replay: driver sent {data[:24].hex()}... but the log has "
-                                   f"{rec.payload[8:32].hex()}... at t={rec.t_ns} ns")
-        return struct.unpack_from("<d", rec.payload)[0]
+                                   f"{body[:24].hex()}... at t={rec.t_ns} ns")
+        if status == TX_FAILED:
+            from ..errors import DeviceError
+
+            raise DeviceError(body[len(data) + 1:].decode(errors="replace"))
+        return t
 
     def recv(self, timeout: float):
         rec = self._next(lf.RX, f"recv({timeout})")
