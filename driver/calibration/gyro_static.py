@@ -132,7 +132,8 @@ def run(args) -> int:
         table.add(name, val * conv[name], units[name], None if tv is None else np.asarray(tv) * conv[name])
         if tv is not None:
             table.rows[name]["rel_error"] = (val / np.asarray(tv) - 1.0).tolist()
-    table.add("quantization_rad", q, "rad")
+    if np.any(q > 0):
+        table.add("quantization_rad", q, "rad")
     if a["temp_coeff"] is not None:
         table.add("bias_temp_coeff_dps_per_c", a["temp_coeff"] * RAD2DEG, "deg/s/C")
     extra = {"duration_s": a["duration"], "fs_hz": a["fs"],
