@@ -171,7 +171,7 @@ def cone_query(vectors, vmag, vox_start, vox_stars, h, g, center, radius, mag_ma
                 for p in range(vox_start[c], vox_start[c + 1]):
                     s = vox_stars[p]
                     if vmag[s] > mag_max:
-                        continue
+                        break  # a cell lists its stars brightest first
                     v = vectors[s]
                     if v[0] * center[0] + v[1] * center[1] + v[2] * center[2] >= cosr:
                         if n == cap:

@@ -46,6 +46,8 @@ class StarIdResult:
     def make(star_index, match, q, ok, status, p_false, method) -> StarIdResult:
         match = np.asarray(match, dtype=np.int64)
         if not ok:
-            match = -np.ones_like(match)
-        ids = np.where(match >= 0, star_index.ids[np.maximum(match, 0)], -1) if match.size else match.copy()
+            match = np.full(match.shape, -1, dtype=np.int64)
+        ids = np.full(match.shape, -1, dtype=np.int64)
+        got = match >= 0
+        ids[got] = star_index.ids[match[got]]
         return StarIdResult(match, ids, np.asarray(q, dtype=np.float64), bool(ok), status, float(p_false), method)
