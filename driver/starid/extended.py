@@ -37,7 +37,7 @@ from ..attitude import quat_error_angles, quat_to_dcm
 from ..camera import project_point, unproject_many
 from ..errors import ConfigError
 from .grid import GridParams, cells_from, nth_neighbour, tangent_coords_into
-from .index import cone_query
+from .index import cone_query, n_brighter
 from .result import StarIdResult
 from .verify import drop_ambiguous, verify_matches
 
@@ -81,7 +81,7 @@ def _triangle(vecs, ref, min_sep):
 
 
 @njit(cache=True)
-def build_images(b, q_pred, cam, vec, vmag, vstart, vstars, vh, vg, mag_max, half_ext, mag_deep):
+def build_images(b, q_pred, cam, vec, vmag, vstart, vstars, vvec, vh, vg, mag_max, half_ext, mag_deep):
     """Images A and C. Returns ``(a_vecs, a_cat, a_real, c_vecs, c_cat)``: A's predicted
     body vectors, catalog indexes and real-part flags; C's body vectors and catalog index
     of each row (-1 for the observed rows, which come first). The ring holds stars to
@@ -90,7 +90,7 @@ def build_images(b, q_pred, cam, vec, vmag, vstart, vstars, vh, vg, mag_max, hal
     a = quat_to_dcm(q_pred)
     bore = a[2].copy()
     radius = np.arctan(half_ext * np.sqrt(2.0)) + 1e-3
-    near = cone_query(vec, vmag, vstart, vstars, vh, vg, bore, radius, max(mag_max, mag_deep))
+    near = cone_query(vvec, vstars, vstart, vh, vg, bore, radius, n_brighter(vmag, max(mag_max, mag_deep)))
     m = near.shape[0]
     a_vecs = np.empty((m, 3))
     a_cat = np.empty(m, dtype=np.int64)
@@ -127,7 +127,7 @@ def build_images(b, q_pred, cam, vec, vmag, vstart, vstars, vh, vg, mag_max, hal
 
 
 @njit(cache=True)
-def extended_core(b, q_pred, cam, vec, vmag, vstart, vstars, vh, vg, mag_max, half_ext, br, pr, g, cell, xi,
+def extended_core(b, q_pred, cam, vec, vmag, vstart, vstars, vvec, vh, vg, mag_max, half_ext, br, pr, g, cell, xi,
                   max_ref, method, tri_eps, n_orient, mag_deep):
     """Match the brightest ``max_ref`` observed stars. Returns ``(match, nb_c, c_cat, cand_cat,
     pat_nb)``: catalog index per observed star (-1 none); C-row of each reference's
@@ -140,7 +140,7 @@ def extended_core(b, q_pred, cam, vec, vmag, vstart, vstars, vh, vg, mag_max, ha
     that is missing from, or extra in, the observed image (magnitude noise at the sensor
     limit) does not lose the match."""
     n = b.shape[0]
-    a_vecs, a_cat, a_real, c_vecs, c_cat = build_images(b, q_pred, cam, vec, vmag, vstart, vstars, vh, vg,
+    a_vecs, a_cat, a_real, c_vecs, c_cat = build_images(b, q_pred, cam, vec, vmag, vstart, vstars, vvec, vh, vg,
                                                         mag_max, half_ext, mag_deep)
     na = a_vecs.shape[0]
     nc = c_vecs.shape[0]
@@ -165,19 +165,24 @@ def extended_core(b, q_pred, cam, vec, vmag, vstart, vstars, vh, vg, mag_max, ha
         npat = ncand * n_orient
         cells = np.empty((npat, na + 1), dtype=np.int64)
         ncell = np.zeros(npat, dtype=np.int64)
-        xs = np.empty(na)
-        ys = np.empty(na)
-        idx = np.empty(na, dtype=np.int64)
-        dots = np.empty(na)
+        done = np.zeros(npat, dtype=np.bool_)
+        xs = np.empty((ncand, na))
+        ys = np.empty((ncand, na))
+        idx = np.empty((ncand, na), dtype=np.int64)
+        dots = np.empty((ncand, na))
+        kk = np.zeros(ncand, dtype=np.int64)
+        nbpos = -np.ones((ncand, n_orient), dtype=np.int64)
         for c in range(ncand):
-            kk = tangent_coords_into(a_vecs, cand[c], br, pr, xs, ys, idx, dots)
+            kk[c] = tangent_coords_into(a_vecs, cand[c], br, pr, xs[c], ys[c], idx[c], dots[c])
             for o in range(n_orient):
-                u = c * n_orient + o
-                nb = nth_neighbour(dots, kk, o)
+                nb = nth_neighbour(dots[c], kk[c], o)
                 if nb < 0:
                     break
-                ncell[u] = cells_from(xs, ys, kk, nb, g, cell, cells[u])
-                pat_nb[c, o] = a_cat[idx[nb]]
+                nbpos[c, o] = nb
+                pat_nb[c, o] = a_cat[idx[c, nb]]
+            if nbpos[c, 0] >= 0:
+                ncell[c * n_orient] = cells_from(xs[c], ys[c], kk[c], nbpos[c, 0], g, cell, cells[c * n_orient])
+            done[c * n_orient] = True
         buf = np.empty(nc + 1, dtype=np.int64)
         occupied = np.zeros(g * g, dtype=np.bool_)
         cx = np.empty(nc)
@@ -185,39 +190,47 @@ def extended_core(b, q_pred, cam, vec, vmag, vstart, vstars, vh, vg, mag_max, ha
         cidx = np.empty(nc, dtype=np.int64)
         cdots = np.empty(nc)
         for r in range(nr):
-            kk = tangent_coords_into(c_vecs, r, br, pr, cx, cy, cidx, cdots)
-            nbp = nth_neighbour(cdots, kk, 0)
+            kr = tangent_coords_into(c_vecs, r, br, pr, cx, cy, cidx, cdots)
+            nbp = nth_neighbour(cdots, kr, 0)
             if nbp < 0:
                 continue
             nb_c[r] = cidx[nbp]
-            k = cells_from(cx, cy, kk, nbp, g, cell, buf)
+            k = cells_from(cx, cy, kr, nbp, g, cell, buf)
             if k < xi:
                 continue
             for t in range(k):
                 occupied[buf[t]] = True
-            best = -1
-            bv = 0
-            second = 0
-            for c in range(ncand):
-                cv = 0
-                cu = -1
-                for o in range(n_orient):
-                    u = c * n_orient + o
-                    if ncell[u] == 0:
-                        continue
-                    v = 0
-                    for t in range(ncell[u]):
-                        if occupied[cells[u, t]]:
-                            v += 1
-                    if v > cv:
-                        cv = v
-                        cu = u
-                if cv > bv:
-                    second = bv
-                    bv = cv
-                    best = cu
-                elif cv > second:
-                    second = cv
+            # pass 1: every candidate in its first orientation; a clear winner is taken.
+            # pass 2 (otherwise): all orientations, the extra patterns built on first use.
+            for npass in range(2):
+                no = 1 if npass == 0 else n_orient
+                best = -1
+                bv = 0
+                second = 0
+                for c in range(ncand):
+                    cv = 0
+                    cu = -1
+                    for o in range(no):
+                        u = c * n_orient + o
+                        if not done[u]:
+                            if nbpos[c, o] >= 0:
+                                ncell[u] = cells_from(xs[c], ys[c], kk[c], nbpos[c, o], g, cell, cells[u])
+                            done[u] = True
+                        v = 0
+                        for t in range(ncell[u]):
+                            if occupied[cells[u, t]]:
+                                v += 1
+                        if v > cv:
+                            cv = v
+                            cu = u
+                    if cv > bv:
+                        second = bv
+                        bv = cv
+                        best = cu
+                    elif cv > second:
+                        second = cv
+                if npass == 0 and bv >= xi and bv >= second + 2:
+                    break
             for t in range(k):
                 occupied[buf[t]] = False
             if bv >= xi and bv > second:
@@ -257,7 +270,7 @@ STATUS_TEXT = {ST_OK: "ok", ST_FEW: "fewer than 2 verified matches",
 
 
 @njit(cache=True)
-def extended_identify_uv(uv, q_pred, cam, vec, vmag, vstart, vstars, vh, vg, mag_max, half_ext, br, pr, g, cell,
+def extended_identify_uv(uv, q_pred, cam, vec, vmag, vstart, vstars, vvec, vh, vg, mag_max, half_ext, br, pr, g, cell,
                          xi, max_ref, method, tri_eps, n_orient, tol, fov_radius, gate, mag_deep):
     """:func:`extended_identify` from centroids ``uv`` (n, 2) px (status ``ST_BAD`` and no
     matches when any is not finite)."""
@@ -267,20 +280,20 @@ def extended_identify_uv(uv, q_pred, cam, vec, vmag, vstart, vstars, vh, vg, mag
             return (-np.ones(uv.shape[0], dtype=np.int64), np.array([0.0, 0.0, 0.0, 1.0]), ST_BAD, e, e, e,
                     np.empty((0, max(n_orient, 1)), dtype=np.int64))
     b = unproject_many(cam, uv)
-    return extended_identify(b, q_pred, cam, vec, vmag, vstart, vstars, vh, vg, mag_max, half_ext, br, pr, g, cell,
-                             xi, max_ref, method, tri_eps, n_orient, tol, fov_radius, gate, mag_deep)
+    return extended_identify(b, q_pred, cam, vec, vmag, vstart, vstars, vvec, vh, vg, mag_max, half_ext, br, pr, g,
+                             cell, xi, max_ref, method, tri_eps, n_orient, tol, fov_radius, gate, mag_deep)
 
 
 @njit(cache=True)
-def extended_identify(b, q_pred, cam, vec, vmag, vstart, vstars, vh, vg, mag_max, half_ext, br, pr, g, cell, xi,
+def extended_identify(b, q_pred, cam, vec, vmag, vstart, vstars, vvec, vh, vg, mag_max, half_ext, br, pr, g, cell, xi,
                       max_ref, method, tri_eps, n_orient, tol, fov_radius, gate, mag_deep):
     """:func:`extended_core` + verification, in one call. Returns ``(match, q, status, nb_c,
     c_cat, cand_cat, pat_nb)`` (``match`` all -1 unless status is ``ST_OK``)."""
-    raw, nb_c, c_cat, cand_cat, pat_nb = extended_core(b, q_pred, cam, vec, vmag, vstart, vstars, vh, vg, mag_max,
+    raw, nb_c, c_cat, cand_cat, pat_nb = extended_core(b, q_pred, cam, vec, vmag, vstart, vstars, vvec, vh, vg, mag_max,
                                                        half_ext, br, pr, g, cell, xi, max_ref, method,
                                                        tri_eps, n_orient, mag_deep)
     q, match, nok, _ = verify_matches(b, vec, raw, tol)
-    if nok >= 2 and drop_ambiguous(b, q, vec, vmag, vstart, vstars, vh, vg, fov_radius, tol, match) > 0:
+    if nok >= 2 and drop_ambiguous(b, q, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, tol, match) > 0:
         q, match, nok, _ = verify_matches(b, vec, match, tol)
     if nok < 2:
         match[:] = -1
@@ -338,9 +351,9 @@ class ExtendedIdentifier:
         """Identify body unit vectors (n, 3), brightest first, given the predicted attitude."""
         ix, p = self.index, self.params
         out = extended_identify(np.ascontiguousarray(b, dtype=np.float64), self._q(q_pred), self._cam, ix.vectors,
-                                ix.vmag, ix.vox_start, ix.vox_stars, ix.vox_h, ix.vox_g, self.mag_max, self.half_ext,
-                                p.br, p.pr, p.g, p.cell, p.xi, self.max_ref, self._code, self.tri_eps, self.n_orient,
-                                self.tol, self.fov_radius, self.gate, self.mag_max + self.deep_mag)
+                                ix.vmag, ix.vox_start, ix.vox_stars, ix.vox_vec, ix.vox_h, ix.vox_g, self.mag_max,
+                                self.half_ext, p.br, p.pr, p.g, p.cell, p.xi, self.max_ref, self._code, self.tri_eps,
+                                self.n_orient, self.tol, self.fov_radius, self.gate, self.mag_max + self.deep_mag)
         return self._result(out)
 
     def identify(self, uv: np.ndarray, q_pred: np.ndarray) -> StarIdResult:
@@ -350,8 +363,8 @@ class ExtendedIdentifier:
         if pts.ndim != 2 or (pts.size and pts.shape[1] != 2):
             pts = pts.reshape(-1, 2) if pts.size % 2 == 0 and pts.size else np.empty((0, 2))
         out = extended_identify_uv(np.ascontiguousarray(pts), self._q(q_pred), self._cam, ix.vectors, ix.vmag,
-                                   ix.vox_start, ix.vox_stars, ix.vox_h, ix.vox_g, self.mag_max, self.half_ext,
-                                   p.br, p.pr, p.g, p.cell, p.xi, self.max_ref, self._code, self.tri_eps,
+                                   ix.vox_start, ix.vox_stars, ix.vox_vec, ix.vox_h, ix.vox_g, self.mag_max,
+                                   self.half_ext, p.br, p.pr, p.g, p.cell, p.xi, self.max_ref, self._code, self.tri_eps,
                                    self.n_orient, self.tol, self.fov_radius, self.gate, self.mag_max + self.deep_mag)
         if int(out[2]) == ST_BAD:
             raise ConfigError("centroids must be finite pixel coordinates")

@@ -33,7 +33,7 @@ from ..errors import ConfigError
 from ..paths import cache_dir
 from . import kvector
 
-INDEX_VERSION = 6
+INDEX_VERSION = 7
 DOUBLE_SEP_DEG = 0.02  # 72″: closer pairs are one spot for every preset sensor (blend ≥ 3 px ≥ 84″)
 
 
@@ -62,6 +62,7 @@ class StarIndex:
     vox_g: int
     vox_start: np.ndarray    # int64 (g³+1,)
     vox_stars: np.ndarray    # int32 (n,)
+    vox_vec: np.ndarray      # float64 (n, 3) vectors in voxel order
 
     def __len__(self) -> int:
         return int(self.ids.shape[0])
@@ -77,8 +78,8 @@ class StarIndex:
     def cone(self, center: np.ndarray, radius: float, mag_max: float = np.inf) -> np.ndarray:
         """Indexes of the stars within ``radius`` (rad) of ``center`` (ICRS) and V ≤ ``mag_max``."""
         c = np.asarray(center, dtype=np.float64)
-        return cone_query(self.vectors, self.vmag, self.vox_start, self.vox_stars, self.vox_h,
-                          self.vox_g, c / np.linalg.norm(c), float(radius), float(mag_max))
+        return cone_query(self.vox_vec, self.vox_stars, self.vox_start, self.vox_h, self.vox_g,
+                          c / np.linalg.norm(c), float(radius), n_brighter(self.vmag, float(mag_max)))
 
 
 def select_navigation_stars(vectors: np.ndarray, per_field: int, thin_radius: float,
@@ -137,7 +138,8 @@ def neighbour_table(n: int, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, n
 
 
 def voxel_grid(vectors: np.ndarray, h: float) -> tuple[int, np.ndarray, np.ndarray]:
-    """Voxel CSR of unit vectors: ``(g, start (g³+1,), stars)``."""
+    """Voxel CSR of unit vectors: ``(g, start (g³+1,), stars)``; inside a cell the stars keep
+    their input order (brightest first for a catalog sorted by V)."""
     g = int(math.ceil(2.0 / h)) + 1
     cell = _voxel_cells(vectors, h, g)
     order = np.argsort(cell, kind="stable")
@@ -152,37 +154,46 @@ def _voxel_cells(vectors, h, g):
 
 
 @njit(cache=True)
-def cone_query(vectors, vmag, vox_start, vox_stars, h, g, center, radius, mag_max):
-    """Star indexes within ``radius`` of unit ``center`` with vmag ≤ ``mag_max`` (ascending V)."""
+def cone_query(vox_vec, vox_stars, vox_start, h, g, center, radius, n_max):
+    """Indexes (ascending) of the stars within ``radius`` of unit ``center`` among the first
+    ``n_max`` (stars are sorted by V, so that is a magnitude limit).
+
+    ``vox_vec`` are the unit vectors in voxel order (each cell's stars contiguous, brightest
+    first), so a cell is one sequential read and the scan stops at the limit."""
     chord = 2.0 * np.sin(radius / 2.0)
     cosr = np.cos(radius)
-    lo = np.empty(3, dtype=np.int64)
-    hi = np.empty(3, dtype=np.int64)
-    for d in range(3):
-        lo[d] = max(0, int(np.floor((center[d] - chord + 1.0) / h)))
-        hi[d] = min(g - 1, int(np.floor((center[d] + chord + 1.0) / h)))
+    lo0 = max(0, int(np.floor((center[0] - chord + 1.0) / h)))
+    hi0 = min(g - 1, int(np.floor((center[0] + chord + 1.0) / h)))
+    lo1 = max(0, int(np.floor((center[1] - chord + 1.0) / h)))
+    hi1 = min(g - 1, int(np.floor((center[1] + chord + 1.0) / h)))
+    lo2 = max(0, int(np.floor((center[2] - chord + 1.0) / h)))
+    hi2 = min(g - 1, int(np.floor((center[2] + chord + 1.0) / h)))
     cap = 64
     out = np.empty(cap, dtype=np.int64)
     n = 0
-    for i in range(lo[0], hi[0] + 1):
-        for j in range(lo[1], hi[1] + 1):
-            for k in range(lo[2], hi[2] + 1):
-                c = (i * g + j) * g + k
-                for p in range(vox_start[c], vox_start[c + 1]):
-                    s = vox_stars[p]
-                    if vmag[s] > mag_max:
-                        break  # a cell lists its stars brightest first
-                    v = vectors[s]
-                    if v[0] * center[0] + v[1] * center[1] + v[2] * center[2] >= cosr:
-                        if n == cap:
-                            cap *= 2
-                            bigger = np.empty(cap, dtype=np.int64)
-                            bigger[:n] = out[:n]
-                            out = bigger
-                        out[n] = s
-                        n += 1
-    res = np.sort(out[:n])
-    return res
+    c0, c1, c2 = center[0], center[1], center[2]
+    for i in range(lo0, hi0 + 1):
+        for j in range(lo1, hi1 + 1):
+            base = (i * g + j) * g
+            for p in range(vox_start[base + lo2], vox_start[base + hi2 + 1]):
+                s = vox_stars[p]
+                if s >= n_max:
+                    continue
+                if vox_vec[p, 0] * c0 + vox_vec[p, 1] * c1 + vox_vec[p, 2] * c2 >= cosr:
+                    if n == cap:
+                        cap *= 2
+                        bigger = np.empty(cap, dtype=np.int64)
+                        bigger[:n] = out[:n]
+                        out = bigger
+                    out[n] = s
+                    n += 1
+    return np.sort(out[:n])
+
+
+@njit(cache=True)
+def n_brighter(vmag, mag_max):
+    """How many stars (sorted by V) have V ≤ ``mag_max``."""
+    return np.searchsorted(vmag, mag_max, side="right")
 
 
 def build_index(catalog, max_sep_deg: float, per_field: int = 0, thin_radius_deg: float | None = None,
@@ -210,7 +221,8 @@ def build_index(catalog, max_sep_deg: float, per_field: int = 0, thin_radius_deg
     is_nav[nav] = True
     return StarIndex(catalog.name, mag_limit, float(catalog.epoch), max_sep, int(per_field), is_nav,
                      np.ascontiguousarray(catalog.ids[keep]), vec, np.ascontiguousarray(catalog.vmag[keep]),
-                     theta, a, b, kv, m, q, nb_start, nb_idx, float(vox_h), g, vstart, vstars)
+                     theta, a, b, kv, m, q, nb_start, nb_idx, float(vox_h), g, vstart, vstars,
+                     np.ascontiguousarray(vec[vstars]))
 
 
 def index_path(catalog: str, mag_limit: float, epoch: float, max_sep_deg: float, per_field: int) -> Path:
@@ -233,7 +245,7 @@ def load_index(catalog: str = "hip2", mag_limit: float = 6.5, max_sep_deg: float
                              int(f["per_field"]), f["is_nav"], f["ids"], f["vectors"], f["vmag"], f["pair_theta"],
                              f["pair_a"], f["pair_b"], f["kv"], float(f["kv_m"]), float(f["kv_q"]),
                              f["nb_start"], f["nb_idx"], float(f["vox_h"]), int(f["vox_g"]),
-                             f["vox_start"], f["vox_stars"])
+                             f["vox_start"], f["vox_stars"], f["vox_vec"])
         except (OSError, KeyError, ValueError):
             path.unlink(missing_ok=True)  # corrupt cache: rebuild below
     cat = load_catalog(catalog, float(mag_limit), float(epoch))

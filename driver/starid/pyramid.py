@@ -116,7 +116,7 @@ def _confirm(b, i, j, k, x, y, z, vec, nbs, nbi, eps, max_sep):
 
 
 @njit(cache=True)
-def pyramid_core(b, vec, vmag, pt, pa, pb, kv, km, kq, nbs, nbi, vstart, vstars, vh, vg, eps, label_tol, max_sep,
+def pyramid_core(b, vec, vmag, pt, pa, pb, kv, km, kq, nbs, nbi, vstart, vstars, vvec, vh, vg, eps, label_tol, max_sep,
                  fov_radius, p_false_max, max_triangles, mark, nnav):
     """Numba core. ``b`` (n,3) body unit vectors, brightest first; ``mark`` int64 (2N,) zeros (work, left zeroed).
 
@@ -268,7 +268,7 @@ def pyramid_core(b, vec, vmag, pt, pa, pb, kv, km, kq, nbs, nbi, vstart, vstars,
                 match[j] = y
                 match[k] = z
                 match[br] = bw
-                label_rest(b, q4, vec, vmag, vstart, vstars, vh, vg, fov_radius, label_tol, match)
+                label_rest(b, q4, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, label_tol, match)
                 q, out, nok, _ = verify_matches(b, vec, match, label_tol)
                 if out[i] != x or out[j] != y or out[k] != z or out[br] != bw:
                     status = ST_REJECTED
@@ -285,7 +285,7 @@ def pyramid_core(b, vec, vmag, pt, pa, pb, kv, km, kq, nbs, nbi, vstart, vstars,
 
 
 @njit(cache=True)
-def label_rest(b, q, vec, vmag, vstart, vstars, vh, vg, fov_radius, tol, match):
+def label_rest(b, q, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, tol, match):
     """Label unmatched observed stars with catalog stars predicted within ``tol`` (in place).
 
     A label is given only when it is unambiguous both ways: exactly one catalog star within
@@ -293,7 +293,7 @@ def label_rest(b, q, vec, vmag, vstart, vstars, vh, vg, fov_radius, tol, match):
     """
     a = quat_to_dcm(q)
     bore = a[2].copy()  # boresight in ICRS = A^T e_z
-    near = cone_query(vec, vmag, vstart, vstars, vh, vg, bore, fov_radius + tol, np.inf)
+    near = cone_query(vvec, vstars, vstart, vh, vg, bore, fov_radius + tol, vec.shape[0])
     m = near.shape[0]
     n = b.shape[0]
     cos_tol = np.cos(tol)
@@ -365,14 +365,14 @@ class Pyramid:
         nb = min(b.shape[0], self.max_stars)
         match, q, pf, st, tried = pyramid_core(
             np.ascontiguousarray(b[:nb]), ix.vectors, ix.vmag, ix.pair_theta, ix.pair_a, ix.pair_b, ix.kv,
-            ix.kv_m, ix.kv_q, ix.nb_start, ix.nb_idx, ix.vox_start, ix.vox_stars, ix.vox_h, ix.vox_g, self.eps,
-            self.label_tol, ix.max_sep, self.fov_radius, self.p_false_max, self.max_triangles, self._mark,
+            ix.kv_m, ix.kv_q, ix.nb_start, ix.nb_idx, ix.vox_start, ix.vox_stars, ix.vox_vec, ix.vox_h, ix.vox_g,
+            self.eps, self.label_tol, ix.max_sep, self.fov_radius, self.p_false_max, self.max_triangles, self._mark,
             self._nnav)
         full = -np.ones(b.shape[0], dtype=np.int64)
         full[:nb] = match
         if st == ST_OK and b.shape[0] > nb:
-            label_rest(np.ascontiguousarray(b), q, ix.vectors, ix.vmag, ix.vox_start, ix.vox_stars, ix.vox_h,
-                       ix.vox_g, self.fov_radius, self.label_tol, full)
+            label_rest(np.ascontiguousarray(b), q, ix.vectors, ix.vmag, ix.vox_start, ix.vox_stars, ix.vox_vec,
+                       ix.vox_h, ix.vox_g, self.fov_radius, self.label_tol, full)
             q, full, _, _ = verify_matches(np.ascontiguousarray(b), ix.vectors, full, self.label_tol)
         return StarIdResult.make(ix, full, q, st == ST_OK, STATUS_TEXT[int(st)], pf, "pyramid")
 

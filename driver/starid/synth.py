@@ -21,7 +21,7 @@ import numpy as np
 from ..attitude import quat_to_dcm
 from ..camera import project_many
 from ..errors import ConfigError
-from .index import cone_query, select_navigation_stars, voxel_grid
+from .index import cone_query, n_brighter, select_navigation_stars, voxel_grid
 
 
 @dataclasses.dataclass(frozen=True)
@@ -50,10 +50,11 @@ class Sky:
         self.ids = np.ascontiguousarray(catalog.ids[keep])
         self.vox_h = vox_h
         self.vox_g, self.vox_start, self.vox_stars = voxel_grid(self.vectors, vox_h)
+        self.vox_vec = np.ascontiguousarray(self.vectors[self.vox_stars])
 
     def cone(self, center, radius: float, mag_max: float) -> np.ndarray:
-        return cone_query(self.vectors, self.vmag, self.vox_start, self.vox_stars, self.vox_h, self.vox_g,
-                          np.asarray(center, dtype=np.float64), float(radius), float(mag_max))
+        return cone_query(self.vox_vec, self.vox_stars, self.vox_start, self.vox_h, self.vox_g,
+                          np.asarray(center, dtype=np.float64), float(radius), n_brighter(self.vmag, float(mag_max)))
 
     def observe(self, camera, q, mag_limit: float, pos_noise_px: float, mag_noise: float, n_false: int,
                 rng: np.random.Generator) -> Frame:

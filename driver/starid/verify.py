@@ -103,12 +103,12 @@ def verify_matches(b, ref, match, tol):
 
 
 @njit(cache=True)
-def drop_ambiguous(b, q, vec, vmag, vstart, vstars, vh, vg, fov_radius, tol, match):
+def drop_ambiguous(b, q, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, tol, match):
     """Unmatch (in place) every star with more than one catalog star within ``tol`` of its
     direction under attitude ``q``: a close pair cannot be told apart by position, so
     naming either could be wrong. Returns the number of stars dropped."""
     a = quat_to_dcm(q)
-    near = cone_query(vec, vmag, vstart, vstars, vh, vg, a[2].copy(), fov_radius + tol, np.inf)
+    near = cone_query(vvec, vstars, vstart, vh, vg, a[2].copy(), fov_radius + tol, vec.shape[0])
     cos_tol = np.cos(tol)
     dropped = 0
     for i in range(b.shape[0]):
