@@ -230,9 +230,9 @@ class Flatsat:
     def clock_advance(self, dt: float) -> None:
         self.base_clock.sleep(dt)
 
-    def apply_faults(self, t: float, loop) -> None:
+    def start_faults(self, t0: float) -> None:
         if self.faults is not None:
-            self.faults.apply(t)
+            self.faults.start(t0, self.base_clock)
 
     def loop_stalled(self, t: float) -> bool:
         return self.faults is not None and self.faults.stalled(t)
@@ -271,6 +271,8 @@ class Flatsat:
         return np.array(rows) if rows else np.zeros((0, 3))
 
     def close(self) -> None:
+        if self.faults is not None:
+            self.faults.stop()
         for c in self.closers:
             try:
                 c()
@@ -455,6 +457,24 @@ class FaultPlan:
         self.firmware_head = None
         self.active: set = set()
         self.in_eclipse = False
+
+    def start(self, t0: float, clock) -> None:
+        """Apply the faults from their own thread (device calls may block; the loop must not)."""
+        if not (self.faults or self.eclipse):
+            return
+        self._stop = threading.Event()
+
+        def run():
+            while not self._stop.wait(0.005):
+                self.apply(clock.now() - t0)
+
+        self._thread = threading.Thread(target=run, name="fault-injector", daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        if getattr(self, "_thread", None) is not None:
+            self._stop.set()
+            self._thread.join(timeout=5.0)
 
     def stalled(self, t: float) -> bool:
         return any(f.kind == "gyro-fifo-overrun" and f.at_s <= t < f.at_s + f.seconds for f in self.faults)

@@ -128,16 +128,16 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
         if writer:
             writer.event({"scenario_t0": fs.truth.t_origin if fs.truth is not None else fs.clock_now()})
         loop.start()
+        fs.start_faults(t_start_of(fs))
         period = 1.0 / loop.gyro.odr_hz
         sched = PeriodicScheduler(period)
         sched.start()
-        t_start = fs.truth.t_origin if fs.truth is not None else fs.clock_now()
+        t_start = t_start_of(fs)
         while True:
             sched.wait()
             t = fs.clock_now() - t_start
             if t >= duration:
                 break
-            fs.apply_faults(t, loop)
             if fs.loop_stalled(t):       # injected "loop does not read the FIFO" fault
                 sched.done()
                 continue
@@ -206,6 +206,10 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
         res_top["plots"] = [str(p) for p in write_plots(folder, out, truth, cerr)]
     (folder / "summary.json").write_text(json.dumps(_jsonable(res_top), indent=2))
     return res_top
+
+
+def t_start_of(fs) -> float:
+    return fs.truth.t_origin if fs.truth is not None else fs.clock_now()
 
 
 def _cfg_dict(obj) -> dict:
