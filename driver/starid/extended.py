@@ -264,24 +264,40 @@ def extended_core(b, q_pred, cam, vec, vmag, vstart, vstars, vvec, vh, vg, mag_m
     return match, nb_c, c_cat, cand_cat, pat_nb
 
 
-ST_OK, ST_FEW, ST_GATE, ST_BAD = 0, 1, 2, 3
+ST_OK, ST_FEW, ST_GATE, ST_BAD, ST_BAD_Q = 0, 1, 2, 3, 4
 STATUS_TEXT = {ST_OK: "ok", ST_FEW: "fewer than 2 verified matches",
-               ST_GATE: "attitude disagrees with the prediction", ST_BAD: "non-finite centroid"}
+               ST_GATE: "attitude disagrees with the prediction", ST_BAD: "non-finite centroid",
+               ST_BAD_Q: "q_pred is not a unit quaternion"}
 
 
 @njit(cache=True)
-def extended_identify_uv(uv, q_pred, cam, vec, vmag, vstart, vstars, vvec, vh, vg, mag_max, half_ext, br, pr, g, cell,
-                         xi, max_ref, method, tri_eps, n_orient, tol, fov_radius, gate, mag_deep):
-    """:func:`extended_identify` from centroids ``uv`` (n, 2) px (status ``ST_BAD`` and no
-    matches when any is not finite)."""
+def extended_identify_uv(uv, q_pred, cam, settings, vec, vmag, ids, vstart, vstars, vvec, vh, vg):
+    """:func:`extended_identify` from centroids ``uv`` (n, 2) px in one compiled call.
+
+    ``settings`` packs the scalars (see :meth:`ExtendedIdentifier.settings`). Returns
+    ``(match, match_ids, q, status, nb_c, c_cat, cand_cat, pat_nb)``; status ``ST_BAD``
+    when a centroid is not finite, ``ST_BAD_Q`` when ``q_pred`` is not a unit quaternion."""
+    n_orient = int(settings[10])
+    e = np.empty(0, dtype=np.int64)
+    none = -np.ones(uv.shape[0], dtype=np.int64)
+    qq = 0.0
+    for i in range(4):
+        qq += q_pred[i] * q_pred[i]
+    if not (abs(qq - 1.0) <= 1e-6):
+        return none, none.copy(), np.array([0.0, 0.0, 0.0, 1.0]), ST_BAD_Q, e, e, e, np.empty((0, 1), dtype=np.int64)
     for i in range(uv.shape[0]):
         if not (np.isfinite(uv[i, 0]) and np.isfinite(uv[i, 1])):
-            e = np.empty(0, dtype=np.int64)
-            return (-np.ones(uv.shape[0], dtype=np.int64), np.array([0.0, 0.0, 0.0, 1.0]), ST_BAD, e, e, e,
-                    np.empty((0, max(n_orient, 1)), dtype=np.int64))
+            return none, none.copy(), np.array([0.0, 0.0, 0.0, 1.0]), ST_BAD, e, e, e, np.empty((0, 1), dtype=np.int64)
     b = unproject_many(cam, uv)
-    return extended_identify(b, q_pred, cam, vec, vmag, vstart, vstars, vvec, vh, vg, mag_max, half_ext, br, pr, g,
-                             cell, xi, max_ref, method, tri_eps, n_orient, tol, fov_radius, gate, mag_deep)
+    match, q, st, nb_c, c_cat, cand_cat, pat_nb = extended_identify(
+        b, q_pred, cam, vec, vmag, vstart, vstars, vvec, vh, vg, settings[0], settings[1], settings[2], settings[3],
+        int(settings[4]), settings[5], int(settings[6]), int(settings[7]), int(settings[8]), settings[9], n_orient,
+        settings[11], settings[12], settings[13], settings[14])
+    out_ids = -np.ones(uv.shape[0], dtype=np.int64)
+    for i in range(uv.shape[0]):
+        if match[i] >= 0:
+            out_ids[i] = ids[match[i]]
+    return match, out_ids, q, st, nb_c, c_cat, cand_cat, pat_nb
 
 
 @njit(cache=True)
@@ -316,6 +332,7 @@ class ExtendedIdentifier:
     attitude and the prediction. ``n_orient``: orientations tried per candidate pattern
     (1 = the plain grid rule). ``deep_mag``: A's real part also holds catalog stars this
     much fainter than ``mag_max`` (candidates and pattern stars the sensor may report).
+    Parameters are read once, at construction.
     """
 
     index: object
@@ -345,6 +362,11 @@ class ExtendedIdentifier:
         w, h = self.camera.width_px, self.camera.height_px
         self.fov_radius = math.atan(0.5 * math.hypot(w, h) / self.camera.focal_length_px)
         self._code = M_GRID if self.method == "grid" else M_TRIANGLE
+        self._method = "extended-" + self.method
+        p = self.params
+        self._settings = np.array([self.mag_max, self.half_ext, p.br, p.pr, p.g, p.cell, p.xi, self.max_ref,
+                                   self._code, self.tri_eps, self.n_orient, self.tol, self.fov_radius, self.gate,
+                                   self.mag_max + self.deep_mag], dtype=np.float64)
         self.last = None  # raw outputs of the last call (neighbour statistics)
 
     def identify_vectors(self, b: np.ndarray, q_pred: np.ndarray) -> StarIdResult:
@@ -358,17 +380,21 @@ class ExtendedIdentifier:
 
     def identify(self, uv: np.ndarray, q_pred: np.ndarray) -> StarIdResult:
         """Identify centroids ``uv`` (n, 2) [col, row] px, brightest first (one compiled call)."""
-        ix, p = self.index, self.params
-        pts = np.asarray(uv, dtype=np.float64)
-        if pts.ndim != 2 or (pts.size and pts.shape[1] != 2):
-            pts = pts.reshape(-1, 2) if pts.size % 2 == 0 and pts.size else np.empty((0, 2))
-        out = extended_identify_uv(np.ascontiguousarray(pts), self._q(q_pred), self._cam, ix.vectors, ix.vmag,
-                                   ix.vox_start, ix.vox_stars, ix.vox_vec, ix.vox_h, ix.vox_g, self.mag_max,
-                                   self.half_ext, p.br, p.pr, p.g, p.cell, p.xi, self.max_ref, self._code, self.tri_eps,
-                                   self.n_orient, self.tol, self.fov_radius, self.gate, self.mag_max + self.deep_mag)
-        if int(out[2]) == ST_BAD:
-            raise ConfigError("centroids must be finite pixel coordinates")
-        return self._result(out)
+        ix = self.index
+        pts = uv
+        if not (isinstance(pts, np.ndarray) and pts.dtype == np.float64 and pts.ndim == 2 and pts.shape[1] == 2
+                and pts.flags.c_contiguous):
+            pts = np.asarray(uv, dtype=np.float64)
+            pts = np.ascontiguousarray(pts.reshape(-1, 2) if pts.size else np.empty((0, 2)))
+        q = q_pred if (isinstance(q_pred, np.ndarray) and q_pred.dtype == np.float64 and q_pred.shape == (4,)) \
+            else self._q(q_pred)
+        out = extended_identify_uv(pts, q, self._cam, self._settings, ix.vectors, ix.vmag, ix.ids, ix.vox_start,
+                                   ix.vox_stars, ix.vox_vec, ix.vox_h, ix.vox_g)
+        st = out[3]
+        if st == ST_BAD or st == ST_BAD_Q:
+            raise ConfigError(STATUS_TEXT[st])
+        self.last = (out[0],) + out[4:]
+        return StarIdResult(out[0], out[1], out[2], st == ST_OK, STATUS_TEXT[st], math.nan, self._method)
 
     @staticmethod
     def _q(q_pred) -> np.ndarray:
