@@ -10,8 +10,10 @@ real bus) and, per transaction, can:
 * disconnect — every transaction fails with ``OSError(errno.ENODEV)`` until reconnected.
 
 :class:`ByteFaults` mutates a byte stream on its way out: corrupt (bit flips), drop
-(bytes vanish), delay (each write is held back by a fixed delay plus uniform jitter);
-``disconnected`` makes the writer stop. Counters record what was injected.
+(bytes vanish), garbage (a burst of random bytes, delimiters included, written before a
+write), delay (each write is held back by a fixed delay plus uniform jitter);
+``disconnected`` makes the writer stop. Counters record what was injected, ``mangled`` the
+writes (frames) that reached the wire changed.
 """
 
 from __future__ import annotations
@@ -168,14 +170,18 @@ class ByteFaults:
     """Mutations applied to bytes on a link, deterministic for a given seed."""
 
     def __init__(self, seed: int = 0, corrupt_p: float = 0.0, drop_p: float = 0.0, delay_s: float = 0.0,
-                 jitter_s: float = 0.0):
+                 jitter_s: float = 0.0, garbage_p: float = 0.0, garbage_len: tuple[int, int] = (8, 64)):
         self.rng = random.Random(seed)
         self.corrupt_p = corrupt_p
         self.drop_p = drop_p
         self.delay_s = delay_s
         self.jitter_s = jitter_s
+        self.garbage_p = garbage_p          # probability that a write is preceded by a garbage burst
+        self.garbage_len = garbage_len      # burst length range (bytes, inclusive)
         self.disconnected = False
-        self.injected = {"corrupt": 0, "drop": 0, "delayed": 0}
+        self.injected = {"corrupt": 0, "drop": 0, "delayed": 0, "garbage_bursts": 0, "garbage_bytes": 0}
+        self.writes = 0                     # writes passed through
+        self.mangled = 0                    # writes whose bytes were changed (corrupt or drop)
 
     def mangle(self, data: bytes) -> bytes:
         if self.corrupt_p <= 0 and self.drop_p <= 0:
@@ -197,13 +203,28 @@ class ByteFaults:
             self.injected["delayed"] += 1
         return d
 
+    def garbage(self) -> bytes:
+        """A garbage burst (random bytes, 0x00 delimiters included) or b"" by ``garbage_p``."""
+        if self.garbage_p <= 0 or self.rng.random() >= self.garbage_p:
+            return b""
+        n = self.rng.randint(*self.garbage_len)
+        self.injected["garbage_bursts"] += 1
+        self.injected["garbage_bytes"] += n
+        return bytes(self.rng.randrange(256) for _ in range(n))
+
     def write_through(self, write, data: bytes, sleep=None) -> None:
-        """Apply delay, then corruption/drops, then ``write`` the result (nothing if disconnected)."""
+        """Apply delay, then corruption/drops (and a garbage burst before), then ``write`` the
+        result (nothing if disconnected)."""
         if self.disconnected:
             return
         d = self.delay()
         if d > 0:
             (sleep or precise_wait)(d)
-        data = self.mangle(data)
-        if data:
-            write(data)
+        self.writes += 1
+        junk = self.garbage()
+        out = self.mangle(data)
+        if out != data:
+            self.mangled += 1
+        out = junk + out
+        if out:
+            write(out)
