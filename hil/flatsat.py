@@ -361,6 +361,8 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
 
     head = make_head(cfg, connect(), rec_clock, reconnect=connect, head_clock=head_clock,
                      poll_log=writer)
+    if faults.firmware_head is not None:
+        head.sensor_expose = faults.firmware_head.expose
     closers.insert(0, head.close)
     closers.append(lambda: current["link"].close())
     wiring["loop"] = ("gyrostar.loop.coupled: spot EKF per star (gyrostar.core.spot_ekf) + QUEST attitude "
@@ -435,10 +437,11 @@ def _head_devices(cfg, scen, sim, truth, seed, faults):
     if h.kind == "firmware-host":
         from .fwhead import FirmwareHead
 
-        fw = FirmwareHead(h.program or None, sim, truth, seed, cfg.sim)
+        fw = FirmwareHead(h.program or None, sim, truth, seed, cfg.sim, scen.mag_limit or cfg.sim.mag_limit)
         fw.start()
         faults.firmware_head = fw
-        return fw.open_link, f"firmware host program {fw.program} on pty {fw.path}", [fw.stop]
+        truth.on_restart.append(fw.set_origin)
+        return fw.open_link, f"firmware host program {fw.program} on a pty (relay {fw.path})", [fw.stop]
 
     def open_serial():
         return SerialLink(h.url, baudrate=h.baudrate)

@@ -84,6 +84,7 @@ class HeadPort:
         self._poll_log = poll_log              # LogWriter when recording
         self._replay_polls = replay_polls      # deque of recorded poll answers when replaying
         self._replay_reconnects = replay_reconnects
+        self.sensor_expose = None              # simulated sensor files only: expose(t_start)
         self.client = None
         self.info = None
         self._job = None
@@ -212,6 +213,7 @@ class HeadPort:
         c = self.client
         if kind == "windows":
             c.set_windows(spans)
+            self._sensor_expose()
             cap = c.capture(fetch=True)
             order = {w.window_id: w.pixels for w in cap.windows}
             ids = []
@@ -230,6 +232,7 @@ class HeadPort:
         # full frame: one small window keeps CAPTURE legal; the frame is read in chunks
         w, h = int(self.info["width"]), int(self.info["height"])
         c.set_windows(np.array([[0, h // 2, w // 2, w // 2 + 1]], np.int32))
+        self._sensor_expose()
         cap = c.capture(fetch=False)
         saved, c.timeout = c.timeout, max(c.timeout, 2.0)   # the first chunk waits for a full render
         try:
@@ -238,6 +241,13 @@ class HeadPort:
             c.timeout = saved
         t0, t1, tm = _exposure_times(cap)
         return ImageResult("frame", t0, t1, tm, image=img)
+
+    def _sensor_expose(self) -> None:
+        """Simulated sensor files only: tell the sensor an exposure is about to start."""
+        if self.sensor_expose is not None:
+            import time as _time
+
+            self.sensor_expose(_time.monotonic() + 0.0003)
 
     def poll(self) -> ImageResult | None:
         """The finished job's result (and the port is free again), or None while in flight."""

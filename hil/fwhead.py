@@ -1,0 +1,215 @@
+"""The firmware's host program as the flatsat's head, fed by a sensor process.
+
+:class:`gyrostar.mocks.firmware_host.FirmwareHost` runs ``firmware/build/host/gyrostar-head``
+on a pty; its sensor is a memory-mapped pixel file. The firmware's CAPTURE waits the
+exposure and then reads its windows from whatever frame the file holds, so a child process
+(``fork``) plays the sensor: just before each CAPTURE is sent, the head port tells it the
+exposure start (``expose``), and it renders the sky (:class:`gyrostar.mocks.sky.Sky`) for
+``[t_start, t_start + T]`` at the scenario's attitude and rates into the file within a few
+ms, before the firmware reads it at the exposure's end. Pixels within 16 px of every star's
+path are rendered fresh with their noise each frame; the rest of the sensor is one rendered
+star-less frame (its noise frozen), since only the pixels around stars are ever read while
+tracking. The exposure start the sensor uses is the host's estimate (send time + ~0.3 ms);
+the firmware stamps its own, so the two differ by the link latency jitter (~0.1 ms).
+
+Link corruption is injected by a relay: the client talks to a second pty whose bytes from
+the firmware pass through :class:`gyrostar.mocks.faults.ByteFaults`.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import select
+import threading
+import tty
+
+import numpy as np
+
+from ..errors import DeviceError
+
+BOX = 16
+
+
+def _sensor_child(conn, pixels, sim, truth, seed, catalog_name, mag_limit):
+    from ..catalog import load_catalog
+    from ..mocks.sky import Sky
+
+    sky = Sky(load_catalog(catalog_name, mag_limit), sim, seed=seed)
+    w, h = sky.camera.width_px, sky.camera.height_px
+    t_exp = sim.detector.exposure_s
+    saved = sky.electrons.copy()
+    sky.electrons[:] = 0.0
+    static, _ = sky.render_frame(truth.q0, np.zeros(3), frame=0)
+    sky.electrons[:] = saved
+    pixels.write_frame(static)
+    frame = 1
+    eclipse = False
+    while True:
+        cmd, arg = conn.recv()
+        if cmd == "stop":
+            return
+        conn.send(("ok", None))          # answer at once: the exposure renders meanwhile
+        if cmd == "origin":
+            truth.restart(arg)
+        elif cmd == "eclipse":
+            eclipse = bool(arg)
+            sky.electrons[:] = 0.0 if eclipse else saved
+        elif cmd == "expose":
+            t0 = float(arg)
+            q0 = truth.q_at(t0, "sensor")
+            rates = truth.rates(t0 + (np.arange(8) + 0.5) * t_exp / 8)
+            exp = sky.expose(q0, rates)
+            img = static.copy()
+            inf = exp.truth.in_field
+            if np.any(inf) and not eclipse:
+                spans = _box_spans(exp.truth.uv[inf], w, h)
+                pix = np.minimum(sky.readout_windows(exp, spans, frame=frame), 0x3FF)
+                widths = spans[:, 3] - spans[:, 2]
+                rows = np.repeat(spans[:, 1], widths)
+                cols = np.repeat(spans[:, 2], widths) + (np.arange(widths.sum()) - np.repeat(
+                    np.cumsum(widths) - widths, widths))
+                img[rows, cols] = pix
+            pixels.write_frame(img)
+            frame += 1
+
+
+def _box_spans(uv: np.ndarray, w: int, h: int) -> np.ndarray:
+    """Spans [star, row, c0, c1) of a (2·BOX+1)² box around each star (boxes may overlap:
+    the renderer's counter-based noise gives a pixel the same value in every box)."""
+    out = []
+    for j, (u, v) in enumerate(uv):
+        r0, r1 = max(0, int(v) - BOX), min(h, int(v) + BOX + 1)
+        c0, c1 = max(0, int(u) - BOX), min(w, int(u) + BOX + 1)
+        if r1 > r0 and c1 > c0:
+            rows = np.arange(r0, r1)
+            out.append(np.column_stack([np.full(len(rows), j), rows, np.full(len(rows), c0), np.full(len(rows), c1)]))
+    return np.ascontiguousarray(np.concatenate(out).astype(np.int32)) if out else np.zeros((0, 4), np.int32)
+
+
+class _Relay:
+    """A pty the client opens, relaying to and from the firmware's pty, corrupting replies."""
+
+    def __init__(self, target: str):
+        self.target = target
+        self.master, self.slave = os.openpty()
+        tty.setraw(self.slave)
+        self.path = os.ttyname(self.slave)
+        self.faults = None
+        self._fw = os.open(target, os.O_RDWR | os.O_NOCTTY)
+        tty.setraw(self._fw)
+        self._stop = False
+        self._thread = threading.Thread(target=self._run, name="fw-relay", daemon=True)
+        self._thread.start()
+
+    def _run(self):
+        while not self._stop:
+            try:
+                r, _, _ = select.select([self.master, self._fw], [], [], 0.05)
+                for fd in r:
+                    data = os.read(fd, 65536)
+                    if not data:
+                        return
+                    if fd == self.master:
+                        os.write(self._fw, data)
+                    else:
+                        if self.faults is not None:
+                            data = self.faults.mangle(data)
+                        os.write(self.master, data)
+            except OSError:
+                return
+
+    def close(self):
+        self._stop = True
+        self._thread.join(timeout=1.0)
+        for fd in (self.master, self.slave, self._fw):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+
+
+class FirmwareHead:
+    """The firmware host program plus its sensor process; same control surface as
+    :class:`gyrostar.hil.emuproc.EmulatorProcess` (start, disconnect, corruption, eclipse)."""
+
+    def __init__(self, program, sim, truth, seed, simcfg, mag_limit: float):
+        from pathlib import Path
+
+        from ..mocks.firmware_host import FirmwareHost
+
+        cam = sim.camera
+        self.host = FirmwareHost(cam.width_px, cam.height_px, binary=Path(program) if program else None)
+        self.program = self.host.binary
+        ctx = mp.get_context("fork")
+        self.conn, child = ctx.Pipe()
+        self.proc = ctx.Process(target=_sensor_child, name="sensor",
+                                args=(child, self.host.pixels, sim, truth, seed, simcfg.catalog, mag_limit),
+                                daemon=True)
+        self.proc.start()
+        self.relay = None
+        self.connected = False
+        self.path = None
+        self._corrupt = None
+        self._lock = threading.Lock()
+
+    def _call(self, cmd, arg=None):
+        with self._lock:
+            self._call_locked(cmd, arg)
+
+    def _call_locked(self, cmd, arg):
+        self.conn.send((cmd, arg))
+        if not self.conn.poll(10.0):
+            raise DeviceError(f"sensor process did not answer {cmd}")
+        self.conn.recv()
+
+    def start(self) -> str:
+        fw_path = self.host.start()
+        self.relay = _Relay(fw_path)
+        self.set_corruption(self._corrupt)
+        self.path = self.relay.path
+        self.connected = True
+        return self.path
+
+    def disconnect(self) -> None:
+        self.connected = False
+        if self.relay is not None:
+            self.relay.close()
+            self.relay = None
+        self.host.stop()
+
+    def set_corruption(self, p) -> None:
+        from ..mocks.faults import ByteFaults
+
+        self._corrupt = p
+        if self.relay is not None:
+            self.relay.faults = None if p is None else ByteFaults(seed=7, corrupt_p=float(p))
+
+    def expose(self, t_start: float) -> None:
+        """The sensor integrates from ``t_start`` (host s): render that exposure into the file
+        (done within a few ms, before the firmware reads it at the exposure's end)."""
+        self._call("expose", t_start)
+
+    def eclipse(self, on: bool) -> None:
+        self._call("eclipse", on)
+
+    def set_origin(self, t0: float) -> None:
+        self._call("origin", t0)
+
+    def open_link(self):
+        from ..transport import SerialLink
+
+        if not self.connected:
+            raise DeviceError("firmware head is disconnected")
+        return SerialLink(self.path)
+
+    def stop(self) -> None:
+        self.disconnect()
+        try:
+            self.conn.send(("stop", None))
+        except OSError:
+            pass
+        self.proc.join(timeout=2.0)
+        if self.proc.is_alive():
+            self.proc.kill()
+        self.host.close()
