@@ -11,7 +11,7 @@ FW_HOST  := firmware/build/host/gyrostar-head
 PYTEST_ARGS ?=
 SECONDS  ?= 60
 
-.PHONY: run test setup lint fw-host fw-test fw-arm fw-fuzz bench clean help
+.PHONY: run test setup lint fw-host fw-test fw-arm fw-fuzz fuzz soak bench clean help
 
 help:
 	@echo "make run    - set up and run the coupled loop on the built-in simulated flatsat"
@@ -20,6 +20,8 @@ help:
 	@echo "make bench  - speed benchmarks (ratios against plain-numpy / peer baselines)"
 	@echo "make fw-arm - build the Cortex-M3 image for QEMU mps2-an385 and print its size"
 	@echo "make fw-fuzz SECONDS=N - libFuzzer over the firmware decoder and dispatcher"
+	@echo "make fuzz   - firmware libFuzzer (FUZZ_RUNS execs) + Python hypothesis campaign (docs/RELIABILITY.md)"
+	@echo "make soak   - 1 h of simulated flatsat time with random faults: RSS and overruns (SOAK_S=3600)"
 
 $(STAMP): pyproject.toml setup.py
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -40,6 +42,21 @@ fw-arm:
 
 fw-fuzz:
 	$(MAKE) -C firmware fuzz SECONDS=$(SECONDS)
+
+# reliability campaigns (docs/RELIABILITY.md); both run niced: the machine is shared
+FUZZ_RUNS ?= 10000000
+FUZZ_EXAMPLES ?= 10000
+SOAK_S ?= 3600
+fuzz: setup
+	$(MAKE) -C firmware fuzz-build
+	cd firmware && mkdir -p build/fuzz/corpus build/fuzz/artifacts && nice -n 10 ./build/fuzz/fuzz-head \
+	  -runs=$(FUZZ_RUNS) -dict=fuzz/head.dict -max_len=4400 -print_final_stats=1 \
+	  -artifact_prefix=build/fuzz/artifacts/ build/fuzz/corpus fuzz/corpus
+	GYROSTAR_FUZZ_EXAMPLES=$(FUZZ_EXAMPLES) nice -n 10 $(PY) -m pytest tests/reliability -m fuzz -q
+
+soak: setup
+	@mkdir -p build/reliability
+	nice -n 5 $(PY) -m gyrostar.reliability.soak --duration $(SOAK_S) --out build/reliability/soak.json
 
 run: setup fw-host
 	$(GYROSTAR) run $(RUN_ARGS)
