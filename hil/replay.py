@@ -67,6 +67,7 @@ def replay(path: str | Path) -> dict:
         "recorded_outputs": int(len(recorded)),
         "replayed_outputs": int(len(replayed)),
         "bit_exact": bool(same_prefix and len(replayed) == len(recorded)),
+        "prefix_exact": bool(same_prefix and n > 0),
         "first_difference_at": first_diff,
         "steps": n_steps,
         "stopped": stop_reason,
