@@ -365,9 +365,9 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
         head.sensor_expose = faults.firmware_head.expose
     closers.insert(0, head.close)
     closers.append(lambda: current["link"].close())
-    wiring["loop"] = ("gyrostar.loop.coupled: spot EKF per star (gyrostar.core.spot_ekf) + QUEST attitude "
-                      "(gyrostar.core.quest), Pyramid acquisition (gyrostar.starid.pyramid), trajectory windows "
-                      "(gyrostar.core.windows), CoG centroids (gyrostar.core.centroid)")
+    wiring["loop"] = ("gyrostar.loop.coupled: attitude MEKF (gyrostar.core.mekf) with star-vector updates, "
+                      "Pyramid acquisition (gyrostar.starid.pyramid), trajectory windows (gyrostar.core.motion/"
+                      "windows), CoG + smeared-PSF centroids (gyrostar.core.centroid)")
     wiring["gyro_time"] = ("FIFO watermark interrupt edges (emulated INT3 line) anchor the sample times"
                            if irq is not None else "FIFO polls bound the sample times (no interrupt line wired)")
     return Flatsat(cfg, scen, camera, rec_clock, base, gyro, head, truth, simulated_clock=False, wiring=wiring,

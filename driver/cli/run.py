@@ -21,7 +21,8 @@ def configure(parser) -> None:
     parser.add_argument("--out", metavar="DIR", default=None, help="run folder (default: runs/<timestamp>)")
     parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     parser.add_argument("--realtime", action="store_true",
-                        help="pace the simulated flatsat on the monotonic clock (default: as fast as possible)")
+                        help="ask for the config's SCHED_FIFO priority / CPU affinity (the loop always runs on "
+                             "the monotonic clock: the emulated head's exposures take real time)")
     add_json(parser)
 
 
