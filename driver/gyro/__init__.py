@@ -2,9 +2,18 @@
 
 from .base import FifoGyro, GyroDevice
 from .bmi088 import Bmi088Gyro
-from .convert import FLAG_GAP, FLAG_SAT_X, FLAG_SAT_Y, FLAG_SAT_Z, FLAG_SATURATED, FLAG_STUCK, FLAG_TIME_EST
+from .convert import (
+                      FLAG_GAP,
+                      FLAG_SAT_X,
+                      FLAG_SAT_Y,
+                      FLAG_SAT_Z,
+                      FLAG_SATURATED,
+                      FLAG_STUCK,
+                      FLAG_STUCK_AXIS,
+                      FLAG_TIME_EST,
+)
 from .l3gd20h import L3gd20hGyro
 from .samples import GyroSamples
 
 __all__ = ["GyroDevice", "FifoGyro", "Bmi088Gyro", "L3gd20hGyro", "GyroSamples", "FLAG_GAP", "FLAG_SAT_X",
-           "FLAG_SAT_Y", "FLAG_SAT_Z", "FLAG_SATURATED", "FLAG_STUCK", "FLAG_TIME_EST"]
+           "FLAG_SAT_Y", "FLAG_SAT_Z", "FLAG_SATURATED", "FLAG_STUCK", "FLAG_STUCK_AXIS", "FLAG_TIME_EST"]

@@ -22,7 +22,7 @@ import numpy as np
 
 from ..clock import MONOTONIC
 from ..errors import DeviceError
-from .convert import FLAG_GAP, FLAG_TIME_EST, convert_frames
+from .convert import FLAG_GAP, FLAG_SATURATED, FLAG_STUCK_AXIS, FLAG_TIME_EST, convert_frames
 from .samples import GyroSamples
 from .timebase import FrameTimebase
 
@@ -76,7 +76,7 @@ class FifoGyro(GyroDevice):
         self._k_next: int | None = None
         self._resync = False
         self._last_event = -math.inf
-        self._prev = np.zeros(4, np.int32)
+        self._prev = np.zeros(8, np.int32)   # last frame, valid, per-axis unchanged-frame runs
 
     # --- part-specific hooks -------------------------------------------------------------
     @abstractmethod
@@ -163,6 +163,9 @@ class FifoGyro(GyroDevice):
         buf = np.frombuffer(raw, np.uint8)
         convert_frames(buf, n, self.scale, self.mounting, tb.t_ref, tb.period, tb.k_ref, first, first_flags,
                        self._prev, out.t, out.index, out.rate, out.flags, out.n)
+        new_flags = out.flags[out.n:out.n + n]
+        out.saturated += int(np.count_nonzero(new_flags & FLAG_SATURATED))
+        out.stuck_axis += int(np.count_nonzero(new_flags & FLAG_STUCK_AXIS))
         out.n += n
         if gap:
             out.gap_frames += gap

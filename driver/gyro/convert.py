@@ -15,6 +15,8 @@ FLAG_SATURATED = FLAG_SAT_X | FLAG_SAT_Y | FLAG_SAT_Z
 FLAG_GAP = 0x08      # frames were lost just before this sample (FIFO overrun); see GyroSamples.gap_frames
 FLAG_STUCK = 0x10    # this frame repeats the previous frame's raw bytes exactly (stuck output)
 FLAG_TIME_EST = 0x20  # index (and so time) after a gap was estimated from the time model
+FLAG_STUCK_AXIS = 0x40  # one axis's raw output has not changed for STUCK_RUN frames (stuck axis)
+STUCK_RUN = 32       # frames (80 ms at 400 Hz); a live axis's noise (≥ 1.5 LSB rms) never repeats that long
 
 
 @njit(cache=True)
@@ -25,9 +27,12 @@ def convert_frames(raw, n, scale, mounting, t_ref, period, k_ref, first_index, f
 
     ``scale`` rad/s per LSB; ``mounting`` (3×3) rotates sensor axes into body axes; sample
     ``k`` is at host time ``t_ref + period·(k − k_ref)`` s; ``first_flags`` is OR-ed into the
-    first sample; ``prev_raw`` (int32[4]: x, y, z, valid) carries the last frame across calls
-    for stuck-output detection and is updated. Returns the number of samples written.
+    first sample; ``prev_raw`` (int32[4]: x, y, z, valid, or int32[8]: … then the per-axis
+    counts of unchanged frames) carries the last frame across calls for stuck-output
+    detection and is updated. With 8 entries an axis unchanged for ``STUCK_RUN`` frames
+    flags ``FLAG_STUCK_AXIS``. Returns the number of samples written.
     """
+    runs = prev_raw.shape[0] >= 7
     for i in range(n):
         o = start + i
         b = 6 * i
@@ -49,6 +54,13 @@ def convert_frames(raw, n, scale, mounting, t_ref, period, k_ref, first_index, f
             flags |= FLAG_SAT_Z
         if prev_raw[3] != 0 and sx == prev_raw[0] and sy == prev_raw[1] and sz == prev_raw[2]:
             flags |= FLAG_STUCK
+        if runs:
+            # a saturated axis is pinned at the limit: flagged FLAG_SAT_*, not counted as stuck
+            prev_raw[4] = prev_raw[4] + 1 if prev_raw[3] != 0 and sx == prev_raw[0] and not flags & FLAG_SAT_X else 0
+            prev_raw[5] = prev_raw[5] + 1 if prev_raw[3] != 0 and sy == prev_raw[1] and not flags & FLAG_SAT_Y else 0
+            prev_raw[6] = prev_raw[6] + 1 if prev_raw[3] != 0 and sz == prev_raw[2] and not flags & FLAG_SAT_Z else 0
+            if prev_raw[4] >= STUCK_RUN or prev_raw[5] >= STUCK_RUN or prev_raw[6] >= STUCK_RUN:
+                flags |= FLAG_STUCK_AXIS
         prev_raw[0] = sx
         prev_raw[1] = sy
         prev_raw[2] = sz

@@ -23,16 +23,20 @@ class GyroSamples:
         self.n = 0
         self.gap_frames = 0   # frames known lost (overruns), summed over the flagged gaps
         self.gaps = 0         # number of flagged gaps
+        self.saturated = 0    # samples with an axis at the range limit (FLAG_SAT_*)
+        self.stuck_axis = 0   # samples flagged FLAG_STUCK_AXIS
 
     @property
     def room(self) -> int:
         return self.capacity - self.n
 
     def clear(self) -> None:
-        """Forget the rows (keep the arrays); gap counters are reset too."""
+        """Forget the rows (keep the arrays); gap and fault counters are reset too."""
         self.n = 0
         self.gap_frames = 0
         self.gaps = 0
+        self.saturated = 0
+        self.stuck_axis = 0
 
     def view(self):
         """``(t, index, rate, flags)`` views of the valid rows."""
