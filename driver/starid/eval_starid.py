@@ -398,12 +398,15 @@ class Runner:
             from dask.distributed import Client, LocalCluster
         except ImportError as exc:
             raise NotAvailableError(f"dask.distributed is needed for the Monte Carlo: {exc}") from exc
+        import logging
+
+        for name in ("distributed", "distributed.scheduler", "distributed.nanny", "distributed.core",
+                     "distributed.worker", "distributed.http.proxy"):
+            logging.getLogger(name).setLevel(logging.ERROR)
         self.cluster = None
         if scheduler:
             self.client = Client(scheduler)
         else:
-            import logging
-
             self.cluster = LocalCluster(n_workers=max(1, workers), threads_per_worker=1, processes=True,
                                         dashboard_address=None, silence_logs=logging.ERROR)
             self.client = Client(self.cluster)

@@ -15,7 +15,10 @@ real-part star of A gets its pattern built on A; patterns are lists of occupied 
 numbers (:func:`gyrostar.starid.grid.grid_pattern`), compared by shared cells. A reference
 takes the candidate with the most shared cells when that is ≥ ξ and strictly more than any
 other; a candidate claimed by two references is given to neither. The matches must then
-pass QUEST residual verification, no matched star may have a second indexed star within
+pass QUEST residual verification (after the verified attitude has labelled the other
+centroids, and with a leave-one-out residual test while ≤ 6 stars are matched; two matches
+are accepted only from images of at most three centroids), no matched star may have a
+second indexed star within
 the residual tolerance (:func:`gyrostar.starid.verify.drop_ambiguous`; the index may go
 deeper than ``mag_max`` for this), and the attitude must lie within ``gate`` (rad) of the
 prediction, or the frame is rejected (the tracker falls back to lost-in-space).
@@ -38,10 +41,12 @@ from ..camera import project_point, unproject_many
 from ..errors import ConfigError
 from .grid import GridParams, cells_from, nth_neighbour, tangent_coords_into
 from .index import cone_query, n_brighter
+from .pyramid import label_rest
 from .result import StarIdResult
-from .verify import drop_ambiguous, verify_matches
+from .verify import drop_ambiguous, loo_reject, verify_matches
 
 M_GRID, M_TRIANGLE = 0, 1
+LOO_MAX = 6  # leave-one-out test up to this many matches
 
 
 @njit(cache=True)
@@ -309,9 +314,16 @@ def extended_identify(b, q_pred, cam, vec, vmag, vstart, vstars, vvec, vh, vg, m
                                                        half_ext, br, pr, g, cell, xi, max_ref, method,
                                                        tri_eps, n_orient, mag_deep)
     q, match, nok, _ = verify_matches(b, vec, raw, tol)
+    if nok >= 2:
+        # the verified attitude labels the other centroids (unambiguous both ways)
+        label_rest(b, q, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, tol, match)
+        q, match, nok, _ = verify_matches(b, vec, match, tol)
+    while 3 <= nok <= LOO_MAX and loo_reject(b, vec, match, tol):
+        q, match, nok, _ = verify_matches(b, vec, match, tol)
     if nok >= 2 and drop_ambiguous(b, q, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, tol, match) > 0:
         q, match, nok, _ = verify_matches(b, vec, match, tol)
-    if nok < 2:
+    if nok < 2 or (nok == 2 and b.shape[0] >= 4):
+        # two matches out of a rich field: the rest should have been labelled, so no
         match[:] = -1
         return match, q, ST_FEW, nb_c, c_cat, cand_cat, pat_nb
     err = quat_error_angles(q, q_pred)

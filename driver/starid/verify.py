@@ -126,3 +126,34 @@ def drop_ambiguous(b, q, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, to
             match[i] = -1
             dropped += 1
     return dropped
+
+
+@njit(cache=True)
+def loo_reject(b, ref, match, tol):
+    """Leave-one-out test (in place): each matched star's residual under the attitude solved
+    from the others; the worst, if beyond ``tol``, is unmatched. Returns True if one was.
+
+    With few stars a wrong match bends the joint solution until its own residual looks
+    small; predicted from the others it cannot hide."""
+    worst = -1
+    wres = tol
+    for i in range(match.shape[0]):
+        s = match[i]
+        if s < 0:
+            continue
+        match[i] = -1
+        q = solve(b, ref, match)
+        match[i] = s
+        a = quat_to_dcm(q)
+        r = ref[s]
+        d = 0.0
+        for j in range(3):
+            d += b[i, j] * (a[j, 0] * r[0] + a[j, 1] * r[1] + a[j, 2] * r[2])
+        res = np.arccos(min(1.0, max(-1.0, d)))
+        if res > wres:
+            wres = res
+            worst = i
+    if worst >= 0:
+        match[worst] = -1
+        return True
+    return False

@@ -51,3 +51,24 @@ def test_empty_and_single_star_images(method):
     q = np.array([0.0, 0.0, 0.0, 1.0])
     assert not ident.identify(np.empty((0, 2)), q).ok
     assert not ident.identify(np.array([[100.0, 200.0]]), q).ok
+
+
+def test_leave_one_out_rejects_a_wrong_match_the_joint_fit_hides():
+    from gyrostar.starid.verify import loo_reject, verify_matches
+
+    rng = np.random.default_rng(2)
+    ifov = math.radians(4.0) / 512
+    # four stars across a 4° field (body = ICRS here), measured with 1 px noise
+    xy = np.array([[-1.5, -1.2], [1.4, -1.0], [0.2, 1.5], [-1.6, 1.1]])
+    ref = np.column_stack([np.tan(np.radians(xy)), np.ones(4)])
+    ref /= np.linalg.norm(ref, axis=1)[:, None]
+    b = ref + rng.normal(0, ifov, ref.shape)
+    b /= np.linalg.norm(b, axis=1)[:, None]
+    # a fifth catalog star 7 px from star 3: matching star 3 to it is wrong
+    wrong = ref[3] + np.array([7 * ifov, 0.0, 0.0])
+    cat = np.vstack([ref, wrong / np.linalg.norm(wrong)])
+    match = np.array([0, 1, 2, 4])
+    tol = 5 * ifov
+    _, kept, nok, _ = verify_matches(b, cat, match, tol)
+    assert nok == 4  # the joint fit bends enough to pass the plain residual test
+    assert loo_reject(b, cat, kept, tol) and kept[3] == -1 and list(kept[:3]) == [0, 1, 2]
