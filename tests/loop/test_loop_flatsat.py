@@ -33,7 +33,7 @@ def demo_run(tmp_path_factory):
     cfg.outputs.udp = True
     cfg.outputs.udp_port = rx.getsockname()[1]
     rx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 23)
-    res = run_flatsat(cfg, hc.load_scenario("sim2"), duration=4.0, seed=5, folder=folder, plots=True, status=False)
+    res = run_flatsat(cfg, hc.load_scenario("sim2"), duration=6.0, seed=5, folder=folder, plots=True, status=False)
     got = []
     while True:
         try:
@@ -49,9 +49,9 @@ def test_run_tracks_truth_and_reports(demo_run):
     for key in ("attitude_error_arcsec_1sigma", "latency_p99_ms", "cpu_percent", "overruns", "mode_seconds",
                 "frames", "gyro_samples", "samples_lost"):
         assert key in res
-    assert res["mode_seconds"]["TRACK"] > 2.0
+    assert res["mode_seconds"]["TRACK"] > 2.5
     assert res["attitude_error_arcsec_1sigma"] < 12.0          # BMI088-class noise gives ~4–6″
-    assert res["frames"] > 100 and res["gyro_samples"] > 1400 and res["samples_lost"] == 0
+    assert res["frames"] > 100 and res["gyro_samples"] > 2000 and res["samples_lost"] == 0
     assert json.loads((folder / "summary.json").read_text())["frames"] == res["frames"]
     for png in ("attitude_error.png", "bias_estimate.png", "latency_histogram.png", "centroid_error.png"):
         assert (folder / png).stat().st_size > 1000
