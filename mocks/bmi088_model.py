@@ -162,8 +162,9 @@ class Bmi088GyroModel(RegisterModelBase):
     def _read_fifo(self, nbytes: int) -> bytes:
         frames = min(len(self.fifo_idx), (nbytes + 5) // 6)
         data = self.fifo_raw[:frames].tobytes()
-        self._popped.append(self.fifo_idx[:frames].copy())
-        self._popped_raw.append(self.fifo_raw[:frames].copy())
+        if self.truth_log:
+            self._popped.append(self.fifo_idx[:frames].copy())
+            self._popped_raw.append(self.fifo_raw[:frames].copy())
         self.fifo_idx = self.fifo_idx[frames:]
         self.fifo_raw = self.fifo_raw[frames:]
         empty = bytes([0x00, 0x80]) * 3  # an empty FIFO reads as -32768 on every axis

@@ -118,7 +118,8 @@ class L3gd20hModel(RegisterModelBase):
         off = reg - 0x28
         frames = min((off + n + 5) // 6, len(self.fifo_idx))
         stream = self.fifo_raw[:frames].tobytes()
-        self._popped.append(self.fifo_idx[:frames].copy())
+        if self.truth_log:
+            self._popped.append(self.fifo_idx[:frames].copy())
         self.fifo_idx, self.fifo_raw = self.fifo_idx[frames:], self.fifo_raw[frames:]
         stream += bytes(self.latest_raw) * ((off + n + 5) // 6 - frames)  # empty FIFO repeats the last sample
         return stream[off:off + n]

@@ -2,6 +2,8 @@
 
 A model keeps ``_popped`` (arrays of the global sample indices delivered through its FIFO
 data port, in order) and ``_t_next``/``_k_next``/``period`` (time and index of the next sample).
+The truth log grows with every FIFO read (≈ 80 kB/s at 400 Hz): long runs that do not need
+it (a flatsat soak) set ``truth_log = False``.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from .fake_spidev import FakeSpiDev
 
 class RegisterModelBase:
     default_address = 0x68
+    truth_log = True      # keep the delivered-frame log that popped_indices() returns
 
     def popped_indices(self) -> np.ndarray:
         """Global indices of every frame delivered through the FIFO data port, in order."""

@@ -54,3 +54,27 @@ def test_mangled_writes_counted():
         bf.write_through(out.append, encode_frame(0x81, i, b"x" * 30))
     changed = sum(1 for i, w in enumerate(out) if w != encode_frame(0x81, i, b"x" * 30))
     assert bf.mangled == changed > 150
+
+
+def test_register_model_truth_log_can_be_off_for_long_runs():
+    from gyrostar.clock import SimulatedClock
+    from gyrostar.gyro import Bmi088Gyro, GyroSamples
+    from gyrostar.mocks.bmi088_model import Bmi088GyroModel
+    from gyrostar.mocks.fake_rates import ProfileRates
+    from gyrostar.transport import I2CBus, I2CRegisters
+
+    counts = []
+    for log in (True, False):
+        clock = SimulatedClock(1.0)
+        model = Bmi088GyroModel(clock, ProfileRates(seed=1))
+        model.truth_log = log
+        gyro = Bmi088Gyro(I2CRegisters(I2CBus(model.smbus(), name="sim"), 0x68), clock=clock)
+        gyro.configure(400, 500, 1)
+        gyro.start()
+        out = GyroSamples(4000)
+        for _ in range(400):
+            clock.advance(0.0025)
+            gyro.read(out)
+        counts.append((out.n, len(model.popped_indices())))
+    assert counts[0][0] > 300 and counts[0][1] == counts[0][0]     # tests keep the full log
+    assert counts[1][0] > 300 and counts[1][1] == 0                # a soak keeps nothing per read
