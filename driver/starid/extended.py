@@ -15,9 +15,9 @@ real-part star of A gets its pattern built on A; patterns are lists of occupied 
 numbers (:func:`gyrostar.starid.grid.grid_pattern`), compared by shared cells. A reference
 takes the candidate with the most shared cells when that is ≥ ξ and strictly more than any
 other; a candidate claimed by two references is given to neither. The matches must then
-pass QUEST residual verification (after the verified attitude has labelled the other
-centroids, and with a leave-one-out residual test while ≤ 6 stars are matched; two matches
-are accepted only from images of at most three centroids), no matched star may have a
+pass QUEST residual verification (with a leave-one-out residual test at 1.5× the tolerance
+for 4–6 matches; a solution from ≤ 3 matches first labels the other centroids, and two
+matches are accepted only from images of at most three centroids), no matched star may have a
 second indexed star within
 the residual tolerance (:func:`gyrostar.starid.verify.drop_ambiguous`; the index may go
 deeper than ``mag_max`` for this), and the attitude must lie within ``gate`` (rad) of the
@@ -46,7 +46,8 @@ from .result import StarIdResult
 from .verify import drop_ambiguous, loo_reject, verify_matches
 
 M_GRID, M_TRIANGLE = 0, 1
-LOO_MAX = 6  # leave-one-out test up to this many matches
+LOO_MAX = 6  # leave-one-out test from 4 up to this many matches
+LOO_TOL = 1.5  # its tolerance, in residual tolerances (the others' attitude adds its own error)
 
 
 @njit(cache=True)
@@ -314,11 +315,11 @@ def extended_identify(b, q_pred, cam, vec, vmag, vstart, vstars, vvec, vh, vg, m
                                                        half_ext, br, pr, g, cell, xi, max_ref, method,
                                                        tri_eps, n_orient, mag_deep)
     q, match, nok, _ = verify_matches(b, vec, raw, tol)
-    if nok >= 2:
-        # the verified attitude labels the other centroids (unambiguous both ways)
+    if nok <= 3:
+        # a weak solution: its attitude must label other centroids (unambiguous both ways)
         label_rest(b, q, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, tol, match)
         q, match, nok, _ = verify_matches(b, vec, match, tol)
-    while 3 <= nok <= LOO_MAX and loo_reject(b, vec, match, tol):
+    while 4 <= nok <= LOO_MAX and loo_reject(b, vec, match, LOO_TOL * tol):
         q, match, nok, _ = verify_matches(b, vec, match, tol)
     if nok >= 2 and drop_ambiguous(b, q, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, tol, match) > 0:
         q, match, nok, _ = verify_matches(b, vec, match, tol)
