@@ -6,10 +6,11 @@ flatsat with four faults on the head → host reply stream (one after another, e
 (0.1 %), garbage bursts (8–64 random bytes before 30 % of replies), and a 2 s disconnect
 (the head's pty closes, a new one opens). It prints one JSON object: per fault the
 attitude continuity (cross-boresight error vs simulator truth just before, the maximum
-during, the maximum over the 2 s after; the largest step of that error between consecutive
-outputs), the image frames the loop needed after the fault to get a good one back
-(resynchronisation), injected vs counted bad frames, and run-wide: exceptions escaping the
-loop (must be 0), gyro samples lost, mode time. Exit status 1 when a criterion fails.
+during, the maximum over the 2 s after; the largest increase and decrease of that error
+between consecutive 400 Hz outputs), the mode time during the fault, the image frames
+the loop needed after the fault to get a good one back (resynchronisation), injected vs
+counted bad frames, and run-wide: exceptions escaping the loop (must be 0), gyro samples
+lost, mode time. Exit status 1 when a criterion fails.
 """
 
 from __future__ import annotations
@@ -48,6 +49,7 @@ def _cum(x: np.ndarray) -> np.ndarray:
 
 def analyse(res: dict, faults) -> dict:
     """Per-fault continuity, resynchronisation and bad-frame accounting from a campaign result."""
+    from ..loop.record import MODE_NAMES
     from .campaign import cross_boresight_error_arcsec
 
     tr, truth = res["trace"], res["truth"]
@@ -57,7 +59,7 @@ def analyse(res: dict, faults) -> dict:
     failed = tr["frames_failed"]
     corrupt = _cum(tr["link_corrupt"])
     retries = _cum(tr["link_retries"])
-    step = np.abs(np.diff(err, prepend=np.nan))
+    step = np.diff(err, prepend=np.nan)
     out = []
     for (name, ev), counts in zip(faults, res["byte_faults"]):
         t0, t1 = ev.at_s, ev.at_s + ev.seconds
@@ -80,7 +82,12 @@ def analyse(res: dict, faults) -> dict:
             "err_before_arcsec": _nanmax(err[before]),
             "err_max_during_arcsec": _nanmax(err[during]),
             "err_max_after_2s_arcsec": _nanmax(err[after]),
-            "err_largest_step_arcsec": _nanmax(step[around]),
+            # continuity: the largest change of the error between consecutive outputs (2.5 ms)
+            # that made it worse (a jump), and that made it better (an update correcting the coast)
+            "err_largest_increase_step_arcsec": _nanmax(step[around]),
+            "err_largest_correction_step_arcsec": _nanmax(-step[around]),
+            "modes_during_s": {name: round(float(np.count_nonzero(tr["mode"][during] == m)) / 400.0, 2)
+                               for m, name in MODE_NAMES.items()},
             "valid_fraction_during": float(np.mean(np.isfinite(err[during]))) if np.any(during) else None,
             "frames_good_during": int(np.ptp(good[during])) if np.any(during) else 0,
             "frames_failed_during": int(np.ptp(failed[during | after])) if np.any(during) else 0,
