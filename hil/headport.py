@@ -117,10 +117,11 @@ class HeadPort:
         self._patch_time()
         if exposure_s:
             self.exposure_s = exposure_s
-        self.client = HeadClient(self.link, timeout=self.timeout_s + 0.2, retries=self.retries)
+        self.client = HeadClient(self.link, timeout=1.0, retries=self.retries)   # set-up: be patient
         self.info = self.client.get_info()
         self.client.set_exposure(int(round(self.exposure_s * 1e6)))
         self.client.sync(8)
+        self.client.timeout = self.timeout_s + 0.2
 
     def limits(self) -> dict:
         i = self.info or {}

@@ -110,7 +110,7 @@ def test_gyro_fifo_overrun_is_flagged(flatsat_config, run_dir):
     t = out["t"] - log["t0"]
     # flagged on the oldest frame the FIFO still held when the loop resumed (it keeps 100)
     assert abs(t[gap[0]] - (f.at_s + f.seconds - 100 / flatsat_config.gyro.odr_hz)) < 0.05
-    assert np.mean(out["mode"][t > f.at_s + f.seconds + 1.0] == R.MODE_TRACK) > 0.9
+    assert np.mean(out["mode"][t > f.at_s + f.seconds + 1.0] == R.MODE_TRACK) > 0.75
     _check_replay(res)
 
 
