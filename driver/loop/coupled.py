@@ -171,7 +171,7 @@ class CoupledLoop:
         cand = self.index.cone(bore, radius, self.p.mag_limit)
         if len(cand) >= 3:
             uv, ok = project_refs(self.cam, q, np.ascontiguousarray(self.index.vectors[cand]))
-            self.identifier.identify(np.ascontiguousarray(uv[ok][:12]))
+            self.identifier.identify(np.ascontiguousarray(uv[ok][:30]))   # > max_stars: labelling too
         return time.perf_counter() - t0
 
     def start(self) -> None:
