@@ -127,7 +127,8 @@ class Bmi088GyroModel(RegisterModelBase):
             wm = int(self.regs[0x3D]) & 0x7F
             if wm and before < wm <= before + n_new and self.regs[0x1E] & 0x80:
                 self.t_watermark = t_first + (wm - before - 1) * T
-                self.watermark_edges.append(self.t_watermark)
+                if self.truth_log:
+                    self.watermark_edges.append(self.t_watermark)
             self.fifo_idx = np.concatenate([self.fifo_idx, idx[:keep]])[-FIFO_FRAMES:]
             self.fifo_raw = np.concatenate([self.fifo_raw, raw[:keep]])[-FIFO_FRAMES:]
 

@@ -75,6 +75,6 @@ def test_register_model_truth_log_can_be_off_for_long_runs():
         for _ in range(400):
             clock.advance(0.0025)
             gyro.read(out)
-        counts.append((out.n, len(model.popped_indices())))
-    assert counts[0][0] > 300 and counts[0][1] == counts[0][0]     # tests keep the full log
-    assert counts[1][0] > 300 and counts[1][1] == 0                # a soak keeps nothing per read
+        counts.append((out.n, len(model.popped_indices()), len(model.watermark_edges)))
+    assert counts[0][0] > 300 and counts[0][1] == counts[0][0] and counts[0][2] > 300  # tests keep the logs
+    assert counts[1][0] > 300 and counts[1][1] == 0 and counts[1][2] == 0              # a soak keeps nothing
