@@ -56,4 +56,5 @@ class StatusLine:
     def close(self) -> None:
         if self._live is not None:
             self._live.stop()
+            self._live.console.print()      # end the status line before the summary
             self._live = None
