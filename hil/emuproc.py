@@ -10,15 +10,22 @@ time origin. The emulator's clock is the host monotonic clock in both processes.
 from __future__ import annotations
 
 import multiprocessing as mp
+import os
 
 from ..errors import DeviceError
 
 
-def _child(conn, make):
+def _child(conn, make, parent_pid):
     emu, truth = make()
     saved = None
     while True:
         try:
+            # the forked child holds the parent's end of the pipe too, so a killed parent
+            # never shows as EOF: watch for being re-parented instead (no orphan emulator)
+            while not conn.poll(0.5):
+                if os.getppid() != parent_pid:
+                    emu.stop()
+                    return
             cmd, arg = conn.recv()
         except (EOFError, OSError):
             break
@@ -71,7 +78,7 @@ class EmulatorProcess:
     def __init__(self, make):
         ctx = mp.get_context("fork")
         self.conn, child = ctx.Pipe()
-        self.proc = ctx.Process(target=_child, args=(child, make), name="head-emulator", daemon=True)
+        self.proc = ctx.Process(target=_child, args=(child, make, os.getpid()), name="head-emulator", daemon=True)
         self.proc.start()
         self.path = None
         self.connected = False
