@@ -63,6 +63,7 @@ def run(trials: int = 10000, seed: int = 1, mag_noise: float = 0.3, pos_noise: f
     by_false = {k: {"trials": 0, "outputs": 0, "wrong": 0} for k in range(MAX_FALSE + 1)}
     errs = []
     worst = None
+    wrong_list: list[dict] = []
     t0 = time.perf_counter()
     for i, q in enumerate(random_attitudes(trials, rng)):
         n_false = int(rng.integers(0, MAX_FALSE + 1))
@@ -100,6 +101,12 @@ def run(trials: int = 10000, seed: int = 1, mag_noise: float = 0.3, pos_noise: f
         if w > 0 or err > WRONG_BORESIGHT_PX * px_arcsec:
             n_wrong += 1
             by_false[n_false]["wrong"] += 1
+            if len(wrong_list) < 50:
+                c, _ = score(r.ids, frame.truth, frame.alt)
+                wrong_list.append({"trial": i, "method": r.method, "tracking": tracking, "n_false": n_false,
+                                   "identified": r.n_identified, "right_ids": int(c), "wrong_ids": int(w),
+                                   "centroids": int(len(frame.uv)), "boresight_err_arcsec": round(err, 1),
+                                   "status": r.status})
             if worst is None or err > worst["boresight_err_arcsec"]:
                 worst = {"trial": i, "boresight_err_arcsec": err, "wrong_ids": int(w), "method": r.method,
                          "n_false": n_false}
@@ -116,7 +123,7 @@ def run(trials: int = 10000, seed: int = 1, mag_noise: float = 0.3, pos_noise: f
         "boresight_err_arcsec_max": float(errs[:, 0].max()) if len(errs) else None,
         "roll_err_arcsec_median": float(np.median(errs[:, 1])) if len(errs) else None,
         "roll_err_arcsec_max": float(errs[:, 1].max()) if len(errs) else None,
-        "by_false_stars": by_false, "worst": worst, "tracker_counts": dict(tracker.counts),
+        "by_false_stars": by_false, "worst": worst, "wrong_outputs": wrong_list, "tracker_counts": dict(tracker.counts),
         "wall_s": round(time.perf_counter() - t0, 1), "pass": n_wrong == 0,
     }
 

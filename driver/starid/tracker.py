@@ -8,7 +8,9 @@ rad/s over ``dt`` s, or an integrated body-frame rotation ``dq`` with
 If that is rejected, the same image goes to Pyramid; if Pyramid also fails the tracker
 is ``LOST`` and reports the failure. Every result it returns has passed the QUEST
 residual verification of its identifier; a rejected one is returned with ``ok`` False
-and no ids, never a guess.
+and no ids, never a guess. A tracking result with fewer than ``min_track_stars``
+identified stars is not trusted (with three stars one false star near a catalog position
+can pass the residual check and pull the boresight by ~10 px): the image goes to Pyramid.
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ class StarTracker:
 
     lost_in_space: object
     tracking: object
+    min_track_stars: int = 4
     mode: Mode = Mode.LOST
     q: np.ndarray | None = None
     counts: dict = dataclasses.field(default_factory=lambda: {"tracked": 0, "acquired": 0, "fallback": 0,
@@ -58,7 +61,7 @@ class StarTracker:
         """Identify one image's centroids ``uv`` (n, 2) px, brightest first."""
         if self.mode is Mode.TRACKING:
             r = self.tracking.identify(uv, self.predict(omega, dt, dq))
-            if r.ok:
+            if r.ok and r.n_identified >= self.min_track_stars:
                 self.q = r.q
                 self.counts["tracked"] += 1
                 return r
