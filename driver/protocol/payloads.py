@@ -12,6 +12,7 @@ import struct
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from .defs import REPLY_FLAG, REPLY_LAYOUT, REQUEST_LAYOUT, MsgType, PixelFormat
 from .errors import PayloadError, ProtocolUsageError, error_for
@@ -88,11 +89,22 @@ def unpack10(data: bytes, n: int) -> np.ndarray:
     need = (10 * n + 7) // 8
     if len(data) < need:
         raise PayloadError(f"{n} packed 10-bit pixels need {need} bytes, got {len(data)}")
-    b = np.frombuffer(bytes(data[:need]) + b"\x00" * ((-need) % 5), dtype=np.uint8)
-    b = b.reshape(-1, 5).astype(np.uint64)
-    word = b[:, 0] | (b[:, 1] << 8) | (b[:, 2] << 16) | (b[:, 3] << 24) | (b[:, 4] << 32)
-    vals = np.stack([(word >> (10 * k)) & 0x3FF for k in range(4)], axis=1).ravel()
-    return vals[:n].astype(np.uint16)
+    return _unpack10_kernel(np.frombuffer(data, dtype=np.uint8, count=need), n)
+
+
+@njit(cache=True)
+def _unpack10_kernel(b, n):
+    """Bit-stream unpack of ``n`` 10-bit values from uint8 ``b`` (LSB first)."""
+    out = np.empty(n, np.uint16)
+    for i in range(n):
+        bit = 10 * i
+        byte = bit >> 3
+        shift = bit & 7
+        word = np.uint32(b[byte])
+        if byte + 1 < b.size:
+            word |= np.uint32(b[byte + 1]) << 8
+        out[i] = (word >> shift) & 0x3FF
+    return out
 
 
 def pixel_bytes(n: int, pixel_format: int) -> int:
