@@ -118,7 +118,7 @@ def run_campaign(events, duration: float, seed: int = 1, keep_hz: float = 400.0,
     warmup()
     fs = flatsat.build(cfg, scen, seed=seed, realtime=False, writer=None)
     if getattr(fs.irq, "model", None) is not None:
-        fs.irq.model.truth_log = False   # the register model's test-truth log grows ~80 kB/s
+        fs.irq.model.truth_log = False   # (build does this too) the model's test-truth log grows ~90 kB/s
     faults = _Faults(fs, events)
     n_keep = int(duration * keep_hz) + 16
     trace = np.empty(n_keep, TRACE_DTYPE)
