@@ -1,6 +1,8 @@
 """Output record layout, UDP stream, scheduler, flatsat config."""
 
+import os
 import socket
+import threading
 
 import numpy as np
 import pytest
@@ -76,8 +78,25 @@ def test_scheduler_is_drift_free_and_counts_overruns():
 
 
 def test_realtime_setup_reports_instead_of_failing():
-    st = realtime_setup(priority=10, cpus=[0])
+    # Linux applies policy and affinity to the calling thread (and threads it starts later):
+    # run it in a throw-away thread so the test process is never left SCHED_FIFO on one CPU
+    # (a FIFO thread spinning there starves every other thread pinned beside it).
+    seen = {}
+
+    def probe():
+        st = realtime_setup(priority=10, cpus=[0])
+        seen["st"] = st
+        seen["policy"] = os.sched_getscheduler(0)
+        seen["cpus"] = os.sched_getaffinity(0)
+
+    t = threading.Thread(target=probe)
+    t.start()
+    t.join()
+    st = seen["st"]
+    assert st.sched_fifo == (seen["policy"] == os.SCHED_FIFO)
     assert st.sched_fifo or any("SCHED_FIFO" in n for n in st.notes)
+    assert st.cpus == [0] == sorted(seen["cpus"]) or any("affinity" in n for n in st.notes)
+    assert os.sched_getscheduler(0) == os.SCHED_OTHER
 
 
 def test_flatsat_config_and_scenarios_validate(tmp_path):
