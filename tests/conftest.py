@@ -2,9 +2,8 @@
 
 from pathlib import Path
 
-import pytest
-
 import gyrostar  # noqa: F401  (imported first: pins BLAS to one thread before numpy loads)
+import pytest
 
 REPO = Path(__file__).resolve().parent.parent
 
