@@ -31,7 +31,7 @@ from ..errors import DeviceError
 BOX = 16
 
 
-def _sensor_child(conn, pixels, sim, truth, seed, catalog_name, mag_limit):
+def _sensor_child(conn, pixels, sim, truth, seed, catalog_name, mag_limit, parent_pid):
     from ..catalog import load_catalog
     from ..mocks.sky import Sky
 
@@ -46,6 +46,11 @@ def _sensor_child(conn, pixels, sim, truth, seed, catalog_name, mag_limit):
     frame = 1
     eclipse = False
     while True:
+        # the forked child holds the parent's pipe end too, so a killed parent never shows as
+        # EOF: watch for being re-parented instead (a SIGKILLed run leaves no sensor process)
+        while not conn.poll(0.5):
+            if os.getppid() != parent_pid:
+                return
         cmd, arg = conn.recv()
         if cmd == "stop":
             return
@@ -144,7 +149,8 @@ class FirmwareHead:
         ctx = mp.get_context("fork")
         self.conn, child = ctx.Pipe()
         self.proc = ctx.Process(target=_sensor_child, name="sensor",
-                                args=(child, self.host.pixels, sim, truth, seed, simcfg.catalog, mag_limit),
+                                args=(child, self.host.pixels, sim, truth, seed, simcfg.catalog, mag_limit,
+                                      os.getpid()),
                                 daemon=True)
         self.proc.start()
         self.relay = None

@@ -91,7 +91,8 @@ class FirmwareHost:
     def start(self, timeout: float = 5.0) -> str:
         self.proc = subprocess.Popen(
             [str(self.binary), "--sensor", str(self.pixels.path), "--width", str(self.pixels.width),
-             "--height", str(self.pixels.height), "--planes", str(self.pixels.planes)],
+             "--height", str(self.pixels.height), "--planes", str(self.pixels.planes),
+             "--exit-with-parent"],
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         t_end = time.monotonic() + timeout
         line = ""

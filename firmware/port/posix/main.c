@@ -1,9 +1,12 @@
 /* main.c - gyrostar-head host program: the head firmware core on a pseudo-terminal.
  *
  *   gyrostar-head --sensor FILE [--width W] [--height H] [--planes 1|2] [--link PATH]
+ *                 [--exit-with-parent]
  *
  * Prints "gyrostar-head: pty <slave path>" on stdout once the UART is up; with --link
  * it also makes PATH a symlink to the pty (removed on exit). SIGINT/SIGTERM exit cleanly.
+ * --exit-with-parent: exit when the launching process dies (checked every 0.5 s idle), so a
+ * killed test or flatsat runner never leaves a host program behind.
  */
 #define _GNU_SOURCE
 #include <errno.h>
@@ -27,7 +30,7 @@ static void on_signal(int sig) { (void)sig; g_stop = 1; }
 static int usage(const char *msg)
 {
     fprintf(stderr, "gyrostar-head: %s\nusage: gyrostar-head --sensor FILE [--width W] [--height H] "
-                    "[--planes 1|2] [--link PATH]\n", msg);
+                    "[--planes 1|2] [--link PATH] [--exit-with-parent]\n", msg);
     return 2;
 }
 
@@ -45,10 +48,15 @@ static int parse_u16(const char *s, uint16_t *out)
 int main(int argc, char **argv)
 {
     const char *sensor = NULL, *link = NULL;
+    pid_t watch_parent = 0;
     uint16_t width = GS_SENSOR_DEFAULT_WIDTH, height = GS_SENSOR_DEFAULT_HEIGHT, planes = 2;
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i];
         const char *v = i + 1 < argc ? argv[i + 1] : NULL;
+        if (!strcmp(a, "--exit-with-parent")) {
+            watch_parent = getppid();
+            continue;
+        }
         if (!strcmp(a, "--help") || !strcmp(a, "-h")) {
             usage("camera-head firmware, host build");
             return 0;
@@ -107,6 +115,8 @@ int main(int argc, char **argv)
         int r = poll(&pfd, 1, 500);
         if (r < 0 && errno != EINTR)
             break;
+        if (r == 0 && watch_parent > 0 && getppid() != watch_parent)
+            break; /* the launcher died: we were re-parented */
         if (r <= 0 || !(pfd.revents & POLLIN))
             continue;
         ssize_t n = read(g_port.master, buf, sizeof buf);
