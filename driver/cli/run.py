@@ -27,10 +27,4 @@ def configure(parser) -> None:
 
 
 def run(args) -> int:
-    try:
-        runner = importlib.import_module(RUNNER)
-    except ImportError as exc:
-        from .stages import report_missing_loop
-
-        return report_missing_loop(args, exc)
-    return runner.run(args)
+    return importlib.import_module(RUNNER).run(args)
