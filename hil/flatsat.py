@@ -362,8 +362,6 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
 
     head = make_head(cfg, connect(), rec_clock, reconnect=connect, head_clock=head_clock,
                      poll_log=writer)
-    if faults.firmware_head is not None:
-        head.sensor_expose = faults.firmware_head.expose
     closers.insert(0, head.close)
     closers.append(lambda: current["link"].close())
     wiring["loop"] = ("gyrostar.loop.coupled: attitude MEKF (gyrostar.core.mekf) with star-vector updates, "

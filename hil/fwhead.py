@@ -1,16 +1,19 @@
 """The firmware's host program as the flatsat's head, fed by a sensor process.
 
 :class:`gyrostar.mocks.firmware_host.FirmwareHost` runs ``firmware/build/host/gyrostar-head``
-on a pty; its sensor is a memory-mapped pixel file. The firmware's CAPTURE waits the
-exposure and then reads its windows from whatever frame the file holds, so a child process
-(``fork``) plays the sensor: just before each CAPTURE is sent, the head port tells it the
-exposure start (``expose``), and it renders the sky (:class:`gyrostar.mocks.sky.Sky`) for
-``[t_start, t_start + T]`` at the scenario's attitude and rates into the file within a few
-ms, before the firmware reads it at the exposure's end. Pixels within 16 px of every star's
-path are rendered fresh with their noise each frame; the rest of the sensor is one rendered
-star-less frame (its noise frozen), since only the pixels around stars are ever read while
-tracking. The exposure start the sensor uses is the host's estimate (send time + ~0.3 ms);
-the firmware stamps its own, so the two differ by the link latency jitter (~0.1 ms).
+on a pty; its sensor is a memory-mapped pixel file. A child process (``fork``) plays the
+sensor and follows the firmware's own exposures: at each CAPTURE's exposure start the
+program announces (number, t_start, length) on a Unix datagram socket
+(:class:`gyrostar.mocks.firmware_host.ExposureSocket`); the child renders the sky
+(:class:`gyrostar.mocks.sky.Sky`) for exactly ``[t_start, t_start + T]`` at the scenario's
+attitude and rates (the program's clock is the host's CLOCK_MONOTONIC), publishes the frame
+tagged with that exposure and wakes the program, which reads its windows only from the
+frame carrying the tag — waiting for it past the exposure end when the render is late, and
+failing the CAPTURE (SENSOR_BUSY) rather than serving another exposure's frame.
+
+Pixels within 16 px of every star's path are rendered fresh with their noise each frame;
+the rest of the sensor is one rendered star-less frame (its noise frozen), since only the
+pixels around stars are ever read while tracking.
 
 Link corruption is injected by a relay: the client talks to a second pty whose bytes from
 the firmware pass through :class:`gyrostar.mocks.faults.ByteFaults`.
@@ -23,6 +26,7 @@ import os
 import select
 import threading
 import tty
+from multiprocessing.connection import wait as mp_wait
 
 import numpy as np
 
@@ -31,52 +35,85 @@ from ..errors import DeviceError
 BOX = 16
 
 
-def _sensor_child(conn, pixels, sim, truth, seed, catalog_name, mag_limit, parent_pid):
-    from ..catalog import load_catalog
-    from ..mocks.sky import Sky
+class _Sensor:
+    """Renders announced exposures: star boxes over a star-less frame, per exposure length."""
 
-    sky = Sky(load_catalog(catalog_name, mag_limit), sim, seed=seed)
-    w, h = sky.camera.width_px, sky.camera.height_px
-    t_exp = sim.detector.exposure_s
-    saved = sky.electrons.copy()
-    sky.electrons[:] = 0.0
-    static, _ = sky.render_frame(truth.q0, np.zeros(3), frame=0)
-    sky.electrons[:] = saved
-    pixels.write_frame(static)
-    frame = 1
-    eclipse = False
+    def __init__(self, catalog, sim, truth, seed):
+        self.catalog, self.sim, self.truth, self.seed = catalog, sim, truth, seed
+        self._skies: dict[int, tuple] = {}
+        self.frame = 0
+        self.eclipse = False
+
+    def _sky(self, exposure_us: int):
+        got = self._skies.get(exposure_us)
+        if got is None:
+            from ..mocks.sky import Sky
+
+            sky = Sky(self.catalog, self.sim.with_exposure(exposure_us * 1e-6), seed=self.seed)
+            saved = sky.electrons.copy()
+            sky.electrons[:] = 0.0
+            static, _ = sky.render_frame(self.truth.q0, np.zeros(3), frame=0)
+            sky.electrons[:] = saved
+            got = self._skies[exposure_us] = (sky, static)
+        return got
+
+    def static(self, exposure_us: int) -> np.ndarray:
+        return self._sky(exposure_us)[1]
+
+    def render(self, t0: float, exposure_us: int) -> np.ndarray:
+        """The frame of the exposure starting at host time ``t0`` (s), uint16 (H, W)."""
+        sky, static = self._sky(exposure_us)
+        t_exp = exposure_us * 1e-6
+        self.frame += 1
+        img = static.copy()
+        if self.eclipse:
+            return img
+        q0 = self.truth.q_at(t0, "sensor")
+        rates = self.truth.rates(t0 + (np.arange(8) + 0.5) * t_exp / 8)
+        exp = sky.expose(q0, rates)
+        inf = exp.truth.in_field
+        if np.any(inf):
+            w, h = sky.camera.width_px, sky.camera.height_px
+            spans = _box_spans(exp.truth.uv[inf], w, h)
+            pix = np.minimum(sky.readout_windows(exp, spans, frame=self.frame), 0x3FF)
+            widths = spans[:, 3] - spans[:, 2]
+            rows = np.repeat(spans[:, 1], widths)
+            cols = np.repeat(spans[:, 2], widths) + (np.arange(widths.sum()) - np.repeat(
+                np.cumsum(widths) - widths, widths))
+            img[rows, cols] = pix
+        return img
+
+
+def _sensor_child(conn, pixels, exposures, sim, truth, seed, catalog_name, mag_limit, parent_pid):
+    from ..catalog import load_catalog
+
+    sensor = _Sensor(load_catalog(catalog_name, mag_limit), sim, truth, seed)
+    exposure_us = int(round(sim.detector.exposure_s * 1e6))
+    pixels.write_frame(sensor.static(exposure_us))
+    sensor.render(truth.t_origin, exposure_us)       # numba kernels loaded before the first exposure
+    conn.send(("ready", None))
     while True:
-        # the forked child holds the parent's pipe end too, so a killed parent never shows as
-        # EOF: watch for being re-parented instead (a SIGKILLed run leaves no sensor process)
-        while not conn.poll(0.5):
+        ready = mp_wait([conn, exposures], timeout=0.5)
+        if not ready:
+            # the forked child holds the parent's pipe end too, so a killed parent never shows
+            # as EOF: watch for being re-parented instead (a SIGKILLed run leaves no sensor)
             if os.getppid() != parent_pid:
                 return
-        cmd, arg = conn.recv()
-        if cmd == "stop":
-            return
-        conn.send(("ok", None))          # answer at once: the exposure renders meanwhile
-        if cmd == "origin":
-            truth.restart(arg)
-        elif cmd == "eclipse":
-            eclipse = bool(arg)
-            sky.electrons[:] = 0.0 if eclipse else saved
-        elif cmd == "expose":
-            t0 = float(arg)
-            q0 = truth.q_at(t0, "sensor")
-            rates = truth.rates(t0 + (np.arange(8) + 0.5) * t_exp / 8)
-            exp = sky.expose(q0, rates)
-            img = static.copy()
-            inf = exp.truth.in_field
-            if np.any(inf) and not eclipse:
-                spans = _box_spans(exp.truth.uv[inf], w, h)
-                pix = np.minimum(sky.readout_windows(exp, spans, frame=frame), 0x3FF)
-                widths = spans[:, 3] - spans[:, 2]
-                rows = np.repeat(spans[:, 1], widths)
-                cols = np.repeat(spans[:, 2], widths) + (np.arange(widths.sum()) - np.repeat(
-                    np.cumsum(widths) - widths, widths))
-                img[rows, cols] = pix
-            pixels.write_frame(img)
-            frame += 1
+            continue
+        if conn in ready:
+            cmd, arg = conn.recv()
+            if cmd == "stop":
+                return
+            if cmd == "origin":
+                truth.restart(arg)
+            elif cmd == "eclipse":
+                sensor.eclipse = bool(arg)
+            conn.send(("ok", None))
+        if exposures in ready:
+            exp = exposures.latest()
+            if exp is not None:
+                pixels.write_frame(sensor.render(exp.t_start, exp.exposure_us), exposure=exp.tag)
+                exposures.published(exp)
 
 
 def _box_spans(uv: np.ndarray, w: int, h: int) -> np.ndarray:
@@ -144,20 +181,25 @@ class FirmwareHead:
         from ..mocks.firmware_host import FirmwareHost
 
         cam = sim.camera
-        self.host = FirmwareHost(cam.width_px, cam.height_px, binary=Path(program) if program else None)
+        self.host = FirmwareHost(cam.width_px, cam.height_px, binary=Path(program) if program else None,
+                                 expose=True)
         self.program = self.host.binary
-        ctx = mp.get_context("fork")
-        self.conn, child = ctx.Pipe()
-        self.proc = ctx.Process(target=_sensor_child, name="sensor",
-                                args=(child, self.host.pixels, sim, truth, seed, simcfg.catalog, mag_limit,
-                                      os.getpid()),
-                                daemon=True)
-        self.proc.start()
         self.relay = None
         self.connected = False
         self.path = None
         self._corrupt = None
         self._lock = threading.Lock()
+        ctx = mp.get_context("fork")
+        self.conn, child = ctx.Pipe()
+        self.proc = ctx.Process(target=_sensor_child, name="sensor",
+                                args=(child, self.host.pixels, self.host.exposures, sim, truth, seed, simcfg.catalog,
+                                      mag_limit, os.getpid()),
+                                daemon=True)
+        self.proc.start()
+        if not self.conn.poll(120.0):
+            self.stop()
+            raise DeviceError("the sensor process did not start (catalog load and first render)")
+        self.conn.recv()
 
     def _call(self, cmd, arg=None):
         with self._lock:
@@ -190,11 +232,6 @@ class FirmwareHead:
         self._corrupt = p
         if self.relay is not None:
             self.relay.faults = None if p is None else ByteFaults(seed=7, corrupt_p=float(p))
-
-    def expose(self, t_start: float) -> None:
-        """The sensor integrates from ``t_start`` (host s): render that exposure into the file
-        (done within a few ms, before the firmware reads it at the exposure's end)."""
-        self._call("expose", t_start)
 
     def eclipse(self, on: bool) -> None:
         self._call("eclipse", on)

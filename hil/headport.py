@@ -84,8 +84,6 @@ class HeadPort:
         self._poll_log = poll_log              # LogWriter when recording
         self._replay_polls = replay_polls      # deque of recorded poll answers when replaying
         self._replay_reconnects = replay_reconnects
-        self.sensor_expose = None              # simulated sensor files only: expose(t_start)
-        self.expose_lead = 0.0005
         self.client = None
         self.info = None
         self._job = None
@@ -215,9 +213,7 @@ class HeadPort:
         c = self.client
         if kind == "windows":
             c.set_windows(spans)
-            hint = self._sensor_expose()
             cap = c.capture(fetch=True)
-            self._learn_lead(hint, cap)
             order = {w.window_id: w.pixels for w in cap.windows}
             ids = []
             for wid in spans[:, 0]:
@@ -235,9 +231,7 @@ class HeadPort:
         # full frame: one small window keeps CAPTURE legal; the frame is read in chunks
         w, h = int(self.info["width"]), int(self.info["height"])
         c.set_windows(np.array([[0, h // 2, w // 2, w // 2 + 1]], np.int32))
-        hint = self._sensor_expose()
         cap = c.capture(fetch=False)
-        self._learn_lead(hint, cap)
         saved, c.timeout = c.timeout, max(c.timeout, 2.0)   # the first chunk waits for a full render
         try:
             img, _ = c.full_frame()
@@ -245,23 +239,6 @@ class HeadPort:
             c.timeout = saved
         t0, t1, tm = _exposure_times(cap)
         return ImageResult("frame", t0, t1, tm, image=img)
-
-    def _sensor_expose(self) -> float | None:
-        """Simulated sensor files only: tell the sensor when the coming exposure will start
-        (now + the lead learnt from the head's reported start times)."""
-        if self.sensor_expose is None:
-            return None
-        import time as _time
-
-        t = _time.monotonic() + self.expose_lead
-        self.sensor_expose(t)
-        return t
-
-    def _learn_lead(self, hint: float | None, cap) -> None:
-        if hint is not None and cap.t_mid_host == cap.t_mid_host:
-            err = _exposure_times(cap)[0] - hint
-            if abs(err) < 0.05:
-                self.expose_lead += 0.2 * err
 
     def poll(self) -> ImageResult | None:
         """The finished job's result (and the port is free again), or None while in flight."""

@@ -195,6 +195,8 @@ static int32_t cmd_capture(gs_head *h, gs_fail *f, size_t n, uint8_t plane)
         return FAIL(f, GS_ERR_DARK_UNAVAILABLE, 0);
     const gs_hal *hal = h->hal;
     uint64_t t0 = hal->time_us(hal->ctx);
+    if (hal->sensor_expose)
+        hal->sensor_expose(hal->ctx, t0, h->exposure_us);
     hal->sleep_until_us(hal->ctx, t0 + h->exposure_us);
     uint64_t t1 = hal->time_us(hal->ctx);
     uint32_t frame = 0;

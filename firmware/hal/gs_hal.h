@@ -44,6 +44,10 @@ typedef struct {
     gs_sensor_status (*sensor_end)(void *ctx, uint32_t frame);
     /* Program exposure (us) and gain (1/16 steps) into the sensor; may be NULL. */
     void (*sensor_configure)(void *ctx, uint32_t exposure_us, uint16_t gain_x16);
+    /* The exposure starts now (t_start_us, as CAPTURE reports it) and lasts exposure_us: a
+     * sensor triggered from outside (a simulator behind the POSIX port) starts integrating
+     * here, and sensor_begin then serves that exposure's frame. May be NULL. */
+    void (*sensor_expose)(void *ctx, uint64_t t_start_us, uint32_t exposure_us);
     /* Sensor die temperature in 0.01 degC. */
     int16_t (*temperature_cdeg)(void *ctx);
 

@@ -77,6 +77,14 @@ static void configure(void *ctx, uint32_t e, uint16_t g)
     f->configures++;
 }
 
+static void expose(void *ctx, uint64_t t_start_us, uint32_t exposure_us)
+{
+    fake_hal *f = ctx;
+    f->exposes++;
+    f->expose_t_us = t_start_us;
+    f->expose_us = exposure_us;
+}
+
 static int16_t temperature(void *ctx) { return ((fake_hal *)ctx)->temp_cdeg; }
 static void kick(void *ctx) { ((fake_hal *)ctx)->kicks++; }
 
@@ -101,6 +109,7 @@ void fake_hal_init(fake_hal *f, gs_hal *hal, uint16_t width, uint16_t height, ui
     hal->sensor_read = read_px;
     hal->sensor_end = end;
     hal->sensor_configure = configure;
+    hal->sensor_expose = expose;
     hal->temperature_cdeg = temperature;
     hal->watchdog_kick = kick;
 }

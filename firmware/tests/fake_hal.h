@@ -21,6 +21,9 @@ typedef struct {
     uint32_t cfg_exposure_us;
     uint16_t cfg_gain_x16;
     int configures, kicks;
+    int exposes;              /* sensor_expose calls, with the last one's arguments */
+    uint64_t expose_t_us;
+    uint32_t expose_us;
     uint8_t out[FAKE_OUT_CAP];
     size_t out_len;
 } fake_hal;

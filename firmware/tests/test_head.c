@@ -103,6 +103,10 @@ static void capture_reads_windows_with_timestamps(void **state)
     assert_int_equal(f->payload_len, GS_CAPTURE_REP_SIZE);
     uint64_t t0 = gs_get_u64(p + GS_CAPTURE_REP_T_START_US), t1 = gs_get_u64(p + GS_CAPTURE_REP_T_END_US);
     assert_true(t1 >= t0 + 3000 && t1 <= t0 + 3002);
+    /* the sensor was triggered once, at the reported start, for the set exposure */
+    assert_int_equal(r->f.exposes, 1);
+    assert_int_equal(r->f.expose_t_us, t0);
+    assert_int_equal(r->f.expose_us, 3000);
     assert_int_equal(gs_get_u32(p + GS_CAPTURE_REP_CAPTURE_NO), 1);
     assert_int_equal(gs_get_u32(p + GS_CAPTURE_REP_SENSOR_FRAME), 7);
     assert_int_equal(gs_get_u16(p + GS_CAPTURE_REP_N_WINDOWS), 2);

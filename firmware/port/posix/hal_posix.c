@@ -9,7 +9,9 @@
 #include <stdio.h>
 #include <string.h>
 #include <sys/mman.h>
+#include <sys/socket.h>
 #include <sys/stat.h>
+#include <sys/un.h>
 #include <termios.h>
 #include <time.h>
 #include <unistd.h>
@@ -59,17 +61,89 @@ static uint32_t load_u32(const uint8_t *map, size_t off)
     return v;
 }
 
+static uint64_t load_u64(const uint8_t *map, size_t off)
+{
+    uint64_t v;
+    __atomic_load((const uint64_t *)(const void *)(map + off), &v, __ATOMIC_ACQUIRE);
+    return v;
+}
+
 static void geometry(void *ctx, gs_sensor_geometry *g) { *g = ((gs_posix *)ctx)->geom; }
+
+static void expose_drain(gs_posix *p)
+{
+    uint8_t buf[64];
+    while (recv(p->expose_fd, buf, sizeof buf, MSG_DONTWAIT) > 0) {
+    }
+}
+
+/* Exposure start: tell the sensor which exposure to render (see hal_posix.h). */
+static void sensor_expose(void *ctx, uint64_t t_start_us, uint32_t exposure_us)
+{
+    gs_posix *p = ctx;
+    if (!p->expose_on)
+        return;
+    expose_drain(p); /* wake-ups of earlier frames */
+    p->expose_no = p->expose_no == UINT32_MAX ? 1u : p->expose_no + 1u;
+    p->expose_t_us = t_start_us;
+    p->expose_pending = 1;
+    p->expose_late = 0;
+    uint8_t msg[GS_EXPOSE_MSG_SIZE];
+    memcpy(msg, GS_EXPOSE_MAGIC, 4);
+    gs_put_u32(msg + 4, p->expose_no);
+    gs_put_u64(msg + 8, t_start_us);
+    gs_put_u32(msg + 16, exposure_us);
+    ssize_t s = sendto(p->expose_fd, msg, sizeof msg, MSG_DONTWAIT, (const struct sockaddr *)&p->expose_addr,
+                       p->expose_addr_len);
+    if (s == (ssize_t)sizeof msg) {
+        p->expose_deadline_us = t_start_us + exposure_us + p->expose_wait_us;
+    } else {
+        p->expose_unsent++; /* nobody renders it: readouts fail at once */
+        p->expose_deadline_us = t_start_us;
+    }
+}
+
+/* 1 if the stable frame (seq even, read before) was rendered for the current exposure. */
+static int frame_is_current(const gs_posix *p)
+{
+    return load_u32(p->map, GS_PIXFILE_OFF_EXPOSURE_NO) == p->expose_no &&
+           load_u64(p->map, GS_PIXFILE_OFF_EXPOSURE_T) == p->expose_t_us;
+}
+
+/* Sleep until the sensor's wake-up datagram or at most max_us (the header is the truth: a
+ * writer that does not answer is still seen within one slice). */
+static void expose_wait(gs_posix *p, uint64_t max_us)
+{
+    if (max_us > 2000u)
+        max_us = 2000u;
+    struct timespec ts = {0, (long)max_us * 1000L};
+    struct pollfd pfd = {p->expose_fd, POLLIN, 0};
+    if (ppoll(&pfd, 1, &ts, NULL) > 0)
+        expose_drain(p);
+}
 
 static gs_sensor_status sensor_begin(void *ctx, uint32_t *frame)
 {
     gs_posix *p = ctx;
-    uint32_t seq = load_u32(p->map, GS_PIXFILE_OFF_SEQ);
-    if (seq & 1u)
-        return GS_SENSOR_BUSY;
-    *frame = load_u32(p->map, GS_PIXFILE_OFF_FRAME);
-    p->lock_seq = seq;
-    return GS_SENSOR_OK;
+    for (;;) {
+        uint32_t seq = load_u32(p->map, GS_PIXFILE_OFF_SEQ);
+        if (seq & 1u)
+            return GS_SENSOR_BUSY;
+        if (!p->expose_pending || frame_is_current(p)) {
+            *frame = load_u32(p->map, GS_PIXFILE_OFF_FRAME);
+            p->lock_seq = seq;
+            return GS_SENSOR_OK;
+        }
+        uint64_t now = gs_posix_time_us(p);
+        if (now >= p->expose_deadline_us) {
+            if (!p->expose_late) {
+                p->expose_late = 1;
+                p->expose_timeouts++;
+            }
+            return GS_SENSOR_BUSY; /* the exposure's frame never came: never serve another */
+        }
+        expose_wait(p, p->expose_deadline_us - now);
+    }
 }
 
 static gs_sensor_status sensor_read(void *ctx, uint8_t plane, uint32_t index, uint16_t count, uint16_t *out)
@@ -175,6 +249,41 @@ void gs_posix_sensor_close(gs_posix *p)
     if (p->map)
         munmap(p->map, p->map_len);
     p->map = NULL;
+    if (p->expose_on)
+        close(p->expose_fd);
+    p->expose_on = 0;
+}
+
+int gs_posix_expose_open(gs_posix *p, const char *sock_path, uint32_t wait_us, char *err, size_t errlen)
+{
+    size_t n = strlen(sock_path);
+    if (n == 0 || n >= sizeof p->expose_addr.sun_path) {
+        snprintf(err, errlen, "exposure socket path must be 1..%zu bytes", sizeof p->expose_addr.sun_path - 1);
+        return -1;
+    }
+    int fd = socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+    if (fd < 0) {
+        snprintf(err, errlen, "cannot create the exposure socket: %s", strerror(errno));
+        return -1;
+    }
+    struct sockaddr_un self;
+    memset(&self, 0, sizeof self);
+    self.sun_family = AF_UNIX;
+    if (bind(fd, (const struct sockaddr *)&self, sizeof(sa_family_t)) != 0) { /* auto-bind */
+        snprintf(err, errlen, "cannot bind the exposure socket: %s", strerror(errno));
+        close(fd);
+        return -1;
+    }
+    memset(&p->expose_addr, 0, sizeof p->expose_addr);
+    p->expose_addr.sun_family = AF_UNIX;
+    memcpy(p->expose_addr.sun_path, sock_path, n);
+    p->expose_addr_len = (socklen_t)(offsetof(struct sockaddr_un, sun_path) + n + 1u);
+    p->expose_fd = fd;
+    p->expose_wait_us = wait_us;
+    p->expose_no = 0;
+    p->expose_pending = 0;
+    p->expose_on = 1;
+    return 0;
 }
 
 int gs_posix_uart_open(gs_posix *p, char *err, size_t errlen)
@@ -207,5 +316,6 @@ void gs_posix_hal(gs_posix *p, gs_hal *hal)
     hal->sensor_begin = sensor_begin;
     hal->sensor_read = sensor_read;
     hal->sensor_end = sensor_end;
+    hal->sensor_expose = sensor_expose;
     hal->temperature_cdeg = temperature;
 }

@@ -1,12 +1,15 @@
 /* main.c - gyrostar-head host program: the head firmware core on a pseudo-terminal.
  *
  *   gyrostar-head --sensor FILE [--width W] [--height H] [--planes 1|2] [--link PATH]
- *                 [--exit-with-parent]
+ *                 [--expose-socket PATH [--expose-wait-ms N]] [--exit-with-parent]
  *
  * Prints "gyrostar-head: pty <slave path>" on stdout once the UART is up; with --link
  * it also makes PATH a symlink to the pty (removed on exit). SIGINT/SIGTERM exit cleanly.
  * --exit-with-parent: exit when the launching process dies (checked every 0.5 s idle), so a
  * killed test or flatsat runner never leaves a host program behind.
+ * --expose-socket: announce each exposure start to the simulator's sensor listening on that
+ * Unix datagram socket and read only the frame it renders for it (hal_posix.h), waiting up
+ * to --expose-wait-ms (default 200) after the exposure end; the counts go to stderr on exit.
  */
 #define _GNU_SOURCE
 #include <errno.h>
@@ -30,7 +33,8 @@ static void on_signal(int sig) { (void)sig; g_stop = 1; }
 static int usage(const char *msg)
 {
     fprintf(stderr, "gyrostar-head: %s\nusage: gyrostar-head --sensor FILE [--width W] [--height H] "
-                    "[--planes 1|2] [--link PATH] [--exit-with-parent]\n", msg);
+                    "[--planes 1|2] [--link PATH] [--expose-socket PATH [--expose-wait-ms N]] "
+                    "[--exit-with-parent]\n", msg);
     return 2;
 }
 
@@ -47,7 +51,8 @@ static int parse_u16(const char *s, uint16_t *out)
 
 int main(int argc, char **argv)
 {
-    const char *sensor = NULL, *link = NULL;
+    const char *sensor = NULL, *link = NULL, *expose = NULL;
+    uint16_t expose_wait_ms = 200;
     pid_t watch_parent = 0;
     uint16_t width = GS_SENSOR_DEFAULT_WIDTH, height = GS_SENSOR_DEFAULT_HEIGHT, planes = 2;
     for (int i = 1; i < argc; i++) {
@@ -67,6 +72,12 @@ int main(int argc, char **argv)
             sensor = v;
         else if (!strcmp(a, "--link"))
             link = v;
+        else if (!strcmp(a, "--expose-socket"))
+            expose = v;
+        else if (!strcmp(a, "--expose-wait-ms")) {
+            if (parse_u16(v, &expose_wait_ms))
+                return usage("--expose-wait-ms needs 1..65535");
+        }
         else if (!strcmp(a, "--width")) {
             if (parse_u16(v, &width))
                 return usage("--width needs 1..65535");
@@ -84,6 +95,7 @@ int main(int argc, char **argv)
         return usage("--sensor FILE is required");
     char err[256];
     if (gs_posix_sensor_open(&g_port, sensor, width, height, (uint8_t)planes, err, sizeof err) ||
+        (expose && gs_posix_expose_open(&g_port, expose, 1000u * expose_wait_ms, err, sizeof err)) ||
         gs_posix_uart_open(&g_port, err, sizeof err)) {
         fprintf(stderr, "gyrostar-head: %s\n", err);
         return 1;
@@ -129,6 +141,9 @@ int main(int argc, char **argv)
     }
     if (link)
         unlink(link);
+    if (g_port.expose_on)
+        fprintf(stderr, "gyrostar-head: %u exposures, %u frames late, %u announcements unsent\n",
+                g_port.expose_no, g_port.expose_timeouts, g_port.expose_unsent);
     gs_posix_sensor_close(&g_port);
     return 0;
 }
