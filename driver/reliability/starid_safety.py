@@ -6,7 +6,10 @@ and noisy magnitudes and centroids (:class:`gyrostar.starid.synth.Sky`), and run
 through :class:`gyrostar.starid.tracker.StarTracker` — Pyramid lost-in-space and the
 extended-grid tracking identifier, each verified by QUEST residuals: even trials start
 LOST (Pyramid), odd trials are TRACKING from the previous image 0.1–1 s earlier with a
-gyro-propagated attitude (rate ≤ 1 °/s, drift 1 °/h), falling back to Pyramid.
+gyro-propagated attitude (rate ≤ 1 °/s, drift 1 °/h), falling back to Pyramid. The
+measured magnitudes go with the centroids, so both identifiers' per-star checks
+(:class:`gyrostar.starid.star_check.StarCheck`, σ_m = the magnitude noise) test position
+and brightness of every label.
 
 An attitude output (``ok``) is *wrong* when any star it identified is not the true one
 (scored against the simulator's truth, blends counted right for either member), or its
@@ -20,6 +23,7 @@ attitude was output.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import sys
@@ -29,6 +33,17 @@ import numpy as np
 
 WRONG_BORESIGHT_PX = 10.0
 MAX_FALSE = 5
+
+
+def _with_checks(sp: dict, se: dict, cfg) -> tuple:
+    """The two identifiers with per-star checks that know the magnitude noise."""
+    from ..starid.star_check import StarCheck
+
+    f = sp["camera"].focal_length_px
+    pyr, ext = sp["ident"], se["ident"]
+    pyr = dataclasses.replace(pyr, check=StarCheck(pyr.sigma_px, f, cfg.total_mag_noise, cfg.mag_limit, min_stars=3))
+    ext = dataclasses.replace(ext, check=StarCheck(ext.sigma_px, f, cfg.total_mag_noise, cfg.mag_limit, min_stars=2))
+    return pyr, ext
 
 
 def _configs(mag_noise: float, pos_noise: float):
@@ -56,7 +71,8 @@ def run(trials: int = 10000, seed: int = 1, mag_noise: float = 0.3, pos_noise: f
     sp, se = setup(cfg_p), setup(cfg_e)
     cam, sky = sp["camera"], sp["sky"]
     px_arcsec = 180.0 / math.pi * 3600.0 / cam.focal_length_px
-    tracker = StarTracker(lost_in_space=sp["ident"], tracking=se["ident"])
+    pyr, ext = _with_checks(sp, se, cfg_p)
+    tracker = StarTracker(lost_in_space=pyr, tracking=ext)
     rng = np.random.default_rng(seed)
     pn, mn = cfg_p.total_pos_noise, cfg_p.total_mag_noise
     n_out = n_wrong = n_wrong_ids = 0
@@ -76,19 +92,19 @@ def run(trials: int = 10000, seed: int = 1, mag_noise: float = 0.3, pos_noise: f
             dt = float(rng.uniform(0.1, 1.0))
             tracker.reset()
             prev = sky.observe(cam, q, cfg_p.mag_limit, pn, mn, 0, rng)
-            tracker.update(prev.uv)
+            tracker.update(prev.uv, mag=prev.mag)
             q_true = quat_propagate(q, omega, dt)
             drift = rng.normal(0.0, math.radians(1.0 / 3600.0), 3)
             frame = sky.observe(cam, q_true, cfg_p.mag_limit, pn, mn, n_false, rng)
             if tracker.mode is Mode.TRACKING:
-                r = tracker.update(frame.uv, omega=omega + drift, dt=dt)
+                r = tracker.update(frame.uv, omega=omega + drift, dt=dt, mag=frame.mag)
             else:
-                r = tracker.update(frame.uv)
+                r = tracker.update(frame.uv, mag=frame.mag)
         else:
             tracker.reset()
             q_true = q
             frame = sky.observe(cam, q_true, cfg_p.mag_limit, pn, mn, n_false, rng)
-            r = tracker.update(frame.uv)
+            r = tracker.update(frame.uv, mag=frame.mag)
         by_false[n_false]["trials"] += 1
         if not r.ok:
             continue
@@ -123,6 +139,8 @@ def run(trials: int = 10000, seed: int = 1, mag_noise: float = 0.3, pos_noise: f
         "boresight_err_arcsec_max": float(errs[:, 0].max()) if len(errs) else None,
         "roll_err_arcsec_median": float(np.median(errs[:, 1])) if len(errs) else None,
         "roll_err_arcsec_max": float(errs[:, 1].max()) if len(errs) else None,
+        "star_check": {k: getattr(pyr.check, k) for k in ("sigma_px", "mag_sigma", "mag_limit", "p_reject",
+                                                           "p_detect_min", "v_safe")},
         "by_false_stars": by_false, "worst": worst, "wrong_outputs": wrong_list, "tracker_counts": dict(tracker.counts),
         "wall_s": round(time.perf_counter() - t0, 1), "pass": n_wrong == 0,
     }

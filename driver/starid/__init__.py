@@ -8,6 +8,7 @@
 * :mod:`.extended` — extended grid tracking (paper 001) and the extended-image triangle
   baseline.
 * :mod:`.verify` — QUEST residual verification shared by every method.
+* :mod:`.star_check` — per-star χ² check (position, magnitude) after the solution.
 * :mod:`.tracker` — lost-in-space → tracking → lost state machine.
 * :mod:`.synth` — synthetic centroid fields for Monte Carlo; :mod:`.eval_starid` — the
   ``gyrostar eval starid`` target.

@@ -21,7 +21,9 @@ matches are accepted only from images of at most three centroids), no matched st
 second indexed star within
 the residual tolerance (:func:`gyrostar.starid.verify.drop_ambiguous`; the index may go
 deeper than ``mag_max`` for this), and the attitude must lie within ``gate`` (rad) of the
-prediction, or the frame is rejected (the tracker falls back to lost-in-space).
+prediction, or the frame is rejected (the tracker falls back to lost-in-space). Last, the
+per-star check (:class:`gyrostar.starid.star_check.StarCheck`, swappable) judges every
+label on its own (position, and magnitude when given), unlabels failures and re-solves.
 
 ``method="triangle"``: the comparison method of paper 001 (extended image + triangles):
 each star's triangle with its two nearest stars (beyond ``2·tri_eps``) in C (reference)
@@ -43,6 +45,7 @@ from .grid import GridParams, cells_from, nth_neighbour, tangent_coords_into
 from .index import cone_query, n_brighter
 from .pyramid import label_rest
 from .result import StarIdResult
+from .star_check import StarCheck, check_stars
 from .verify import drop_ambiguous, loo_reject, verify_matches
 
 M_GRID, M_TRIANGLE = 0, 1
@@ -270,17 +273,21 @@ def extended_core(b, q_pred, cam, vec, vmag, vstart, vstars, vvec, vh, vg, mag_m
     return match, nb_c, c_cat, cand_cat, pat_nb
 
 
-ST_OK, ST_FEW, ST_GATE, ST_BAD, ST_BAD_Q = 0, 1, 2, 3, 4
+ST_OK, ST_FEW, ST_GATE, ST_BAD, ST_BAD_Q, ST_STAR_CHECK = 0, 1, 2, 3, 4, 5
 STATUS_TEXT = {ST_OK: "ok", ST_FEW: "fewer than 2 verified matches",
                ST_GATE: "attitude disagrees with the prediction", ST_BAD: "non-finite centroid",
-               ST_BAD_Q: "q_pred is not a unit quaternion"}
+               ST_BAD_Q: "q_pred is not a unit quaternion",
+               ST_STAR_CHECK: "too few stars pass the per-star check"}
 
 
 @njit(cache=True)
-def extended_identify_uv(uv, q_pred, cam, settings, vec, vmag, ids, vstart, vstars, vvec, vh, vg):
-    """:func:`extended_identify` from centroids ``uv`` (n, 2) px in one compiled call.
+def extended_identify_uv(uv, q_pred, cam, settings, vec, vmag, ids, vstart, vstars, vvec, vh, vg, mag, check):
+    """:func:`extended_identify` from centroids ``uv`` (n, 2) px in one compiled call, then
+    the per-star check :func:`gyrostar.starid.star_check.check_stars` with the scalars
+    ``check`` (:meth:`StarCheck.settings`; empty: no check) and measured V ``mag`` (n,)
+    (empty: unknown).
 
-    ``settings`` packs the scalars (see :meth:`ExtendedIdentifier.settings`). Returns
+    ``settings`` packs the identifier's scalars (see :class:`ExtendedIdentifier`). Returns
     ``(match, match_ids, q, status, nb_c, c_cat, cand_cat, pat_nb)``; status ``ST_BAD``
     when a centroid is not finite, ``ST_BAD_Q`` when ``q_pred`` is not a unit quaternion."""
     n_orient = int(settings[10])
@@ -299,6 +306,14 @@ def extended_identify_uv(uv, q_pred, cam, settings, vec, vmag, ids, vstart, vsta
         b, q_pred, cam, vec, vmag, vstart, vstars, vvec, vh, vg, settings[0], settings[1], settings[2], settings[3],
         int(settings[4]), settings[5], int(settings[6]), int(settings[7]), int(settings[8]), settings[9], n_orient,
         settings[11], settings[12], settings[13], settings[14])
+    if st == ST_OK and check.shape[0] > 0:
+        m = mag if mag.shape[0] == uv.shape[0] else np.full(uv.shape[0], np.nan)
+        qc, nok = check_stars(b, m, vec, vmag, match, check[0], check[1], check[2], check[3], check[4],
+                              int(check[5]), int(check[6]))
+        if nok == 0:
+            st = ST_STAR_CHECK
+        else:
+            q = qc
     out_ids = -np.ones(uv.shape[0], dtype=np.int64)
     for i in range(uv.shape[0]):
         if match[i] >= 0:
@@ -345,7 +360,9 @@ class ExtendedIdentifier:
     attitude and the prediction. ``n_orient``: orientations tried per candidate pattern
     (1 = the plain grid rule). ``deep_mag``: A's real part also holds catalog stars this
     much fainter than ``mag_max`` (candidates and pattern stars the sensor may report).
-    Parameters are read once, at construction.
+    ``check``: the per-star verification stage (``apply(b, mag, ref, vmag, match) -> (q,
+    match, n_ok)``); default a :class:`StarCheck` at ``sigma_px`` and ``mag_max``, two
+    stars minimum (the tracker asks for more). Parameters are read once, at construction.
     """
 
     index: object
@@ -360,6 +377,7 @@ class ExtendedIdentifier:
     gate_px: float = 20.0
     n_orient: int = 3
     deep_mag: float = 0.3
+    check: object = None
 
     def __post_init__(self) -> None:
         if self.method not in ("grid", "triangle"):
@@ -381,18 +399,34 @@ class ExtendedIdentifier:
                                    self._code, self.tri_eps, self.n_orient, self.tol, self.fov_radius, self.gate,
                                    self.mag_max + self.deep_mag], dtype=np.float64)
         self.last = None  # raw outputs of the last call (neighbour statistics)
+        if self.check is None:
+            self.check = StarCheck(self.sigma_px, self.camera.focal_length_px, mag_limit=self.mag_max, min_stars=2)
+        # a StarCheck runs inside the compiled call; another stage runs after it
+        self._fused = self.check.settings() if isinstance(self.check, StarCheck) else np.empty(0)
+        self._no_mag = np.empty(0)
 
-    def identify_vectors(self, b: np.ndarray, q_pred: np.ndarray) -> StarIdResult:
-        """Identify body unit vectors (n, 3), brightest first, given the predicted attitude."""
+    def identify_vectors(self, b: np.ndarray, q_pred: np.ndarray, mag=None) -> StarIdResult:
+        """Identify body unit vectors (n, 3), brightest first, given the predicted attitude;
+        ``mag`` (n,) their calibrated measured V or None."""
         ix, p = self.index, self.params
-        out = extended_identify(np.ascontiguousarray(b, dtype=np.float64), self._q(q_pred), self._cam, ix.vectors,
+        b = np.ascontiguousarray(b, dtype=np.float64)
+        out = extended_identify(b, self._q(q_pred), self._cam, ix.vectors,
                                 ix.vmag, ix.vox_start, ix.vox_stars, ix.vox_vec, ix.vox_h, ix.vox_g, self.mag_max,
                                 self.half_ext, p.br, p.pr, p.g, p.cell, p.xi, self.max_ref, self._code, self.tri_eps,
                                 self.n_orient, self.tol, self.fov_radius, self.gate, self.mag_max + self.deep_mag)
-        return self._result(out)
+        match, q, st = out[0], out[1], int(out[2])
+        self.last = (match,) + out[3:]
+        if st == ST_OK:
+            q, match, st = self._check(b, mag, match)
+        return StarIdResult.make(ix, match, q, st == ST_OK, STATUS_TEXT[st], math.nan, self._method)
 
-    def identify(self, uv: np.ndarray, q_pred: np.ndarray) -> StarIdResult:
-        """Identify centroids ``uv`` (n, 2) [col, row] px, brightest first (one compiled call)."""
+    def _check(self, b, mag, match):
+        q, match, n_ok = self.check.apply(b, mag, self.index.vectors, self.index.vmag, match)
+        return q, match, (ST_OK if n_ok > 0 else ST_STAR_CHECK)
+
+    def identify(self, uv: np.ndarray, q_pred: np.ndarray, mag=None) -> StarIdResult:
+        """Identify centroids ``uv`` (n, 2) [col, row] px, brightest first (one compiled call
+        and the per-star check); ``mag`` (n,) their calibrated measured V or None."""
         ix = self.index
         pts = uv
         if not (isinstance(pts, np.ndarray) and pts.dtype == np.float64 and pts.ndim == 2 and pts.shape[1] == 2
@@ -401,12 +435,20 @@ class ExtendedIdentifier:
             pts = np.ascontiguousarray(pts.reshape(-1, 2) if pts.size else np.empty((0, 2)))
         q = q_pred if (isinstance(q_pred, np.ndarray) and q_pred.dtype == np.float64 and q_pred.shape == (4,)) \
             else self._q(q_pred)
+        m = self._no_mag
+        if mag is not None:
+            m = np.ascontiguousarray(mag, dtype=np.float64).reshape(-1)
+            if m.shape[0] != pts.shape[0]:
+                raise ConfigError(f"{m.shape[0]} magnitudes for {pts.shape[0]} centroids")
         out = extended_identify_uv(pts, q, self._cam, self._settings, ix.vectors, ix.vmag, ix.ids, ix.vox_start,
-                                   ix.vox_stars, ix.vox_vec, ix.vox_h, ix.vox_g)
+                                   ix.vox_stars, ix.vox_vec, ix.vox_h, ix.vox_g, m, self._fused)
         st = out[3]
         if st == ST_BAD or st == ST_BAD_Q:
             raise ConfigError(STATUS_TEXT[st])
         self.last = (out[0],) + out[4:]
+        if st == ST_OK and self._fused.shape[0] == 0:
+            q, match, st = self._check(unproject_many(self._cam, pts), mag, out[0])
+            return StarIdResult.make(ix, match, q, st == ST_OK, STATUS_TEXT[st], math.nan, self._method)
         return StarIdResult(out[0], out[1], out[2], st == ST_OK, STATUS_TEXT[st], math.nan, self._method)
 
     @staticmethod
@@ -415,9 +457,3 @@ class ExtendedIdentifier:
         if q.shape != (4,) or not np.all(np.isfinite(q)) or abs(q @ q - 1.0) > 1e-6:
             raise ConfigError("q_pred must be a finite unit quaternion [x, y, z, w]")
         return q
-
-    def _result(self, out) -> StarIdResult:
-        match, q, st = out[0], out[1], int(out[2])
-        self.last = (match,) + out[3:]
-        return StarIdResult.make(self.index, match, q, st == ST_OK, STATUS_TEXT[st], math.nan,
-                                 "extended-" + self.method)

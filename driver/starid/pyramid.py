@@ -16,6 +16,9 @@ residuals of every identified star are within ``label_tol``.
 4. QUEST on the pyramid, then every other centroid is labelled with the nearest catalog
    star within ``label_tol`` of its predicted direction; QUEST again over all and the
    residual test of :mod:`gyrostar.starid.verify`.
+5. The per-star check (:class:`gyrostar.starid.star_check.StarCheck`, swappable): each
+   label's own χ² (position, and magnitude when given) after QUEST; failures are
+   unlabelled, the attitude re-solved over the rest, and fewer than three reject.
 
 Expected false matches for a uniform sky of N navigation stars and tolerance ε (rad):
 a triangle with side θ_ij and angle φ_k at vertex k:  E₃ = N³ ε³ sin θ_ij / (π sin φ_k)
@@ -40,11 +43,12 @@ from ..errors import ConfigError
 from .index import StarIndex, cone_query
 from .kvector import query
 from .result import StarIdResult, to_body_vectors
+from .star_check import StarCheck
 from .verify import verify_matches
 
-ST_OK, ST_TOO_FEW, ST_NO_MATCH, ST_REJECTED = 0, 1, 2, 3
+ST_OK, ST_TOO_FEW, ST_NO_MATCH, ST_REJECTED, ST_STAR_CHECK = 0, 1, 2, 3, 4
 STATUS_TEXT = {ST_OK: "ok", ST_TOO_FEW: "fewer than 3 stars", ST_NO_MATCH: "no unique pyramid",
-               ST_REJECTED: "rejected by verification"}
+               ST_REJECTED: "rejected by verification", ST_STAR_CHECK: "fewer than 3 stars pass the per-star check"}
 _MAX_CAND = 256
 
 
@@ -334,6 +338,9 @@ class Pyramid:
     ``sigma_px``: centroid noise (px, 1σ) the tolerances are built from:
     ε = n_sigma·√2·σ (pair angles), label_tol = n_sigma·1.25·σ (labelling/residuals).
     ``max_stars``: only the brightest this many centroids are used for the pyramid.
+    ``check``: the per-star verification stage (any object with ``apply(b, mag, ref, vmag,
+    match) -> (q, match, n_ok)``); default a :class:`StarCheck` at ``sigma_px`` and the
+    index's limiting magnitude, three stars minimum.
     """
 
     index: StarIndex
@@ -343,6 +350,7 @@ class Pyramid:
     p_false_max: float = 1e-6
     max_stars: int = 8
     max_triangles: int = 400
+    check: object = None
 
     def __post_init__(self) -> None:
         if not (self.sigma_px > 0 and self.n_sigma > 0 and self.max_stars >= 3):
@@ -358,9 +366,12 @@ class Pyramid:
                               f"diagonal is {math.degrees(2 * self.fov_radius):.2f}°")
         self._mark = np.zeros(2 * len(self.index), dtype=np.int64)
         self._nnav = int(np.count_nonzero(self.index.is_nav))
+        if self.check is None:
+            self.check = StarCheck(self.sigma_px, self.camera.focal_length_px, mag_limit=self.index.mag_limit,
+                                   min_stars=3)
 
-    def identify_vectors(self, b: np.ndarray) -> StarIdResult:
-        """Identify body unit vectors (n, 3), brightest first."""
+    def identify_vectors(self, b: np.ndarray, mag=None) -> StarIdResult:
+        """Identify body unit vectors (n, 3), brightest first; ``mag`` (n,) measured V or None."""
         ix = self.index
         nb = min(b.shape[0], self.max_stars)
         match, q, pf, st, tried = pyramid_core(
@@ -374,8 +385,13 @@ class Pyramid:
             label_rest(np.ascontiguousarray(b), q, ix.vectors, ix.vmag, ix.vox_start, ix.vox_stars, ix.vox_vec,
                        ix.vox_h, ix.vox_g, self.fov_radius, self.label_tol, full)
             q, full, _, _ = verify_matches(np.ascontiguousarray(b), ix.vectors, full, self.label_tol)
+        if st == ST_OK:
+            q, full, n_ok = self.check.apply(b, mag, ix.vectors, ix.vmag, full)
+            if n_ok == 0:
+                st = ST_STAR_CHECK
         return StarIdResult.make(ix, full, q, st == ST_OK, STATUS_TEXT[int(st)], pf, "pyramid")
 
-    def identify(self, uv: np.ndarray) -> StarIdResult:
-        """Identify centroids ``uv`` (n, 2) [col, row] px, brightest first."""
-        return self.identify_vectors(to_body_vectors(self._params, uv))
+    def identify(self, uv: np.ndarray, mag=None) -> StarIdResult:
+        """Identify centroids ``uv`` (n, 2) [col, row] px, brightest first; ``mag`` (n,)
+        their calibrated measured V (None: position-only per-star check)."""
+        return self.identify_vectors(to_body_vectors(self._params, uv), mag)

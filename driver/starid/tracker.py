@@ -11,6 +11,8 @@ residual verification of its identifier; a rejected one is returned with ``ok`` 
 and no ids, never a guess. A tracking result with fewer than ``min_track_stars``
 identified stars is not trusted (with three stars one false star near a catalog position
 can pass the residual check and pull the boresight by ~10 px): the image goes to Pyramid.
+Measured magnitudes, when given, go to both identifiers' per-star checks
+(:mod:`gyrostar.starid.star_check`).
 """
 
 from __future__ import annotations
@@ -32,8 +34,9 @@ class Mode(enum.Enum):
 
 @dataclasses.dataclass
 class StarTracker:
-    """``lost_in_space``: identifier with ``identify(uv)`` (Pyramid); ``tracking``: with
-    ``identify(uv, q_pred)`` (extended grid). Counters say how often each path ran."""
+    """``lost_in_space``: identifier with ``identify(uv, mag=None)`` (Pyramid); ``tracking``:
+    with ``identify(uv, q_pred, mag=None)`` (extended grid). Counters say how often each
+    path ran."""
 
     lost_in_space: object
     tracking: object
@@ -57,16 +60,18 @@ class StarTracker:
             raise ConfigError("omega must be 3 finite rates (rad/s) and dt a finite time ≥ 0 (s)")
         return quat_propagate(self.q, w, float(dt))
 
-    def update(self, uv, omega=None, dt: float = 0.0, dq=None) -> StarIdResult:
-        """Identify one image's centroids ``uv`` (n, 2) px, brightest first."""
+    def update(self, uv, omega=None, dt: float = 0.0, dq=None, mag=None) -> StarIdResult:
+        """Identify one image's centroids ``uv`` (n, 2) px, brightest first; ``mag`` (n,)
+        their calibrated measured V, or None (position-only per-star checks)."""
         if self.mode is Mode.TRACKING:
-            r = self.tracking.identify(uv, self.predict(omega, dt, dq))
+            q_pred = self.predict(omega, dt, dq)
+            r = self.tracking.identify(uv, q_pred) if mag is None else self.tracking.identify(uv, q_pred, mag=mag)
             if r.ok and r.n_identified >= self.min_track_stars:
                 self.q = r.q
                 self.counts["tracked"] += 1
                 return r
             self.counts["fallback"] += 1
-        r = self.lost_in_space.identify(uv)
+        r = self.lost_in_space.identify(uv) if mag is None else self.lost_in_space.identify(uv, mag=mag)
         if r.ok:
             self.mode, self.q = Mode.TRACKING, r.q
             self.counts["acquired"] += 1
