@@ -467,6 +467,9 @@ class FaultPlan:
         self._stop = threading.Event()
 
         def run():
+            from ..realtime import join_realtime
+
+            join_realtime(2)       # it touches the devices' state the loop reads: no inversion
             while not self._stop.wait(0.005):
                 self.apply(clock.now() - t0)
 
@@ -568,6 +571,7 @@ def replay_loop(meta: dict, records, sinks):
         except taps.ReplayExhausted as exc:
             return steps, f"end of log ({exc})"
         finally:
+            loop.close()
             head.close()
 
     return loop, run_all

@@ -44,6 +44,7 @@ class ImageResult:
     values: np.ndarray | None = None   # windows: pixels in span order
     image: np.ndarray | None = None    # frame: (H, W)
     error: Exception | None = None
+    measured: object = None            # frame: what the job's ``post(image)`` returned
 
 
 def _exposure_times(cap) -> tuple[float, float, float]:
@@ -66,6 +67,29 @@ class _TimeShim:
 
     def __getattr__(self, name):
         return getattr(self._real, name)
+
+
+class _GatedLink:
+    """The link as the head client sees it when the port has a step gate: a blocking
+    receive on the worker leaves the gate meanwhile, so the worker's Python work (encode,
+    decode, record) runs between loop steps, never inside one or just before one."""
+
+    def __init__(self, link, port):
+        self._link = link
+        self._port = port
+
+    def recv(self, timeout: float):
+        held = self._port._gate_held()
+        if held:
+            self._port.step_gate.worker_exit()
+        try:
+            return self._link.recv(timeout)
+        finally:
+            if held:
+                self._port.step_gate.worker_enter()
+
+    def __getattr__(self, name):
+        return getattr(self._link, name)
 
 
 class HeadPort:
@@ -92,6 +116,9 @@ class HeadPort:
         self._jobs: queue.SimpleQueue = queue.SimpleQueue()
         self._result: ImageResult | None = None
         self._patched = None
+        # real-time runs: the loop's StepGate (gyrostar.loop.scheduler; see _GatedLink); None: off
+        self.step_gate = None
+        self._held = threading.local()
 
     # ------------------------------------------------------------------ set-up
     def _patch_time(self) -> None:
@@ -116,11 +143,14 @@ class HeadPort:
         self._patch_time()
         if exposure_s:
             self.exposure_s = exposure_s
-        self.client = HeadClient(self.link, timeout=1.0, retries=self.retries)   # set-up: be patient
+        link = _GatedLink(self.link, self) if self.step_gate is not None else self.link
+        self.client = HeadClient(link, timeout=1.0, retries=self.retries)   # set-up: be patient
         self.info = self.client.get_info()
         self.client.set_exposure(int(round(self.exposure_s * 1e6)))
         self.client.sync(8)
         self.client.timeout = self.timeout_s + 0.2
+        if threading.current_thread() is not self._thread:
+            self._start_worker()          # now, not inside the loop's first step
 
     def limits(self) -> dict:
         i = self.info or {}
@@ -179,8 +209,11 @@ class HeadPort:
     def submit_windows(self, spans: np.ndarray) -> None:
         self._submit("windows", spans)
 
-    def submit_frame(self) -> None:
-        self._submit("frame", None)
+    def submit_frame(self, post=None) -> None:
+        """Capture and read a full frame; ``post(image)`` (optional, e.g. spot detection and
+        lost-in-space identification) runs on the worker after the read, outside the step
+        gate, and its return value comes back as ``ImageResult.measured``."""
+        self._submit("frame", post)
 
     def _submit(self, kind, spans) -> None:
         if self._job is not None:
@@ -188,23 +221,49 @@ class HeadPort:
         self._job = (kind, spans)
         self._done.clear()
         self._result = None
+        self._start_worker()
+        self._jobs.put((kind, spans))
+
+    def _start_worker(self) -> None:
         if self._thread is None or not self._thread.is_alive():
             self._jobs = queue.SimpleQueue()
             self._thread = threading.Thread(target=self._work, name="head-port", daemon=True)
             self._thread.start()
-        self._jobs.put((kind, spans))
 
     def _work(self) -> None:
+        from ..realtime import join_realtime
+
+        join_realtime()
         while True:
             job = self._jobs.get()
             if job is None:
                 return
             kind, spans = job
+            post = None
+            if kind == "frame":
+                post, spans = spans, None
+            gate = self.step_gate
+            if gate is not None:
+                gate.worker_enter()
+                self._held.on = True
             try:
                 self._result = self._do(kind, spans)
             except Exception as exc:  # noqa: BLE001 - every failure goes back to the loop as a result
                 self._result = ImageResult(kind, np.nan, np.nan, np.nan, error=exc)
+            finally:
+                if gate is not None:
+                    self._held.on = False
+                    gate.worker_exit()
+            res = self._result
+            if post is not None and res is not None and res.error is None and res.image is not None:
+                try:
+                    res.measured = post(res.image)
+                except Exception as exc:  # noqa: BLE001 - reported to the loop like a device failure
+                    res.error = exc
             self._done.set()
+
+    def _gate_held(self) -> bool:
+        return self.step_gate is not None and getattr(self._held, "on", False)
 
     def _do(self, kind, spans) -> ImageResult:
         if kind == "reconnect":

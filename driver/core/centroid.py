@@ -324,21 +324,6 @@ def iwcog_variance(spans, values, bg, u, v, offsets, sigma_w, sigma_bg, e_per_dn
 
 
 @njit(cache=True)
-def _pix_gauss(edge_lo, centre, inv_s):
-    """½[erf((e+1−c)/√2σ) − erf((e−c)/√2σ)]: a Gaussian's integral over [e, e+1)."""
-    return 0.5 * (math.erf((edge_lo + 1.0 - centre) * inv_s) - math.erf((edge_lo - centre) * inv_s))
-
-
-@njit(cache=True)
-def _pix_dgauss(edge_lo, centre, sigma):
-    """d/dcentre of ``_pix_gauss``: pdf(e − c) − pdf(e + 1 − c)."""
-    k = 1.0 / (sigma * math.sqrt(2.0 * math.pi))
-    a = (edge_lo - centre) / sigma
-    b = (edge_lo + 1.0 - centre) / sigma
-    return k * (math.exp(-0.5 * a * a) - math.exp(-0.5 * b * b))
-
-
-@njit(cache=True)
 def _inv3_sym(a):
     """Inverse of a symmetric positive-definite 3×3 matrix by cofactors (NaN if singular)."""
     c00 = a[1, 1] * a[2, 2] - a[1, 2] * a[1, 2]
@@ -399,16 +384,34 @@ def smear_fit(spans, values, bg, u0, v0, offsets, sigma_psf, noise_var, e_per_dn
     dx = np.empty((m, nc))
     ey = np.empty((m, nr))
     dy = np.empty((m, nr))
+    # pixel integral of a Gaussian over [e, e+1): ½[erf((e+1−c)/√2σ) − erf((e−c)/√2σ)], and its
+    # derivative in c: pdf(e − c) − pdf(e + 1 − c); erf and pdf are taken once per pixel edge
+    e_col = np.empty(nc + 1)
+    p_col = np.empty(nc + 1)
+    e_row = np.empty(nr + 1)
+    p_row = np.empty(nr + 1)
+    k_pdf = 1.0 / (sigma_psf * math.sqrt(2.0 * math.pi))
+    inv_sig = 1.0 / sigma_psf
     for it in range(1, n_iter + 1):
         for j in range(m):
             cu = u + offsets[j, 0]
             cv = v + offsets[j, 1]
+            for c in range(nc + 1):
+                z = c0 + c - 0.5 - cu
+                e_col[c] = math.erf(z * inv_s)
+                a_ = z * inv_sig
+                p_col[c] = k_pdf * math.exp(-0.5 * a_ * a_)
             for c in range(nc):
-                ex[j, c] = _pix_gauss(c0 + c - 0.5, cu, inv_s)
-                dx[j, c] = _pix_dgauss(c0 + c - 0.5, cu, sigma_psf)
+                ex[j, c] = 0.5 * (e_col[c + 1] - e_col[c])
+                dx[j, c] = p_col[c] - p_col[c + 1]
+            for r in range(nr + 1):
+                z = r0 + r - 0.5 - cv
+                e_row[r] = math.erf(z * inv_s)
+                a_ = z * inv_sig
+                p_row[r] = k_pdf * math.exp(-0.5 * a_ * a_)
             for r in range(nr):
-                ey[j, r] = _pix_gauss(r0 + r - 0.5, cv, inv_s)
-                dy[j, r] = _pix_dgauss(r0 + r - 0.5, cv, sigma_psf)
+                ey[j, r] = 0.5 * (e_row[r + 1] - e_row[r])
+                dy[j, r] = p_row[r] - p_row[r + 1]
         a = np.zeros((3, 3))
         g = np.zeros(3)
         k = 0

@@ -155,6 +155,8 @@ class CoupledLoop:
         self.out_buf = R.empty(256)
         self._blank = R.empty(1)[0]
         self.last_output = None
+        self.measuring = None          # (pending, result, future) of the readout being centroided
+        self._pool = None
 
     # ------------------------------------------------------------------ set-up
     def warm_identifier(self) -> float:
@@ -280,6 +282,10 @@ class CoupledLoop:
     # ------------------------------------------------------------------ images
     def _image_phase(self) -> None:
         now = self.clock.now()
+        if self.measuring is not None:
+            pend, res, fut = self.measuring
+            self.measuring = None
+            self._process_windows(pend, res, fut.result(), now)
         res = self.head.poll()
         if res is not None and res.kind == "reconnect":
             if res.error is None:
@@ -299,6 +305,10 @@ class CoupledLoop:
         pend = None
         if res is not None:
             pend, self.pending = self.pending, None
+        if res is not None and res.error is None and res.kind == "windows" and pend is not None:
+            # centroid the readout on the measuring thread (nogil kernel) while this step
+            # plans the next exposure; the update is applied at the next step
+            self.measuring = (pend, res, self._measure_pool().submit(self._measure, pend, res.values))
         if res is not None and res.error is None and res.kind == "windows" and self.mode != R.MODE_ACQUIRE \
                 and now >= self.next_frame_t - 0.5 / self.p.frame_hz:
             # next exposure first (windows from the prediction), then this image's update:
@@ -322,13 +332,12 @@ class CoupledLoop:
                 self._acquire(res, now)
             else:
                 self.timeouts = 0
-                self._process_windows(pend, res, now)
         if self.head.busy:
             return
         if self.mode == R.MODE_ACQUIRE and not self.q_valid:
             if now >= self.next_acquire_t:
                 self.next_acquire_t = now + self.p.acquire_every_s
-                self.head.submit_frame()
+                self.head.submit_frame(self._lost_in_space)
             return
         if now >= self.next_frame_t:
             self.next_frame_t = max(self.next_frame_t + 1.0 / self.p.frame_hz, now)
@@ -350,15 +359,22 @@ class CoupledLoop:
             self._set_mode(R.MODE_COAST, self.head_down_since)
 
     # -- ACQUIRE ----------------------------------------------------------------
-    def _acquire(self, res, now: float) -> None:
+    def _lost_in_space(self, image: np.ndarray):
+        """Spots of a full frame and their identification: ``(spots, ident or None)``.
+        Runs on the head port's worker, off the loop's steps; reads no loop state."""
         from .acquire import detect_spots
 
-        spots = detect_spots(res.image.astype(np.float64), 6.0, 40, 7)
-        self.c.acquisitions += 1
+        spots = detect_spots(image.astype(np.float64), 6.0, 40, 7)
         if len(spots) < 3:
+            return spots, None
+        return spots, self.identifier.identify(np.ascontiguousarray(spots[:, :2]))
+
+    def _acquire(self, res, now: float) -> None:
+        spots, ident = res.measured if res.measured is not None else self._lost_in_space(res.image)
+        self.c.acquisitions += 1
+        if ident is None:
             self.c.acquisition_failures += 1
             return
-        ident = self.identifier.identify(np.ascontiguousarray(spots[:, :2]))
         if not ident.ok or ident.n_identified < 3:
             self.c.acquisition_failures += 1
             log.debug("acquisition failed: %s", ident.status)
@@ -385,8 +401,8 @@ class CoupledLoop:
 
     # -- TRACK / COAST --------------------------------------------------------------
     def _command_windows(self, now: float) -> None:
-        from ..core.motion import predict_trajectory, substeps_for
-        from ..core.windows import concat_windows, span_pixel_count, trajectory_window
+        from ..core.motion import substeps_for
+        from .image_kernels import plan_windows
         from .kernels import project_refs
 
         self._add_stars_from_catalog(now)
@@ -394,105 +410,90 @@ class CoupledLoop:
         if not len(act):
             self._after_image(now, updated=0)
             return
-        uv, _ = project_refs(self.cam, self.q, self.ref[act])
+        order = act[np.argsort(self._slot_mag(act), kind="stable")]      # brightest first (budget)
+        uv, _ = project_refs(self.cam, self.q, self.ref[order])
         # the exposure starts when the head gets CAPTURE, ~lat s from now (measured)
         m = max(1, int(round(self.p.exposure_s * self.gyro.odr_hz)))
         m_lat = int(round(self.exposure_lag * self.gyro.odr_hz))
         rates = np.repeat((self.omega + self.bias)[None, :], m + m_lat, axis=0)
         dt = self.p.exposure_s / m
-        sub = substeps_for(rates - self.bias, dt, self.f_px, 0.25)
+        sub = substeps_for(rates - self.bias, dt, self.f_px, 0.5)
         sig_px = math.sqrt(max(self.P[0, 0], self.P[1, 1])) * self.f_px
-        speed = float(np.linalg.norm(self.omega)) * self.f_px          # px/s near the boresight
+        speed = math.sqrt(float(self.omega @ self.omega)) * self.f_px          # px/s near the boresight
         margin = 3.0 * sig_px + speed * self.lag_jitter
         k = min(self.p.window_k + 2 * int(math.ceil(margin)), 40)
-        parts = []
-        slots = []
-        trajs = {}
-        budget = self.p.pixel_budget
-        n_spans = 0
-        for j in np.argsort(self._slot_mag(act)):
-            s = int(act[j])
-            traj = predict_trajectory(uv[j, 0] - self.cam[1], uv[j, 1] - self.cam[2], rates, dt, self.bias,
-                                      self.f_px, MODEL, sub)
-            traj = traj[m_lat * sub:]
-            traj[:, 0] += self.cam[1]
-            traj[:, 1] += self.cam[2]
-            spans = trajectory_window(traj, k, self.camera.height_px, self.camera.width_px, s)
-            npx = span_pixel_count(spans)
-            if len(spans) == 0 or npx > self.p.max_window_pixels or npx > budget \
-                    or n_spans + len(spans) > self.p.max_spans:
-                continue
-            budget -= npx
-            n_spans += len(spans)
-            parts.append(spans)
-            slots.append(s)
-            trajs[s] = traj - traj.mean(axis=0)
-        if not parts:
+        spans, wins, off, off_start, off_len = plan_windows(
+            uv, order.astype(np.int64), rates, dt, self.bias, self.cam, MODEL, sub, m_lat * sub, k,
+            self.camera.height_px, self.camera.width_px, self.p.pixel_budget, self.p.max_window_pixels,
+            self.p.max_spans)
+        if not len(wins):
             self._after_image(now, updated=0)
             return
-        spans = concat_windows(parts)
         self.head.submit_windows(spans)
-        self.pending = {"spans": spans, "slots": slots, "offsets": trajs, "t_submit": now}
+        self.pending = {"spans": spans, "wins": wins, "nav": self.star_nav[wins].copy(), "off": off,
+                        "off_start": off_start, "off_len": off_len, "t_submit": now}
 
-    def _process_windows(self, pend: dict, res, now: float) -> None:
+    def _measure_pool(self):
+        if self._pool is None:
+            from concurrent.futures import ThreadPoolExecutor
+
+            from ..realtime import join_realtime
+
+            self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="loop-measure", initializer=join_realtime)
+        return self._pool
+
+    def close(self) -> None:
+        """Stop the measuring thread (the devices belong to the caller)."""
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+            self._pool = None
+
+    def _measure(self, pend: dict, values) -> tuple:
+        """Spot directions of a readout (:func:`image_kernels.measure_windows`, nogil)."""
+        from .image_kernels import measure_windows
+
+        p = self.p
+        vals = np.ascontiguousarray(values, dtype=np.float64)
+        return measure_windows(pend["spans"], vals, pend["wins"], pend["off"], pend["off_start"], pend["off_len"],
+                               self.cam, p.psf_sigma_px, p.thresh_sigma, p.min_signal, p.e_per_dn, 10, 1e-3)
+
+    def _process_windows(self, pend: dict, res, measured: tuple, now: float) -> None:
         from ..attitude import quat_conj, quat_mult, quat_to_dcm
-        from ..camera import unproject_point
-        from ..core.centroid import cog, smear_fit, window_background, window_spans_of
         from ..core.mekf import mekf_update
+        from .image_kernels import MEAS_MISS, MEAS_OK
 
         self.c.frames += 1
         lag = res.t_start - pend["t_submit"]
         if 0.0 <= lag < 0.1:
             self.lag_jitter = 0.9 * self.lag_jitter + 0.1 * abs(lag - self.exposure_lag)
             self.exposure_lag = 0.9 * self.exposure_lag + 0.1 * lag
-        spans = pend["spans"]
-        vals = np.asarray(res.values, dtype=np.float64)
-        # rotation body(t_mid) → body(now) from the gyro-propagated attitude history
-        q_mid = self._hist_q_at(res.t_mid)
-        rot = quat_to_dcm(quat_mult(self.q, quat_conj(q_mid)))
-        slots, bvecs, sig = [], [], []
-        for s in pend["slots"]:
-            if not self.active[s]:
-                continue
-            a, b, v0 = window_spans_of(spans, s)
-            if b <= a:
-                continue
-            sp = np.ascontiguousarray(spans[a:b])
-            npx = int(np.sum(sp[:, 3] - sp[:, 2]))
-            wv = vals[v0: v0 + npx]
-            bg, noise = window_background(wv, 3.0)
-            u, v, flux, npix = cog(sp, wv, bg, bg + self.p.thresh_sigma * noise)
-            if npix < 2 or flux < self.p.min_signal:
-                self.misses[s] += 1
-                continue
-            off = pend["offsets"][s]
-            fu, fv, fflux, var_u, var_v, _ = smear_fit(sp, wv, bg, u, v, off, self.p.psf_sigma_px,
-                                                       noise * noise, self.p.e_per_dn, 10, 1e-3)
-            if np.isfinite(fu) and np.isfinite(fv) and abs(fu - u) < 2.0 and abs(fv - v) < 2.0:
-                u, v = fu, fv
-                var = max(0.5 * (var_u + var_v), 0.02 ** 2)
-            else:
-                var = 0.3 ** 2
-            bvecs.append(rot @ unproject_point(self.cam, u, v))
-            sig.append(math.sqrt(var) / self.f_px)
-            slots.append(s)
+        state, b_mid, sig, _ = measured
+        wins = pend["wins"]
+        live = self.active[wins] & (self.star_nav[wins] == pend["nav"])   # dropped/replaced meanwhile: skip
+        self.misses[wins[live & (state == MEAS_MISS)]] += 1
+        use = live & (state == MEAS_OK)
+        slots = wins[use]
         updated = 0
-        if slots:
+        if len(slots):
+            # rotation body(t_mid) → body(now) from the gyro-propagated attitude history
+            q_mid = self._hist_q_at(res.t_mid)
+            rot = quat_to_dcm(quat_mult(self.q, quat_conj(q_mid)))
+            bvecs = np.ascontiguousarray(b_mid[use] @ rot.T)
             acc = np.zeros(len(slots), np.uint8)
-            updated = mekf_update(self.q, self.bias, self.P, np.array(bvecs), np.ascontiguousarray(self.ref[slots]),
-                                  np.array(sig), GATE, acc)
+            updated = mekf_update(self.q, self.bias, self.P, bvecs, np.ascontiguousarray(self.ref[slots]),
+                                  np.ascontiguousarray(sig[use]), GATE, acc)
             self.c.updates += int(updated)
-            for j, s in enumerate(slots):
-                if acc[j]:
-                    self.misses[s] = 0
-                    self.rejects[s] = 0
-                    self.seen[s] = True
-                else:
-                    self.rejects[s] += 1
-                    self.c.rejected_updates += 1
-                    if self.rejects[s] >= 5 and updated >= self.p.min_stars:
-                        self._drop(s)
-                        self.c.wrong_ids_dropped += 1
+            good = acc.astype(np.bool_)
+            self.misses[slots[good]] = 0
+            self.rejects[slots[good]] = 0
+            self.seen[slots[good]] = True
+            bad = slots[~good]
+            self.rejects[bad] += 1
+            self.c.rejected_updates += len(bad)
+            if updated >= self.p.min_stars:
+                for s in bad[self.rejects[bad] >= 5]:
+                    self._drop(int(s))
+                    self.c.wrong_ids_dropped += 1
         self.id_verified = updated >= 3 and updated == len(slots)
         self._after_image(now, int(updated))
 
@@ -631,7 +632,8 @@ def warmup() -> dict:
     from ..core.mekf import mekf_init, mekf_predict, mekf_update
     from ..core.motion import predict_trajectory, substeps_for
     from ..core.windows import trajectory_window
-    from . import acquire, kernels
+    from ..gyro.convert import convert_frames
+    from . import acquire, image_kernels, kernels
     from .warmup import warm
 
     cam = np.array([6666.0, 511.5, 511.5, 0, 0, 0, 0, 0, 1024, 1024])
@@ -657,6 +659,14 @@ def warmup() -> dict:
         (smear_fit, (spans, vals, 0.0, 12.0, 10.5, np.zeros((2, 2)), 0.85, 1.0, 5.0, 5, 1e-3)),
         (window_spans_of, (spans, 0)),
         (acquire.detect_spots, (img, 6.0, 40, 7)),
+        (convert_frames, (np.frombuffer(bytes(12), np.uint8), 2, 1e-3, np.eye(3), 0.0, 0.0025, 0.0, 0, 0,
+                          np.zeros(8, np.int32), np.zeros(4), np.zeros(4, np.int64), np.zeros((4, 3)),
+                          np.zeros(4, np.uint8), 0)),
+        (image_kernels.plan_windows, (np.array([[20.0, 20.0]]), np.array([0], np.int64), rates, 0.0025, w, cam,
+                                      MODEL, 1, 0, 6, 1024, 1024, 8192, 2048, 512)),
+        (image_kernels.measure_windows, (spans, vals, np.array([0], np.int64), np.zeros((2, 2)),
+                                         np.array([0], np.int64), np.array([2], np.int64), cam, 0.85, 4.0, 30.0,
+                                         5.0, 10, 1e-3)),
     ]
     return warm(calls)
 

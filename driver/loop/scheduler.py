@@ -14,6 +14,8 @@ import time
 from collections import deque
 from dataclasses import dataclass, field
 
+from ..realtime import fifo_policy, set_loop_priority
+
 LATE_KEEP = 4096   # wake-up lateness values kept (≈ 10 s at 400 Hz)
 
 
@@ -36,7 +38,11 @@ def realtime_setup(priority: int | None = None, cpus: list[int] | None = None) -
             st.notes.append(f"CPU affinity {cpus} not set: {exc}")
     if priority:
         try:
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(int(priority)))
+            # reset-on-fork: threads and processes started from here on (emulators, host
+            # work) run SCHED_OTHER; the driver's workers raise themselves just below the
+            # loop (gyrostar.realtime.join_realtime)
+            os.sched_setscheduler(0, fifo_policy(), os.sched_param(int(priority)))
+            set_loop_priority(int(priority))
             st.sched_fifo = True
             st.priority = int(priority)
         except (OSError, AttributeError) as exc:
@@ -98,3 +104,66 @@ class PeriodicScheduler:
             self.overruns += missed
             self.k += missed
         return missed
+
+
+class StepGate:
+    """Keeps a device worker's Python work out of the loop's steps and wake-ups.
+
+    The loop and its device workers share one interpreter lock, so a worker busy in Python
+    when a step is due delays it. The loop holds the gate for each step
+    (:meth:`loop_enter` … :meth:`loop_exit` with its next wake-up time); a worker wraps each
+    stretch of Python work in :meth:`worker_enter`/:meth:`worker_exit` and starts one only
+    between steps with at least ``min_slot_s`` left before the next wake-up (blocking waits
+    for device replies happen outside). :meth:`open` ends the schedule (workers run freely).
+    """
+
+    def __init__(self, min_slot_s: float = 0.001, clock=time.monotonic):
+        import threading
+
+        self.min_slot = float(min_slot_s)
+        self.clock = clock
+        self._cv = threading.Condition(threading.Lock())
+        self._loop_in = False
+        self._worker_in = False
+        self._next: float | None = None
+        self.worker_waits = 0          # worker stretches that had to wait for a slot
+
+    def loop_enter(self) -> None:
+        with self._cv:
+            while self._worker_in:
+                self._cv.wait()
+            self._loop_in = True
+
+    def loop_exit(self, next_wake: float) -> None:
+        with self._cv:
+            self._loop_in = False
+            self._next = float(next_wake)
+            self._cv.notify_all()
+
+    def open(self) -> None:
+        """No more steps: let workers run whenever they like."""
+        with self._cv:
+            self._loop_in = False
+            self._next = None
+            self._cv.notify_all()
+
+    def worker_enter(self) -> None:
+        with self._cv:
+            waited = False
+            while True:
+                if not self._loop_in:
+                    if self._next is None:
+                        break
+                    left = self._next - self.clock()
+                    # enough room before the next step, or the loop is not stepping at all
+                    if left >= self.min_slot or left < -0.05:
+                        break
+                waited = True
+                self._cv.wait(timeout=0.005)
+            self._worker_in = True
+            self.worker_waits += int(waited)
+
+    def worker_exit(self) -> None:
+        with self._cv:
+            self._worker_in = False
+            self._cv.notify_all()

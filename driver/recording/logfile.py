@@ -9,8 +9,9 @@ File layout (all integers little-endian)::
 ``t_ns`` is the host time of the event in integer nanoseconds (monotonic clock, or the
 simulated clock on a simulated flatsat). ``channel`` tells devices apart (0 = the head
 link, 1 = the gyro bus, ...). The writer keeps records in a user-space buffer and
-``write(2)``\\ s it to the kernel every ``flush_bytes`` bytes or ``flush_s`` seconds, so a
-SIGKILL loses at most that unflushed tail; ``fsync`` (power loss) is optional. A reader
+``write(2)``\\ s it to the kernel every ``flush_bytes`` bytes or ``flush_s`` seconds (from a
+writer thread with ``background=True``), so a SIGKILL loses at most that unflushed tail;
+``fsync`` (power loss) is optional. A reader
 stops at the first truncated or corrupt record and reports how many bytes it ignored.
 """
 
@@ -64,12 +65,18 @@ class LogWriter:
     """Append records to a log file; thread-safe (a link reader thread may record too)."""
 
     def __init__(self, path: str | Path, flush_bytes: int = 64 * 1024, flush_s: float = 0.05,
-                 fsync: bool = False):
+                 fsync: bool = False, background: bool = False):
         self.path = Path(path)
         self.flush_bytes = int(flush_bytes)
         self.flush_s = float(flush_s)
         self.fsync = fsync
-        self._lock = threading.Lock()
+        # background: the size/age flushes run on a writer thread, so a real-time caller of
+        # append() never waits for the disk; flush() and close() still write at once
+        self.background = bool(background)
+        self._lock = threading.Lock()          # the buffer
+        self._wlock = threading.Lock()         # the file: writes in buffer order
+        self._wake = threading.Event()
+        self._writer: threading.Thread | None = None
         self._buf = bytearray()
         self._last_flush = time.monotonic()
         self.records = 0
@@ -92,8 +99,13 @@ class LogWriter:
             self._buf += payload
             self._buf += CRC.pack(crc)
             self.records += 1
-            if len(self._buf) >= self.flush_bytes or time.monotonic() - self._last_flush >= self.flush_s:
+            due = len(self._buf) >= self.flush_bytes or time.monotonic() - self._last_flush >= self.flush_s
+            if due and not self.background:
                 self._flush_locked()
+        if due and self.background:
+            if self._writer is None:
+                self._start_writer()
+            self._wake.set()
 
     def meta(self, obj: dict, t_ns: int = 0) -> None:
         self.append(META, json.dumps(obj, sort_keys=True).encode(), t_ns=t_ns)
@@ -102,8 +114,9 @@ class LogWriter:
         self.append(EVENT, json.dumps(obj, sort_keys=True).encode(), t_ns=t_ns)
 
     def flush(self) -> None:
-        with self._lock:
-            self._flush_locked()
+        with self._wlock:
+            with self._lock:
+                self._flush_locked()
 
     def _flush_locked(self) -> None:
         if self._buf and self._fd >= 0:
@@ -113,6 +126,33 @@ class LogWriter:
                 os.fsync(self._fd)
         self._last_flush = time.monotonic()
 
+    def _start_writer(self) -> None:
+        with self._lock:
+            if self._writer is None and self._fd >= 0:
+                self._writer = threading.Thread(target=self._write_behind, name="log-writer", daemon=True)
+                self._writer.start()
+
+    def _write_behind(self) -> None:
+        """Writer thread: take the buffer (under the lock, O(1)) and write it outside it."""
+        from ..realtime import join_realtime, loop_priority
+
+        rt = False
+        while True:
+            self._wake.wait(self.flush_s)
+            self._wake.clear()
+            if not rt and loop_priority():
+                rt = join_realtime(3)     # never preempted by the host while holding the interpreter lock
+            with self._wlock:
+                with self._lock:
+                    if self._fd < 0:
+                        return
+                    data, self._buf = self._buf, bytearray()
+                    self._last_flush = time.monotonic()
+                if data:
+                    self._write_all(data)
+                    if self.fsync:
+                        os.fsync(self._fd)
+
     def _write_all(self, data) -> None:
         view = memoryview(bytes(data))
         while view:
@@ -121,12 +161,17 @@ class LogWriter:
             view = view[n:]
 
     def close(self) -> None:
-        with self._lock:
-            if self._fd >= 0:
-                self._flush_locked()
-                os.fsync(self._fd)
-                os.close(self._fd)
-                self._fd = -1
+        with self._wlock:
+            with self._lock:
+                if self._fd >= 0:
+                    self._flush_locked()
+                    os.fsync(self._fd)
+                    os.close(self._fd)
+                    self._fd = -1
+        if self._writer is not None:
+            self._wake.set()
+            self._writer.join(timeout=2.0)
+            self._writer = None
 
     def __enter__(self):
         return self

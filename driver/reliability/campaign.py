@@ -181,6 +181,7 @@ def run_campaign(events, duration: float, seed: int = 1, keep_hz: float = 400.0,
         rss[n_rss] = (t, rss_bytes(), rss_bytes(emu_pid))
         n_rss += 1
     finally:
+        loop.close()
         fs.close()
     trace = trace[: state["n"]]
     truth = fs.truth.rows(trace["t"])

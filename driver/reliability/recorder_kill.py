@@ -51,7 +51,8 @@ def child(log: str, side: str, seed: int) -> None:
 
     rng = random.Random(seed)
     fd = os.open(side, os.O_WRONLY | os.O_CREAT, 0o644)
-    w = LogWriter(log, flush_bytes=rng.choice([4096, 65536, 1 << 20]), flush_s=rng.choice([0.01, 0.05, 1.0]))
+    w = LogWriter(log, flush_bytes=rng.choice([4096, 65536, 1 << 20]), flush_s=rng.choice([0.01, 0.05, 1.0]),
+                  background=rng.random() < 0.5)
     i = 0
     while True:
         kind, ch, t_ns, payload = expected_record(i)

@@ -55,6 +55,9 @@ class _Reader(serial.threaded.ReaderThread):
     ``in_waiting``) as the connection lost, instead of dying with an unhandled exception."""
 
     def run(self):
+        from ..realtime import join_realtime
+
+        join_realtime()      # just below a real-time loop: it holds the interpreter lock at times
         if not hasattr(self.serial, "cancel_read"):
             self.serial.timeout = 1
         self.protocol = self.protocol_factory()

@@ -10,6 +10,7 @@ from gyrostar.errors import ConfigError
 from gyrostar.hil import config as hc
 from gyrostar.loop import record, sinks
 from gyrostar.loop.scheduler import PeriodicScheduler, realtime_setup
+from gyrostar.realtime import join_realtime, leave_realtime
 
 
 def test_record_layout_is_fixed_little_endian():
@@ -86,8 +87,11 @@ def test_realtime_setup_reports_instead_of_failing():
     def probe():
         st = realtime_setup(priority=10, cpus=[0])
         seen["st"] = st
-        seen["policy"] = os.sched_getscheduler(0)
+        seen["policy"] = os.sched_getscheduler(0) & ~getattr(os, "SCHED_RESET_ON_FORK", 0)
         seen["cpus"] = os.sched_getaffinity(0)
+        seen["workers_join"] = join_realtime() == st.sched_fifo
+        leave_realtime()
+        seen["left"] = os.sched_getscheduler(0) == os.SCHED_OTHER and not join_realtime()
 
     t = threading.Thread(target=probe)
     t.start()
@@ -97,6 +101,7 @@ def test_realtime_setup_reports_instead_of_failing():
     assert st.sched_fifo or any("SCHED_FIFO" in n for n in st.notes)
     assert st.cpus == [0] == sorted(seen["cpus"]) or any("affinity" in n for n in st.notes)
     assert os.sched_getscheduler(0) == os.SCHED_OTHER
+    assert seen["workers_join"] and seen["left"]
 
 
 def test_flatsat_config_and_scenarios_validate(tmp_path):

@@ -1,0 +1,164 @@
+"""numba kernels of the loop's image cycle: plan a frame's windows, measure their spots.
+
+Both work on whole frames (every tracked star in one call) so the image cycle costs no
+per-star Python. Pixel coordinates are (u, v) = (column, row) with integer pixel centres;
+``cam`` is :meth:`gyrostar.camera.Camera.as_array`.
+
+* :func:`plan_windows` — for each tracked star (brightest first) predict its spot
+  trajectory over the coming exposure from the gyro rates (paper 000's spot motion,
+  :func:`gyrostar.core.motion.predict_trajectory`) and build its trajectory window
+  (:func:`gyrostar.core.windows.trajectory_window`) within the head's pixel and span
+  budgets; returns the span set sorted by window id (= star slot), the chosen slots and
+  each one's trajectory offsets about its mean (the smeared-spot model of the fit).
+* :func:`measure_windows` — for each planned window: background, thresholded CoG, then
+  the smeared-PSF fit (:func:`gyrostar.core.centroid.smear_fit`); returns the measured
+  unit direction in the body frame at exposure mid-time and its 1σ (rad). ``nogil``: the
+  head port runs it on its worker thread, beside the 400 Hz path.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ..camera import P_CX, P_CY, P_F, unproject_point
+from ..core.centroid import cog, smear_fit, window_background, window_spans_of
+from ..core.motion import predict_trajectory
+from ..core.windows import trajectory_window
+
+MEAS_OK = 0        # direction measured
+MEAS_MISS = 1      # window read, no spot above threshold (or too faint)
+MEAS_ABSENT = 2    # the window is not in the readout
+
+
+@njit(cache=True)
+def plan_windows(uv, slots, rates, dt, bias, cam, model, substeps, skip, k, n_rows, n_cols,
+                 pixel_budget, max_window_pixels, max_spans):
+    """Windows for the next exposure of the stars ``slots`` (brightest first) at ``uv`` (n, 2).
+
+    ``rates`` (m, 3) rad/s measured rates held ``dt`` s each, from now; the first ``skip``
+    trajectory points (the command-to-exposure lag) are dropped. Returns ``(spans (s, 4)
+    int32 sorted by window id then row, wins (w,) int64 chosen slots ascending, offsets
+    (M, 2) px about each trajectory's mean, off_start (w,), off_len (w,))``. A star whose
+    window is empty (off the sensor) or would exceed a budget is left out.
+    """
+    n = slots.shape[0]
+    cx = cam[P_CX]
+    cy = cam[P_CY]
+    f = cam[P_F]
+    all_spans = np.empty((max_spans, 4), np.int32)
+    s_start = np.zeros(n, np.int64)
+    s_len = np.zeros(n, np.int64)
+    npts = rates.shape[0] * substeps + 1 - skip
+    if npts < 1:
+        npts = 1
+        skip = rates.shape[0] * substeps
+    trajs = np.empty((n, npts, 2))
+    chosen = np.zeros(n, np.bool_)
+    used_spans = 0
+    budget = pixel_budget
+    for j in range(n):
+        tr = predict_trajectory(uv[j, 0] - cx, uv[j, 1] - cy, rates, dt, bias, f, model, substeps)
+        for i in range(npts):
+            trajs[j, i, 0] = tr[skip + i, 0] + cx
+            trajs[j, i, 1] = tr[skip + i, 1] + cy
+        sp = trajectory_window(trajs[j], k, n_rows, n_cols, slots[j])
+        npx = 0
+        for i in range(sp.shape[0]):
+            npx += sp[i, 3] - sp[i, 2]
+        if sp.shape[0] == 0 or npx > max_window_pixels or npx > budget or used_spans + sp.shape[0] > max_spans:
+            continue
+        budget -= npx
+        s_start[j] = used_spans
+        s_len[j] = sp.shape[0]
+        all_spans[used_spans:used_spans + sp.shape[0]] = sp
+        used_spans += sp.shape[0]
+        chosen[j] = True
+    order = np.argsort(slots)
+    nw = 0
+    for j in range(n):
+        if chosen[j]:
+            nw += 1
+    spans = np.empty((used_spans, 4), np.int32)
+    wins = np.empty(nw, np.int64)
+    off = np.empty((nw * npts, 2))
+    off_start = np.empty(nw, np.int64)
+    off_len = np.empty(nw, np.int64)
+    a = 0
+    w = 0
+    for jj in range(n):
+        j = order[jj]
+        if not chosen[j]:
+            continue
+        spans[a:a + s_len[j]] = all_spans[s_start[j]:s_start[j] + s_len[j]]
+        a += s_len[j]
+        wins[w] = slots[j]
+        mu = 0.0
+        mv = 0.0
+        for i in range(npts):
+            mu += trajs[j, i, 0]
+            mv += trajs[j, i, 1]
+        mu /= npts
+        mv /= npts
+        off_start[w] = w * npts
+        off_len[w] = npts
+        for i in range(npts):
+            off[w * npts + i, 0] = trajs[j, i, 0] - mu
+            off[w * npts + i, 1] = trajs[j, i, 1] - mv
+        w += 1
+    return spans, wins, off, off_start, off_len
+
+
+@njit(cache=True, nogil=True)
+def measure_windows(spans, values, wins, off, off_start, off_len, cam, psf_sigma, thresh_sigma, min_signal,
+                    e_per_dn, n_iter, tol):
+    """Spot directions of the windows ``wins`` in one readout (``values`` in span order).
+
+    Returns ``(state (w,) int8 MEAS_*, b (w, 3) unit body direction at exposure mid-time,
+    sigma (w,) rad, uv (w, 2) px)``. A window's spot is its thresholded CoG (threshold
+    ``thresh_sigma`` noise σ above the window background; ≥ 2 pixels and ``min_signal`` DN
+    needed) refined by the smeared-PSF fit along its predicted trajectory offsets; when the
+    fit diverges (> 2 px from the CoG) the CoG is kept with σ = 0.3 px.
+    """
+    nw = wins.shape[0]
+    state = np.full(nw, MEAS_ABSENT, np.int8)
+    b = np.zeros((nw, 3))
+    sig = np.full(nw, np.inf)
+    uv = np.full((nw, 2), np.nan)
+    f = cam[P_F]
+    for i in range(nw):
+        a, e, v0 = window_spans_of(spans, wins[i])
+        if e <= a:
+            continue
+        sp = spans[a:e]
+        npx = 0
+        for r in range(sp.shape[0]):
+            npx += sp[r, 3] - sp[r, 2]
+        if v0 + npx > values.shape[0]:
+            continue
+        wv = values[v0:v0 + npx]
+        bg, noise = window_background(wv, 3.0)
+        u, v, flux, npix = cog(sp, wv, bg, bg + thresh_sigma * noise)
+        if npix < 2 or flux < min_signal:
+            state[i] = MEAS_MISS
+            continue
+        o = off[off_start[i]:off_start[i] + off_len[i]]
+        fu, fv, _, var_u, var_v, _ = smear_fit(sp, wv, bg, u, v, o, psf_sigma, noise * noise, e_per_dn,
+                                               n_iter, tol)
+        if math.isfinite(fu) and math.isfinite(fv) and abs(fu - u) < 2.0 and abs(fv - v) < 2.0:
+            u = fu
+            v = fv
+            var = max(0.5 * (var_u + var_v), 0.02 ** 2)
+        else:
+            var = 0.3 ** 2
+        d = unproject_point(cam, u, v)
+        b[i, 0] = d[0]
+        b[i, 1] = d[1]
+        b[i, 2] = d[2]
+        sig[i] = math.sqrt(var) / f
+        uv[i, 0] = u
+        uv[i, 1] = v
+        state[i] = MEAS_OK
+    return state, b, sig, uv
