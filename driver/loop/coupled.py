@@ -80,6 +80,8 @@ class Counters:
     samples_lost: int = 0
     gyro_gaps: int = 0
     gyro_errors: int = 0
+    gyro_saturated: int = 0        # samples with an axis at the range limit
+    gyro_stuck: int = 0            # samples flagged with a stuck axis (≥ 32 unchanged frames)
     frames: int = 0
     frames_failed: int = 0
     full_frames: int = 0
@@ -205,6 +207,7 @@ class CoupledLoop:
 
     def _gyro_phase(self) -> int:
         from ..core.mekf import mekf_predict
+        from ..gyro.convert import FLAG_GAP, FLAG_SATURATED, FLAG_STUCK_AXIS
         from .kernels import project_refs
 
         smp = self.samples
@@ -241,10 +244,13 @@ class CoupledLoop:
             self.omega = w - self.bias
             flags = self.flags_pending | self.last_image_flags
             self.flags_pending = 0
-            if smp.flags[i] & 0x08:
+            if smp.flags[i] & FLAG_GAP:
                 flags |= R.FLAG_GYRO_GAP
-            if smp.flags[i] & 0x07:
+            if smp.flags[i] & FLAG_SATURATED:
                 flags |= R.FLAG_GYRO_SATURATED
+            if smp.flags[i] & FLAG_STUCK_AXIS:
+                flags |= R.FLAG_GYRO_STUCK
+                self.c.gyro_stuck += 1
             if self.q_valid and self.mode != R.MODE_ACQUIRE:
                 flags |= R.FLAG_ATTITUDE_VALID
             if self.id_verified:
@@ -271,6 +277,7 @@ class CoupledLoop:
                 o["centroid_px"][:k] = uv
                 o["n_stars"] = k
         self.c.gyro_samples += n
+        self.c.gyro_saturated += int(smp.saturated)
         t_out = self.lat_clock.now()
         out["latency_us"] = (t_out - t_read) * 1e6
         for sink in self.sinks:

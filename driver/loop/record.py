@@ -42,11 +42,13 @@ FLAG_HEAD_LOST = 0x0040        # the head does not answer (disconnected); reconn
 FLAG_OVERRUN = 0x0080          # the loop missed its deadline before this sample
 FLAG_BIAS_CONVERGED = 0x0100   # bias covariance below threshold
 FLAG_ID_VERIFIED = 0x0200      # identification verified by residuals after the last solve
+FLAG_GYRO_STUCK = 0x0400       # a gyro axis output is stuck (unchanged for ≥ 32 frames: gyro.convert.FLAG_STUCK_AXIS)
 FLAG_NAMES = {
     FLAG_ATTITUDE_VALID: "attitude_valid", FLAG_IMAGE_UPDATE: "image_update",
     FLAG_GYRO_GAP: "gyro_gap", FLAG_GYRO_SATURATED: "gyro_saturated",
     FLAG_FEW_STARS: "few_stars", FLAG_LINK_ERROR: "link_error", FLAG_HEAD_LOST: "head_lost",
     FLAG_OVERRUN: "overrun", FLAG_BIAS_CONVERGED: "bias_converged", FLAG_ID_VERIFIED: "id_verified",
+    FLAG_GYRO_STUCK: "gyro_stuck",
 }
 
 OUTPUT_DTYPE = np.dtype([
