@@ -9,6 +9,7 @@ GYROSTAR := $(VENV)/bin/gyrostar
 STAMP    := $(VENV)/.installed
 FW_HOST  := firmware/build/host/gyrostar-head
 PYTEST_ARGS ?=
+RUN_ARGS ?= --realtime   # SCHED_FIFO for the loop thread when permitted (else it says why and runs normally)
 SECONDS  ?= 60
 
 .PHONY: run test setup lint fw-host fw-test fw-arm fw-fuzz fuzz soak bench clean help

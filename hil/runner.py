@@ -10,10 +10,11 @@ A run folder (``gyrostar.paths.runs_dir()/<timestamp>_<scenario>`` or ``--out``)
 
 Every flatsat runs on the host monotonic clock: the head emulator's and the firmware's
 exposures take their real time, so a simulated flatsat runs in real time as well; the loop
-is paced every gyro period by a drift-free scheduler. ``--realtime`` also asks for the
-config's SCHED_FIFO priority / CPU affinity (when permitted) and shortens Python's thread
-switch interval. Latency is host time from a gyro FIFO read to the emitted outputs;
-``cpu_percent`` is the loop thread's CPU time per wall second.
+is paced every gyro period by a drift-free scheduler, and the head worker's Python work is
+kept between steps (:class:`gyrostar.loop.scheduler.StepGate`). ``--realtime`` also asks
+for the config's SCHED_FIFO priority / CPU affinity (when permitted; see
+:mod:`gyrostar.realtime`). Latency is host time from a gyro FIFO read to the emitted
+outputs; ``cpu_percent`` is the loop thread's CPU time per wall second.
 """
 
 from __future__ import annotations
