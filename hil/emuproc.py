@@ -61,6 +61,8 @@ def _child(conn, make, parent_pid):
             elif cmd == "origin":
                 truth.restart(arg)
                 reply = None
+            elif cmd == "last_exposure":
+                reply = emu.last_exposure_host
             elif cmd == "stop":
                 emu.stop()
                 conn.send(("ok", None))
@@ -115,6 +117,10 @@ class EmulatorProcess:
     def byte_fault_counts(self) -> dict | None:
         """The active ByteFaults' counters (writes, mangled, injected bytes/bursts), or None."""
         return self._call("fault_counts")
+
+    def last_exposure(self) -> tuple[float, float] | None:
+        """Host (start, end) of the emulator's last exposure (its truth)."""
+        return self._call("last_exposure")
 
     def eclipse(self, on: bool) -> None:
         self._call("eclipse", bool(on))
