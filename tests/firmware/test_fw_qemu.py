@@ -56,3 +56,22 @@ def test_arm_image_boots_pings_and_captures(tmp_path):
             link.close()
     assert boot_s < 10.0
     pixels.close()
+
+
+def test_requests_racing_the_boot_are_answered(tmp_path):
+    """Pings sent the moment the UART socket listens, over several boots: the UART interrupt
+    must not be lost when a byte lands while the handler drains (that left the link silent
+    for good in about 1 boot in 3)."""
+    W, H = 64, 64
+    pixels = PixelFile(tmp_path / "sensor.gspx", W, H, planes=1)
+    pixels.write_frame(np.zeros((H, W), np.uint16))
+    for boot in range(8):
+        with qemu.QemuHead(pixels.path) as q:
+            link = q.link(timeout=10.0)
+            try:
+                client = HeadClient(link, timeout=0.5, retries=3)
+                for _ in range(5):
+                    assert client.ping(b"race") < 0.5, f"boot {boot}"
+            finally:
+                link.close()
+    pixels.close()

@@ -62,6 +62,11 @@ void SysTick_Handler(void) { (void)time_us(NULL); }
 
 void UART0_RX_Handler(void)
 {
+    /* Clear the RX interrupt before draining, never after: a byte that lands between the
+     * last RXFULL check and a late clear would lose its interrupt, and with the byte left in
+     * the 1-byte buffer QEMU delivers nothing more - the link went silent for good (seen in
+     * 1 of 3 boots when a request raced the start-up). Cleared first, such a byte re-raises it. */
+    UART0_INTCLR = 0x2u;
     while (UART0_STATE & UART_STATE_RXFULL) {
         uint8_t b = (uint8_t)UART0_DATA;
         uint32_t next = (g_head + 1u) & (MPS2_RX_RING - 1u);
@@ -76,7 +81,6 @@ void UART0_RX_Handler(void)
         UART0_STATE = UART_STATE_RXOVR; /* write 1 to clear */
         g_overruns++;
     }
-    UART0_INTCLR = 0x2u;
 }
 
 uint32_t mps2_uart_take(uint8_t *buf, uint32_t cap)
