@@ -71,8 +71,12 @@ def run(args) -> int:
 
 def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed: int, folder: Path,
                 realtime: bool = False, plots: bool = True, status: bool = True, config_path=None,
-                record: bool | None = None, on_output=None) -> dict:
-    """Run one flatsat session and return its summary (also written to summary.json)."""
+                record: bool | None = None, on_output=None, probe=None) -> dict:
+    """Run one flatsat session and return its summary (also written to summary.json).
+
+    ``probe``: a :class:`gyrostar.loop.wakeup_probe.WakeupProbe` to run beside the loop; the
+    summary's ``host_wakeups`` then says how often the host itself woke a real-time task
+    late and how many overruns coincided with that."""
     from ..loop.record import describe
     from ..loop.scheduler import PeriodicScheduler, StepGate, realtime_setup
     from ..loop.sinks import CallbackSink, RecorderSink, UdpSink
@@ -142,6 +146,8 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
         fs.start_faults(t_start_of(fs))
         period = 1.0 / loop.gyro.odr_hz
         sched = PeriodicScheduler(period)
+        if probe is not None:
+            probe.start(duration)
         sched.start()
         t_start = t_start_of(fs)
         while True:
@@ -212,6 +218,15 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
         res_top["realtime_setup"] = {"sched_fifo": rt.sched_fifo, "cpus": rt.cpus, "notes": rt.notes}
     if udp is not None:
         res_top["udp"] = {"sent": udp.sent, "dropped": udp.dropped, "to": f"{udp.addr[0]}:{udp.addr[1]}"}
+    if probe is not None:
+        from ..loop.wakeup_probe import LATE_S, coincident
+
+        pr = probe.result()
+        res_top["host_wakeups"] = {
+            "probe_sched_fifo": pr["granted"], "probe_priority": probe.priority, "wakeups": pr["wakeups"],
+            f"late_over_{LATE_S * 1e3:.0f}ms": len(pr["late_s"]), "max_late_ms": pr["max_s"] * 1e3,
+            "overrun_events": len(sched.overrun_t),
+            "overrun_events_during_host_stalls": coincident(np.array(sched.overrun_t), pr["late_t"], pr["late_s"])}
     res_top["run_folder"] = str(folder)
     if writer:
         writer.event({"summary": _jsonable(res_top)})

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from ..realtime import fifo_policy, set_loop_priority
 
 LATE_KEEP = 4096   # wake-up lateness values kept (≈ 10 s at 400 Hz)
+OVERRUN_KEEP = 65536  # times of the latest overrun events kept
 
 
 @dataclass
@@ -71,6 +72,7 @@ class PeriodicScheduler:
         self.overruns = 0
         self.steps = 0
         self.late_s: deque[float] = deque(maxlen=LATE_KEEP)
+        self.overrun_t: deque[float] = deque(maxlen=OVERRUN_KEEP)   # missed deadlines (clock s)
 
     def start(self, t0: float | None = None) -> None:
         self.t0 = self.clock() if t0 is None else t0
@@ -102,6 +104,7 @@ class PeriodicScheduler:
         if now > self.deadline:
             missed = int((now - self.deadline) // self.period) + 1
             self.overruns += missed
+            self.overrun_t.append(self.deadline)
             self.k += missed
         return missed
 

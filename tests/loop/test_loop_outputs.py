@@ -71,6 +71,8 @@ def test_scheduler_is_drift_free_and_counts_overruns():
         ft.t += 0.0011 if k != 100 else 0.0080     # one step takes 8 ms: misses 3 deadlines
         s.done()
     assert s.overruns == 3
+    # one overrun event, at the first missed deadline: step 101's (t0 + 101·T)
+    assert len(s.overrun_t) == 1 and abs(s.overrun_t[0] - (100.0 + 101 * 0.0025)) < 1e-9
     wakes = np.array(wakes) - 100.0
     # every wake-up is on the grid t0 + k·period: no accumulated drift
     k = np.round(wakes / 0.0025)
