@@ -633,13 +633,14 @@ def _link_closed(exc: Exception) -> bool:
 
 def warmup() -> dict:
     """Compile or load every numba function of the loop's hot path, timed (see warmup.py)."""
-    from ..attitude import quat_propagate
+    from ..attitude import quat_conj, quat_mult, quat_normalize, quat_propagate, quat_to_dcm
     from ..camera import unproject_point
     from ..core.centroid import cog, smear_fit, window_background, window_spans_of
     from ..core.mekf import mekf_init, mekf_predict, mekf_update
     from ..core.motion import predict_trajectory, substeps_for
     from ..core.windows import trajectory_window
     from ..gyro.convert import convert_frames
+    from ..protocol.payloads import _unpack10_kernel
     from . import acquire, image_kernels, kernels
     from .warmup import warm
 
@@ -657,6 +658,11 @@ def warmup() -> dict:
         (mekf_update, (q, b, P, ref, ref, np.array([1e-5, 1e-5]), GATE, np.zeros(2, np.uint8))),
         (kernels.project_refs, (cam, q, ref)),
         (quat_propagate, (q, w, 0.001)),
+        (quat_mult, (q, q)),          # acquisition and delayed-measurement transfer
+        (quat_conj, (q,)),
+        (quat_normalize, (q,)),
+        (quat_to_dcm, (q,)),
+        (_unpack10_kernel, (np.frombuffer(bytes(20), np.uint8), 16)),   # full-frame chunks (head worker)
         (unproject_point, (cam, 10.0, 10.0)),
         (substeps_for, (rates, 0.0025, 6666.0, 0.25)),
         (predict_trajectory, (0.0, 0.0, rates, 0.0025, w, 6666.0, MODEL, 1)),
