@@ -271,8 +271,7 @@ class HeadPort:
             return ImageResult("reconnect", np.nan, np.nan, np.nan)
         c = self.client
         if kind == "windows":
-            c.set_windows(spans)
-            cap = c.capture(fetch=True)
+            cap = c.capture_windows(spans)      # SET_WINDOWS, CAPTURE, WINDOW_DATA back to back
             order = {w.window_id: w.pixels for w in cap.windows}
             ids = []
             for wid in spans[:, 0]:

@@ -67,7 +67,7 @@ class HeadClient:
         self._seq = 0
         self._last_sync = -1e300
         self.info: dict | None = None
-        self.stats = {"requests": 0, "retries": 0, "corrupt": 0, "stale": 0}
+        self.stats = {"requests": 0, "retries": 0, "corrupt": 0, "stale": 0, "pipeline_fallbacks": 0}
 
     # --- plumbing ---------------------------------------------------------------------------
     def _next_seq(self) -> int:
@@ -170,18 +170,60 @@ class HeadClient:
         msg = MsgType.DARK if dark else MsgType.CAPTURE
         # A lost reply means another exposure on retry: the new capture_no tells them apart.
         f, _, _ = self.request(msg, timeout=self.timeout + self._exposure_s)
+        windows = self.window_data(pixel_format, f["capture_no"]) if fetch else None
+        return self._capture_of(f, windows)
+
+    def capture_windows(self, spans, pixel_format: int = PixelFormat.U16) -> Capture:
+        """SET_WINDOWS, CAPTURE and the first WINDOW_DATA page sent back to back, then their
+        replies: the head serves requests in order, so the link never idles for a round trip
+        between them. The capture is used only when all three replies came and agree (the
+        new window set was applied, then captured, then read); a lost, late or rejected reply
+        falls back to :meth:`set_windows` + :meth:`capture`, request by request (a rejected
+        window set raises its firmware error there)."""
+        self.maybe_sync()
+        seqs = {}
+        for msg, payload in ((MsgType.SET_WINDOWS, encode_spans(spans)), (MsgType.CAPTURE, b""),
+                             (MsgType.WINDOW_DATA, encode_request(MsgType.WINDOW_DATA, start=0,
+                                                                  pixel_format=pixel_format))):
+            seqs[self._send(msg, payload)[0]] = int(msg)
+        pending = dict(seqs)
+        replies = {}
+        deadline = time.monotonic() + self.timeout + self._exposure_s
+        while pending:
+            got = self._await(pending, deadline)
+            if got is None:
+                break
+            frame, _ = got
+            msg = pending.pop(frame.seq)
+            try:
+                replies[msg] = decode_reply(frame, expect=msg)
+            except DeviceError:
+                break
+        s, c, w = (replies.get(int(m)) for m in (MsgType.SET_WINDOWS, MsgType.CAPTURE, MsgType.WINDOW_DATA))
+        if s is None or c is None or w is None or (s["n_windows"], s["n_pixels"]) != (c["n_windows"], c["n_pixels"]) \
+                or w["capture_no"] != c["capture_no"] or w["start"] != 0 or w["count"] == 0:
+            self.stats["pipeline_fallbacks"] += 1
+            self.set_windows(spans)
+            return self.capture(fetch=True, pixel_format=pixel_format)
+        windows = list(w["windows"])
+        if w["count"] < w["total"]:
+            windows += self.window_data(pixel_format, c["capture_no"], start=w["count"])
+        return self._capture_of(c, windows)
+
+    def _capture_of(self, f: dict, windows) -> Capture:
         self._exposure_s = f["exposure_us"] * 1e-6
         mid = 0.5 * (f["t_start_us"] + f["t_end_us"])
         t_mid = self.sync_state.mcu_to_host(mid) if self.sync_state.ready else float("nan")
-        windows = self.window_data(pixel_format, f["capture_no"]) if fetch else None
         return Capture(f["capture_no"], f["sensor_frame"], f["t_start_us"], f["t_end_us"], f["exposure_us"],
                        f["gain_x16"], f["n_windows"], f["n_pixels"], f["plane"], t_mid, windows)
 
     _exposure_s = LIMITS["exposure_default_us"] * 1e-6
 
-    def window_data(self, pixel_format: int = PixelFormat.U16, capture_no: int | None = None) -> list:
-        """All windows of the last capture (as many WINDOW_DATA pages as needed)."""
-        out, start = [], 0
+    def window_data(self, pixel_format: int = PixelFormat.U16, capture_no: int | None = None,
+                    start: int = 0) -> list:
+        """The windows of the last capture from window index ``start`` on (as many
+        WINDOW_DATA pages as needed)."""
+        out = []
         while True:
             f = self.request(MsgType.WINDOW_DATA, encode_request(MsgType.WINDOW_DATA, start=start,
                                                                  pixel_format=pixel_format))[0]

@@ -287,3 +287,54 @@ def test_corrupted_requests_are_dropped_by_the_head_and_retried(leg):
         assert dropped > 0  # the head counted the damaged requests and did not answer them
     finally:
         link.close()
+
+
+def test_pipelined_windows_capture_matches_the_sequential_one(head, leg):
+    """SET_WINDOWS + CAPTURE + WINDOW_DATA sent back to back: the same pixels as the
+    request-by-request exchange, pages beyond the first fetched, no fallback needed."""
+    for spans in (spans_grid(), spans_grid(n_windows=8, rows=32, width=32, row0=100)):   # 1 page, several
+        cap = head.capture_windows(spans)
+        assert head.stats["pipeline_fallbacks"] == 0
+        assert [w.window_id for w in cap.windows] == sorted(set(spans[:, 0].tolist()))
+        got = np.concatenate([w.pixels for w in cap.windows])
+        image = leg.expected(cap.exposure_us)
+        assert np.array_equal(got, np.concatenate([image[r, c0:c1] for _, r, c0, c1 in spans]))
+        seq = head.capture(pixel_format=PixelFormat.U16)           # same window set, request by request
+        assert seq.capture_no == cap.capture_no + 1
+        assert np.array_equal(np.concatenate([w.pixels for w in seq.windows]), got)
+
+
+def test_pipelined_capture_with_a_rejected_window_set_raises_that_rejection(head):
+    from gyrostar.protocol.errors import FirmwareError
+
+    good = spans_grid()
+    head.capture_windows(good)
+    bad = good.copy()
+    bad[0, 3] = 5000                                   # a span off the sensor: SET_WINDOWS is rejected
+    with pytest.raises(FirmwareError):
+        head.capture_windows(bad)
+    assert head.stats["pipeline_fallbacks"] == 1       # the pipelined capture was not used
+    cap = head.capture_windows(good)                   # the stale replies of the rejected try are skipped
+    assert len(cap.windows) == 10
+
+
+def test_pipelined_capture_under_request_corruption_never_returns_the_old_windows(leg):
+    """Requests damaged on the way (the head drops them): a capture is returned only for the
+    window set asked for — never the previous set's pixels."""
+    from gyrostar.mocks.faults import ByteFaults, JitteredLink
+
+    link = SerialLink(leg.path)
+    faults = ByteFaults(seed=11, corrupt_p=0.0005)    # ~20 % of the window sets damaged
+    head = HeadClient(JitteredLink(link, faults), timeout=0.1, retries=12)
+    try:
+        HeadClient(link).reset()
+        sets = [spans_grid(rows=6, row0=200), spans_grid(n_windows=6, rows=8, width=24, row0=500)]
+        for i in range(24):
+            spans = sets[i % 2]
+            cap = head.capture_windows(spans)
+            image = leg.expected(cap.exposure_us)
+            got = np.concatenate([w.pixels for w in cap.windows])
+            assert np.array_equal(got, np.concatenate([image[r, c0:c1] for _, r, c0, c1 in spans]))
+        assert faults.injected["corrupt"] > 0 and head.stats["pipeline_fallbacks"] > 0
+    finally:
+        link.close()
