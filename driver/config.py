@@ -12,6 +12,7 @@ Supported field types: ``bool``, ``int``, ``float`` (ints accepted), ``str``, ``
 from __future__ import annotations
 
 import dataclasses
+import math
 import tomllib
 import types
 import typing
@@ -136,6 +137,8 @@ def _coerce(value: Any, tp: Any, source: str, key: str) -> Any:
         raise _bad(source, key, tp, value)
     if tp is float:
         if isinstance(value, (int, float)) and not isinstance(value, bool):
+            if not math.isfinite(value):        # TOML has nan and inf literals
+                raise ConfigError(f"{source}: key '{key}' must be a finite number, got {value!r}")
             return float(value)
         raise _bad(source, key, tp, value)
     if tp is str:

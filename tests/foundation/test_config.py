@@ -55,6 +55,9 @@ def test_unknown_key_names_key_and_file(tmp_path):
     ('name = "x"\nurls = [1]', "urls[0]", "a string"),
     ('name = "x"\noffset = [1, 2]', "offset", "3 items"),
     ('name = "x"\n[gyro]\nkind = "mpu6050"', "gyro.kind", "one of"),
+    ('name = "x"\nrate_hz = nan', "rate_hz", "finite"),
+    ('name = "x"\nrate_hz = -inf', "rate_hz", "finite"),
+    ('name = "x"\noffset = [0.0, inf, 0.0]', "offset[1]", "finite"),
 ])
 def test_ill_typed_key_names_expected_type(text, key, expected):
     with pytest.raises(ConfigError) as err:
