@@ -118,7 +118,6 @@ class HeadPort:
         self._patched = None
         # real-time runs: the loop's StepGate (gyrostar.loop.scheduler; see _GatedLink); None: off
         self.step_gate = None
-        self._held = threading.local()
 
     # ------------------------------------------------------------------ set-up
     def _patch_time(self) -> None:
@@ -245,14 +244,12 @@ class HeadPort:
             gate = self.step_gate
             if gate is not None:
                 gate.worker_enter()
-                self._held.on = True
             try:
                 self._result = self._do(kind, spans)
             except Exception as exc:  # noqa: BLE001 - every failure goes back to the loop as a result
                 self._result = ImageResult(kind, np.nan, np.nan, np.nan, error=exc)
             finally:
                 if gate is not None:
-                    self._held.on = False
                     gate.worker_exit()
             res = self._result
             if post is not None and res is not None and res.error is None and res.image is not None:
@@ -263,7 +260,8 @@ class HeadPort:
             self._done.set()
 
     def _gate_held(self) -> bool:
-        return self.step_gate is not None and getattr(self._held, "on", False)
+        """Inside a job the worker holds the gate (set-up on the loop's thread does not)."""
+        return self.step_gate is not None and threading.current_thread() is self._thread
 
     def _do(self, kind, spans) -> ImageResult:
         if kind == "reconnect":

@@ -38,8 +38,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..core.mekf import mekf_predict
 from ..errors import DeviceError, GyrostarError
+from ..gyro.convert import FLAG_GAP, FLAG_SATURATED, FLAG_STUCK_AXIS
+from ..head.client import HeadTimeoutError
 from . import record as R
+from .kernels import project_refs
 
 log = logging.getLogger(__name__)
 
@@ -206,10 +210,6 @@ class CoupledLoop:
         return n_out
 
     def _gyro_phase(self) -> int:
-        from ..core.mekf import mekf_predict
-        from ..gyro.convert import FLAG_GAP, FLAG_SATURATED, FLAG_STUCK_AXIS
-        from .kernels import project_refs
-
         smp = self.samples
         smp.clear()
         try:
@@ -327,7 +327,7 @@ class CoupledLoop:
                 self.c.frames_failed += 1
                 self.last_image_flags |= R.FLAG_LINK_ERROR
                 self._count_head_error(res.error)
-                self.timeouts = self.timeouts + 1 if type(res.error).__name__ == "HeadTimeoutError" else 0
+                self.timeouts = self.timeouts + 1 if isinstance(res.error, HeadTimeoutError) else 0
                 if _link_closed(res.error) or self.timeouts >= 3:
                     self._head_failed(res.error)
                     return
@@ -377,7 +377,7 @@ class CoupledLoop:
         return spots, self.identifier.identify(np.ascontiguousarray(spots[:, :2]))
 
     def _acquire(self, res, now: float) -> None:
-        spots, ident = res.measured if res.measured is not None else self._lost_in_space(res.image)
+        spots, ident = res.measured          # _lost_in_space ran on the head worker
         self.c.acquisitions += 1
         if ident is None:
             self.c.acquisition_failures += 1
@@ -474,7 +474,7 @@ class CoupledLoop:
         if 0.0 <= lag < 0.1:
             self.lag_jitter = 0.9 * self.lag_jitter + 0.1 * abs(lag - self.exposure_lag)
             self.exposure_lag = 0.9 * self.exposure_lag + 0.1 * lag
-        state, b_mid, sig, _ = measured
+        state, b_mid, sig = measured
         wins = pend["wins"]
         live = self.active[wins] & (self.star_nav[wins] == pend["nav"])   # dropped/replaced meanwhile: skip
         self.misses[wins[live & (state == MEAS_MISS)]] += 1
@@ -632,13 +632,12 @@ def _link_closed(exc: Exception) -> bool:
 
 
 def warmup() -> dict:
-    """Compile or load every numba function of the loop's hot path, timed (see warmup.py)."""
+    """Compile or load every numba function the loop (or its head worker) calls from Python,
+    with the argument types it uses, timed (see warmup.py). Kernels called only from inside
+    other kernels (centroiding, trajectories, windows) come with their callers."""
     from ..attitude import quat_conj, quat_mult, quat_normalize, quat_propagate, quat_to_dcm
-    from ..camera import unproject_point
-    from ..core.centroid import cog, smear_fit, window_background, window_spans_of
     from ..core.mekf import mekf_init, mekf_predict, mekf_update
-    from ..core.motion import predict_trajectory, substeps_for
-    from ..core.windows import trajectory_window
+    from ..core.motion import substeps_for
     from ..gyro.convert import convert_frames
     from ..protocol.payloads import _unpack10_kernel
     from . import acquire, image_kernels, kernels
@@ -663,14 +662,7 @@ def warmup() -> dict:
         (quat_normalize, (q,)),
         (quat_to_dcm, (q,)),
         (_unpack10_kernel, (np.frombuffer(bytes(20), np.uint8), 16)),   # full-frame chunks (head worker)
-        (unproject_point, (cam, 10.0, 10.0)),
         (substeps_for, (rates, 0.0025, 6666.0, 0.25)),
-        (predict_trajectory, (0.0, 0.0, rates, 0.0025, w, 6666.0, MODEL, 1)),
-        (trajectory_window, (np.zeros((3, 2)) + 20.0, 6, 1024, 1024, 0)),
-        (window_background, (vals, 3.0)),
-        (cog, (spans, vals, 0.0, 1.0)),
-        (smear_fit, (spans, vals, 0.0, 12.0, 10.5, np.zeros((2, 2)), 0.85, 1.0, 5.0, 5, 1e-3)),
-        (window_spans_of, (spans, 0)),
         (acquire.detect_spots, (img, 6.0, 40, 7)),
         (convert_frames, (np.frombuffer(bytes(12), np.uint8), 2, 1e-3, np.eye(3), 0.0, 0.0025, 0.0, 0, 0,
                           np.zeros(8, np.int32), np.zeros(4), np.zeros(4, np.int64), np.zeros((4, 3)),

@@ -117,7 +117,7 @@ def measure_windows(spans, values, wins, off, off_start, off_len, cam, psf_sigma
     """Spot directions of the windows ``wins`` in one readout (``values`` in span order).
 
     Returns ``(state (w,) int8 MEAS_*, b (w, 3) unit body direction at exposure mid-time,
-    sigma (w,) rad, uv (w, 2) px)``. A window's spot is its thresholded CoG (threshold
+    sigma (w,) rad)``. A window's spot is its thresholded CoG (threshold
     ``thresh_sigma`` noise σ above the window background; ≥ 2 pixels and ``min_signal`` DN
     needed) refined by the smeared-PSF fit along its predicted trajectory offsets; when the
     fit diverges (> 2 px from the CoG) the CoG is kept with σ = 0.3 px.
@@ -126,7 +126,6 @@ def measure_windows(spans, values, wins, off, off_start, off_len, cam, psf_sigma
     state = np.full(nw, MEAS_ABSENT, np.int8)
     b = np.zeros((nw, 3))
     sig = np.full(nw, np.inf)
-    uv = np.full((nw, 2), np.nan)
     f = cam[P_F]
     for i in range(nw):
         a, e, v0 = window_spans_of(spans, wins[i])
@@ -158,7 +157,5 @@ def measure_windows(spans, values, wins, off, off_start, off_len, cam, psf_sigma
         b[i, 1] = d[1]
         b[i, 2] = d[2]
         sig[i] = math.sqrt(var) / f
-        uv[i, 0] = u
-        uv[i, 1] = v
         state[i] = MEAS_OK
-    return state, b, sig, uv
+    return state, b, sig

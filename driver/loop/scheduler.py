@@ -129,7 +129,6 @@ class StepGate:
         self._loop_in = False
         self._worker_in = False
         self._next: float | None = None
-        self.worker_waits = 0          # worker stretches that had to wait for a slot
 
     def loop_enter(self) -> None:
         with self._cv:
@@ -152,7 +151,6 @@ class StepGate:
 
     def worker_enter(self) -> None:
         with self._cv:
-            waited = False
             while True:
                 if not self._loop_in:
                     if self._next is None:
@@ -161,10 +159,8 @@ class StepGate:
                     # enough room before the next step, or the loop is not stepping at all
                     if left >= self.min_slot or left < -0.05:
                         break
-                waited = True
                 self._cv.wait(timeout=0.005)
             self._worker_in = True
-            self.worker_waits += int(waited)
 
     def worker_exit(self) -> None:
         with self._cv:

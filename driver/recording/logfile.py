@@ -74,7 +74,7 @@ class LogWriter:
         # append() never waits for the disk; flush() and close() still write at once
         self.background = bool(background)
         self._lock = threading.Lock()          # the buffer
-        self._wlock = threading.Lock()         # the file: writes in buffer order
+        self._wlock = threading.RLock()        # the file: writes in buffer order (close drains inside it)
         self._wake = threading.Event()
         self._writer: threading.Thread | None = None
         self._buf = bytearray()
@@ -100,12 +100,14 @@ class LogWriter:
             self._buf += CRC.pack(crc)
             self.records += 1
             due = len(self._buf) >= self.flush_bytes or time.monotonic() - self._last_flush >= self.flush_s
-            if due and not self.background:
-                self._flush_locked()
-        if due and self.background:
-            if self._writer is None:
-                self._start_writer()
-            self._wake.set()
+        if not due:
+            return
+        if not self.background:
+            self.flush()
+            return
+        if self._writer is None:
+            self._start_writer()
+        self._wake.set()
 
     def meta(self, obj: dict, t_ns: int = 0) -> None:
         self.append(META, json.dumps(obj, sort_keys=True).encode(), t_ns=t_ns)
@@ -114,17 +116,23 @@ class LogWriter:
         self.append(EVENT, json.dumps(obj, sort_keys=True).encode(), t_ns=t_ns)
 
     def flush(self) -> None:
+        """Hand every buffered record to the kernel now."""
+        self._drain()
+
+    def _drain(self) -> bool:
+        """Take the buffer (under the buffer lock, O(1)) and write it outside that lock, in
+        buffer order (the file lock); False once the log is closed."""
         with self._wlock:
             with self._lock:
-                self._flush_locked()
-
-    def _flush_locked(self) -> None:
-        if self._buf and self._fd >= 0:
-            self._write_all(self._buf)
-            self._buf.clear()
-            if self.fsync:
-                os.fsync(self._fd)
-        self._last_flush = time.monotonic()
+                if self._fd < 0:
+                    return False
+                data, self._buf = self._buf, bytearray()
+                self._last_flush = time.monotonic()
+            if data:
+                self._write_all(data)
+                if self.fsync:
+                    os.fsync(self._fd)
+        return True
 
     def _start_writer(self) -> None:
         with self._lock:
@@ -133,7 +141,7 @@ class LogWriter:
                 self._writer.start()
 
     def _write_behind(self) -> None:
-        """Writer thread: take the buffer (under the lock, O(1)) and write it outside it."""
+        """Writer thread: drain every ``flush_s``, or when an append finds a flush due."""
         from ..realtime import join_realtime, loop_priority
 
         rt = False
@@ -142,19 +150,11 @@ class LogWriter:
             self._wake.clear()
             if not rt and loop_priority():
                 rt = join_realtime(3)     # never preempted by the host while holding the interpreter lock
-            with self._wlock:
-                with self._lock:
-                    if self._fd < 0:
-                        return
-                    data, self._buf = self._buf, bytearray()
-                    self._last_flush = time.monotonic()
-                if data:
-                    self._write_all(data)
-                    if self.fsync:
-                        os.fsync(self._fd)
+            if not self._drain():
+                return
 
     def _write_all(self, data) -> None:
-        view = memoryview(bytes(data))
+        view = memoryview(data)
         while view:
             n = os.write(self._fd, view)
             self.bytes_written += n
@@ -162,9 +162,8 @@ class LogWriter:
 
     def close(self) -> None:
         with self._wlock:
-            with self._lock:
-                if self._fd >= 0:
-                    self._flush_locked()
+            if self._drain():
+                with self._lock:
                     os.fsync(self._fd)
                     os.close(self._fd)
                     self._fd = -1
