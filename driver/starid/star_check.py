@@ -36,20 +36,9 @@ def chi2_gate(p_reject: float, dof: int) -> float:
     """The χ² value a true star exceeds with probability ``p_reject`` (2 or 3 dof)."""
     if not (0.0 < p_reject < 1.0) or dof not in (2, 3):
         raise ConfigError(f"chi2_gate needs 0 < p_reject < 1 and 2 or 3 dof, got {p_reject}, {dof}")
-    if dof == 2:
-        return -2.0 * math.log(p_reject)
+    from scipy.stats import chi2
 
-    def sf3(x: float) -> float:  # survival function of χ²₃
-        return math.erfc(math.sqrt(x / 2.0)) + math.sqrt(2.0 * x / math.pi) * math.exp(-x / 2.0)
-
-    lo, hi = 0.0, 200.0
-    for _ in range(200):
-        mid = 0.5 * (lo + hi)
-        if sf3(mid) > p_reject:
-            lo = mid
-        else:
-            hi = mid
-    return 0.5 * (lo + hi)
+    return float(chi2.isf(p_reject, dof))
 
 
 @njit(cache=True)
