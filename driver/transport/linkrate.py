@@ -1,0 +1,68 @@
+"""Line-rate model of the head link: how long bytes take on the wire.
+
+One model for every place that needs it: the simulated links pace bytes with it (a
+simulation is never faster than the hardware), the loop budgets its windows with it, and
+``gyrostar bench`` reports link utilisation with it.
+
+A preset is a sustained payload rate (bytes/s after the transport's own overhead) plus a
+per-transfer latency (s): the time from the sender's first byte to the receiver seeing any
+of it, on top of the bytes' wire time.
+
+* UART 8N1: 10 bits on the wire per payload byte (start + 8 data + stop); latency is one
+  character time plus the receiver's FIFO/idle timeout (the host driver hands bytes up
+  after about 2 character times of idle line, or when its FIFO fills).
+* USB full-speed CDC-ACM (bulk): 12 Mbit/s raw, at most 19 × 64-byte packets per 1 ms
+  frame (1.216 MB/s); a Linux host sustains about 0.9 MB/s. Bytes move in 1 ms frames,
+  so a transfer waits up to one frame for the host's next IN token (0.5 ms on average; the
+  model uses the full frame, never the kinder value).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class LinkPreset:
+    """A head link: name, sustained payload bytes/s, per-transfer latency (s)."""
+
+    name: str
+    bytes_per_s: float
+    latency_s: float
+    description: str
+
+    def wire_time(self, n_bytes: int) -> float:
+        """Seconds from the first byte sent to the last byte received, for ``n_bytes``."""
+        return self.latency_s + n_bytes / self.bytes_per_s
+
+    def utilisation(self, bytes_per_frame: float, frame_hz: float) -> float:
+        """Fraction of the link's sustained rate used by ``bytes_per_frame`` at ``frame_hz``."""
+        return bytes_per_frame * frame_hz / self.bytes_per_s
+
+    def max_frame_hz(self, bytes_per_frame: float, budget: float = 1.0) -> float:
+        """Highest frame rate (Hz) whose traffic fits ``budget`` × the sustained rate."""
+        return budget * self.bytes_per_s / max(bytes_per_frame, 1.0)
+
+
+def _uart(name: str, baud: int, description: str) -> LinkPreset:
+    byte_s = 10.0 / baud  # 8N1
+    return LinkPreset(name, baud / 10.0, 3 * byte_s, description)
+
+
+PRESETS: dict[str, LinkPreset] = {
+    p.name: p
+    for p in (
+        _uart("uart-921k", 921_600, "UART 921.6 kBd 8N1 (92.16 kB/s)"),
+        _uart("uart-3m", 3_000_000, "UART 3 MBd 8N1 (300 kB/s; short cable or RS-422)"),
+        LinkPreset("usb-fs", 900_000.0, 1.0e-3,
+                   "USB full-speed CDC-ACM bulk, 0.9 MB/s sustained, 1 ms frames"),
+    )
+}
+
+
+def preset(name: str) -> LinkPreset:
+    """The preset called ``name`` (``KeyError`` lists the known names)."""
+    try:
+        return PRESETS[name]
+    except KeyError:
+        raise KeyError(f"unknown link preset {name!r}; known: {', '.join(PRESETS)}") from None
