@@ -219,6 +219,12 @@ class Flatsat:
     faults: object = None
     closers: tuple = ()
     irq: object = None
+    device_truth: Truth | None = None   # the emulated devices' scenario (also on a half-real flatsat)
+
+    def start_scenario(self, t0: float) -> None:
+        """Scenario time 0 of the emulated devices is host time ``t0`` (just before the loop starts)."""
+        if self.device_truth is not None:
+            self.device_truth.restart(t0)
 
     def make_loop(self, sinks):
         return make_loop(self.cfg, self.clock, self.gyro, self.head, self.camera, sinks, self.lat_clock,
@@ -280,6 +286,52 @@ class Flatsat:
                 log.debug("close: %s", exc)
 
 
+HEAD_FAULTS = ("head-disconnect", "link-corruption")
+GYRO_FAULTS = ("gyro-nack",)
+
+
+def emulated_head(cfg: hc.FlatsatConfig) -> bool:
+    return cfg.head.kind in ("emulator", "firmware-host")
+
+
+def emulated_gyro(cfg: hc.FlatsatConfig) -> bool:
+    return cfg.gyro.kind == "emulator"
+
+
+def preflight(cfg: hc.FlatsatConfig, scen: hc.Scenario, simulated_clock: bool = False) -> None:
+    """Refuse, before anything is opened or compiled, a device mix that cannot work
+    (:class:`ConfigError`, exit 2, with the reason) and a real device node that is not
+    there (:class:`DeviceError`, exit 3, naming it).
+
+    Any mix of real and emulated devices is allowed: an emulated device takes its scenario
+    from the simulator, a real one its physics from the bench. What cannot work: the gyro
+    emulator for a part it does not model, faults injected into a real device, an eclipse
+    on a real sensor, and a simulated clock with a real device (real devices keep real time).
+    """
+    import os
+
+    if emulated_gyro(cfg) and cfg.gyro.model != "bmi088":
+        raise ConfigError(f"the gyro emulator models the BMI088, not gyro.model = '{cfg.gyro.model}'")
+    for f in scen.faults:
+        if f.kind in HEAD_FAULTS and not emulated_head(cfg):
+            raise ConfigError(f"scenario '{scen.name}' injects '{f.kind}', which needs an emulated head "
+                              f"(head.kind = '{cfg.head.kind}')")
+        if f.kind in GYRO_FAULTS and not emulated_gyro(cfg):
+            raise ConfigError(f"scenario '{scen.name}' injects '{f.kind}', which needs the emulated gyro "
+                              f"(gyro.kind = '{cfg.gyro.kind}')")
+    if scen.eclipse and not emulated_head(cfg):
+        raise ConfigError(f"scenario '{scen.name}' has an eclipse, which needs an emulated head "
+                          f"(head.kind = '{cfg.head.kind}')")
+    if simulated_clock and not cfg.simulated:
+        raise ConfigError("a simulated clock (--fast) needs every device emulated: real devices keep real time")
+    if cfg.head.kind == "serial" and "://" not in cfg.head.url and not os.path.exists(cfg.head.url):
+        raise DeviceError(f"head serial port {cfg.head.url} does not exist")
+    if cfg.gyro.kind == "i2c" and not os.path.exists(f"/dev/i2c-{cfg.gyro.i2c_bus}"):
+        raise DeviceError(f"gyro I2C bus /dev/i2c-{cfg.gyro.i2c_bus} does not exist (i2cdetect -l lists the buses)")
+    if cfg.gyro.kind == "spi" and not os.path.exists(f"/dev/spidev{cfg.gyro.spi_bus}.{cfg.gyro.spi_device}"):
+        raise DeviceError(f"gyro SPI device /dev/spidev{cfg.gyro.spi_bus}.{cfg.gyro.spi_device} does not exist")
+
+
 def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, writer) -> Flatsat:
     """Devices + recording taps + driver for ``cfg`` running ``scen``.
 
@@ -290,6 +342,7 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
     from ..clock import MONOTONIC
     from ..transport import I2CBus, I2CRegisters
 
+    preflight(cfg, scen)
     wiring = {}
     irq = None
     preset = scen.preset or cfg.sim.preset
@@ -297,7 +350,8 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
     base = MONOTONIC
     truth = sim = gsamp = None
     e_per_dn = None
-    if cfg.simulated:
+    if emulated_head(cfg) or emulated_gyro(cfg):
+        # the emulated devices' world: each emulated device takes only its own part of it
         from ..mocks.gyro_truth import gyro_params, simulate_gyro
         from ..mocks.sim_preset import load_preset
 
@@ -305,8 +359,12 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
         gp = gyro_params(scen.gyro_errors or cfg.sim.gyro_errors, range_dps=0.0, odr_hz=float(cfg.gyro.odr_hz))
         gsamp = simulate_gyro(scenario_profile(scen), scen.duration_s + 60.0, gp, seed=seed)
         truth = Truth(scen, gsamp, t_origin=base.now())
-        wiring["sky"] = f"simulator: {preset} preset, {cfg.sim.catalog} catalog, gyro errors '{gp.name}'"
-        e_per_dn = sim.detector.gain_e_per_adu
+        parts = [f"{preset} preset sky and sensor, {cfg.sim.catalog} catalog"] if emulated_head(cfg) else []
+        parts += [f"gyro errors '{gp.name}'"] if emulated_gyro(cfg) else []
+        wiring["sky"] = ("simulator: " + ", ".join(parts)
+                         + ("" if cfg.simulated else " (emulated devices only; no truth for the run's figures)"))
+        if emulated_head(cfg):
+            e_per_dn = sim.detector.gain_e_per_adu
     rec_clock = taps.RecordingClock(base, writer) if writer else base
     head_clock = taps.RecordingClock(base, writer, channel=CH_HEAD_CLOCK) if writer else base
     closers = []
@@ -317,8 +375,6 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
         from ..mocks.bmi088_model import Bmi088GyroModel
         from ..mocks.faults import FaultyBus
 
-        if cfg.gyro.model != "bmi088":
-            raise ConfigError("the gyro emulator models the BMI088 (gyro.model = 'bmi088')")
         model = Bmi088GyroModel(base, _SampleSource(gsamp, truth))
         model.truth_log = False    # the run's truth is the simulator's; the model's test log grows ~90 kB/s
         smbus = FaultyBus(model.smbus(cfg.gyro.i2c_address, bus_hz=None), clock=base, seed=seed)
@@ -369,8 +425,9 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
                       "windows), CoG + smeared-PSF centroids (gyrostar.core.centroid)")
     wiring["gyro_time"] = ("FIFO watermark interrupt edges (emulated INT3 line) anchor the sample times"
                            if irq is not None else "FIFO polls bound the sample times (no interrupt line wired)")
-    return Flatsat(cfg, scen, camera, rec_clock, base, gyro, head, truth, simulated_clock=False, wiring=wiring,
-                   e_per_dn=e_per_dn, faults=faults, closers=tuple(closers), irq=irq)
+    return Flatsat(cfg, scen, camera, rec_clock, base, gyro, head, truth if cfg.simulated else None,
+                   simulated_clock=False, wiring=wiring, e_per_dn=e_per_dn, faults=faults, closers=tuple(closers),
+                   irq=irq, device_truth=truth)
 
 
 CH_IRQ = 5

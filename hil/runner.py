@@ -55,7 +55,11 @@ def make_run_folder(out: str | None, scenario: str) -> Path:
 
 def run(args) -> int:
     cfg = hc.load_flatsat(getattr(args, "config", None))
-    scen = hc.load_scenario(getattr(args, "scenario", None))
+    from .flatsat import emulated_head, preflight
+
+    scen = hc.load_scenario(getattr(args, "scenario", None) or ("demo" if emulated_head(cfg) else "bench"))
+
+    preflight(cfg, scen)
     duration = float(args.duration) if getattr(args, "duration", None) else scen.duration_s
     if duration <= 0:
         raise ConfigError(f"--duration must be positive, got {duration}")
@@ -138,8 +142,7 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
     if hasattr(loop.head, "step_gate"):
         loop.head.step_gate = gate
     try:
-        if fs.truth is not None:
-            fs.truth.restart(fs.clock_now())
+        fs.start_scenario(fs.clock_now())
         if writer:
             writer.event({"scenario_t0": fs.truth.t_origin if fs.truth is not None else fs.clock_now()})
         loop.start()
@@ -244,7 +247,8 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
 
 
 def t_start_of(fs) -> float:
-    return fs.truth.t_origin if fs.truth is not None else fs.clock_now()
+    world = fs.device_truth or fs.truth
+    return world.t_origin if world is not None else fs.clock_now()
 
 
 def _cfg_dict(obj) -> dict:

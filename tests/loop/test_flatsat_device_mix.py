@@ -1,0 +1,95 @@
+"""Any mix of real and emulated flatsat devices: refused at load when it cannot work,
+a missing device node named with exit 3, and a real serial head beside the emulated gyro.
+
+The "real" serial head here is the firmware host program on a pty, opened as
+``head.kind = "serial"`` exactly as a bench would open /dev/ttyACM0.
+"""
+
+import subprocess
+import sys
+
+import pytest
+from gyrostar.errors import ConfigError, DeviceError
+from gyrostar.hil import config as hc
+from gyrostar.hil.flatsat import preflight
+
+
+def _cfg(head: dict, gyro: dict, path):
+    lines = ["[head]"] + [f"{k} = {v!r}".replace("'", '"') for k, v in head.items()]
+    lines += ["[gyro]"] + [f"{k} = {v!r}".replace("'", '"') for k, v in gyro.items()]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def _gyrostar(*args):
+    return subprocess.run([sys.executable, "-m", "gyrostar", *args], capture_output=True, text=True, timeout=120)
+
+
+def test_missing_serial_port_exits_3_naming_it(tmp_path):
+    cfg = _cfg({"kind": "serial", "url": "/dev/ttyGS_NONE7"}, {"kind": "emulator"}, tmp_path / "f.toml")
+    r = _gyrostar("run", "--config", str(cfg), "--duration", "1", "--out", str(tmp_path / "run"), "--no-plots")
+    assert r.returncode == 3, r.stderr
+    assert "/dev/ttyGS_NONE7" in " ".join(r.stderr.split())
+    assert "Traceback" not in r.stderr
+    assert not (tmp_path / "run" / "flatsat.gslog").exists()
+
+
+def test_missing_i2c_bus_exits_3_naming_it(tmp_path):
+    cfg = _cfg({"kind": "emulator"}, {"kind": "i2c", "i2c_bus": 97}, tmp_path / "f.toml")
+    r = _gyrostar("run", "--config", str(cfg), "--duration", "1", "--out", str(tmp_path / "run"), "--no-plots")
+    assert r.returncode == 3, r.stderr
+    assert "/dev/i2c-97" in " ".join(r.stderr.split())
+    assert "Traceback" not in r.stderr
+
+
+@pytest.mark.parametrize("head, gyro, scenario, words", [
+    ({"kind": "serial", "url": "socket://127.0.0.1:9"}, {"kind": "emulator"}, "disconnect", "head-disconnect"),
+    ({"kind": "serial", "url": "socket://127.0.0.1:9"}, {"kind": "emulator"}, "corruption", "link-corruption"),
+    ({"kind": "serial", "url": "socket://127.0.0.1:9"}, {"kind": "emulator"}, "eclipse", "eclipse"),
+    ({"kind": "emulator"}, {"kind": "emulator", "model": "l3gd20h"}, "sim2", "l3gd20h"),
+])
+def test_impossible_mix_refused_at_load(tmp_path, head, gyro, scenario, words):
+    cfg = hc.load_flatsat(_cfg(head, gyro, tmp_path / "f.toml"))
+    with pytest.raises(ConfigError, match=words):
+        preflight(cfg, hc.load_scenario(scenario))
+
+
+def test_gyro_fault_on_real_gyro_refused(tmp_path):
+    cfg = hc.load_flatsat(_cfg({"kind": "emulator"}, {"kind": "spi"}, tmp_path / "f.toml"))
+    scen = hc.load_scenario("sim2")
+    scen.faults = [hc.Fault(kind="gyro-nack", at_s=1.0, seconds=1.0)]
+    with pytest.raises(ConfigError, match="gyro-nack"):
+        preflight(cfg, scen)
+
+
+def test_simulated_clock_refused_with_a_real_device(tmp_path):
+    cfg = hc.load_flatsat(_cfg({"kind": "serial", "url": "socket://127.0.0.1:9"}, {"kind": "emulator"},
+                               tmp_path / "f.toml"))
+    with pytest.raises(ConfigError, match="real time"):
+        preflight(cfg, hc.load_scenario("bench"), simulated_clock=True)
+
+
+def test_missing_spidev_is_a_device_error(tmp_path):
+    cfg = hc.load_flatsat(_cfg({"kind": "emulator"}, {"kind": "spi", "spi_bus": 9, "spi_device": 3},
+                               tmp_path / "f.toml"))
+    with pytest.raises(DeviceError, match="/dev/spidev9.3"):
+        preflight(cfg, hc.load_scenario("sim2"))
+
+
+def test_real_serial_head_with_emulated_gyro_runs(tmp_path):
+    """The bring-up order that used to crash ('NoneType' has no 't_origin'): the emulated gyro
+    takes its rates from the simulator, the serial head is a separate program on a pty."""
+    from gyrostar.hil.runner import run_flatsat
+    from gyrostar.mocks.firmware_host import FirmwareHost, is_built
+
+    if not is_built():
+        pytest.skip("firmware host program not built (make fw-host)")
+    with FirmwareHost(workdir=str(tmp_path)) as fw:
+        cfg = hc.load_flatsat(_cfg({"kind": "serial", "url": fw.path}, {"kind": "emulator"}, tmp_path / "f.toml"))
+        (tmp_path / "run").mkdir()
+        res = run_flatsat(cfg, hc.load_scenario("bench"), duration=2.0, seed=1, folder=tmp_path / "run",
+                          plots=False, status=False)
+    assert res["gyro_samples"] >= 0.9 * 2.0 * 400 and res["samples_lost"] == 0
+    assert res["link"]["requests"] > 100            # full-frame acquisition attempts over the pty
+    assert res["attitude_error_arcsec_1sigma"] is None          # no truth for a half-real flatsat
+    assert "no truth" in res["wiring"]["sky"]
