@@ -81,9 +81,15 @@ class LoopConfig:
     coast_timeout_s: float = 5.0       # COAST longer than this → ACQUIRE (full frame)
     acquire_every_s: float = 0.5       # full-frame attempt period while ACQUIRE
     mag_limit: float = 6.5             # stars predicted into the field brighter than this are tracked
+    camera_sigma_px: float = 0.0       # camera-model uncertainty per centroid, px, without a [camera]
+                                       # calibration (0: the model is exact, e.g. the simulator's preset);
+                                       # with one, its residual_rms_px is used
 
     def validate(self):
         from ..loop.record import MAX_STARS
+
+        if not 0 <= self.camera_sigma_px <= 20:
+            raise ValueError(f"loop.camera_sigma_px {self.camera_sigma_px} outside [0, 20]")
 
         if not 1 <= self.max_stars <= MAX_STARS:
             raise ValueError(f"loop.max_stars {self.max_stars} outside 1..{MAX_STARS}")
@@ -146,6 +152,31 @@ class Fault:
 
 
 @dataclass
+class TrueDevices:
+    """How the simulated devices differ from their nominal models: what calibration must find.
+
+    The head emulator renders through the true camera, the emulated gyro senses in its own
+    frame and stamps its samples off by the time offset; the loop still starts from the
+    nominal camera and an identity mounting unless a calibration file says otherwise."""
+
+    focal_scale: float = 1.0                                  # true focal length / nominal
+    principal_offset_px: tuple[float, float] = (0.0, 0.0)     # true − nominal principal point (column, row)
+    k1: float = 0.0                                           # Brown–Conrady k1 of the true optics
+    gyro_rotation_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)   # rotation vector gyro → camera, deg
+    gyro_time_offset_ms: float = 0.0     # camera time − gyro time stamp (the calibration's time_offset_s), ms
+
+    def validate(self):
+        if not 0.9 < self.focal_scale < 1.1:
+            raise ValueError(f"truth.focal_scale {self.focal_scale} outside (0.9, 1.1)")
+        if abs(self.gyro_time_offset_ms) > 50:
+            raise ValueError(f"truth.gyro_time_offset_ms {self.gyro_time_offset_ms} outside ±50 ms")
+
+    @property
+    def nominal(self) -> bool:
+        return self == TrueDevices()
+
+
+@dataclass
 class Scenario:
     name: str
     description: str = ""
@@ -159,6 +190,8 @@ class Scenario:
     preset: str = ""                   # overrides sim.preset when set
     gyro_errors: str = ""              # overrides sim.gyro_errors when set
     mag_limit: float = 0.0             # overrides sim.mag_limit when > 0
+    camera_sigma_px: float = 0.0       # overrides loop.camera_sigma_px when > 0 and no [camera] calibration is loaded
+    truth: TrueDevices = field(default_factory=TrueDevices)   # simulated devices off their nominal models
     # acceptance of the scenario in the HIL suite
     max_error_arcsec_1sigma: float = 0.0   # 0 = not checked
     min_track_fraction: float = 0.0

@@ -14,6 +14,7 @@ Two halves, kept apart so that replay can reuse the second:
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import threading
@@ -149,13 +150,14 @@ class ScenarioScene:
 
 
 # ---------------------------------------------------------------------------- driver
-def loop_params(cfg: hc.FlatsatConfig, e_per_dn: float | None = None):
+def loop_params(cfg: hc.FlatsatConfig, e_per_dn: float | None = None, camera_sigma_px: float | None = None):
     from ..loop.coupled import LoopParams
 
     lc = cfg.loop
     p = LoopParams(frame_hz=lc.frame_hz, exposure_s=cfg.head.exposure_ms * 1e-3, window_k=lc.window_k,
                    max_stars=lc.max_stars, min_stars=lc.min_stars, coast_timeout_s=lc.coast_timeout_s,
-                   acquire_every_s=lc.acquire_every_s, mag_limit=lc.mag_limit)
+                   acquire_every_s=lc.acquire_every_s, mag_limit=lc.mag_limit,
+                   camera_sigma_px=lc.camera_sigma_px if camera_sigma_px is None else camera_sigma_px)
     if e_per_dn:
         p.e_per_dn = e_per_dn
     return p
@@ -191,14 +193,22 @@ def star_index(cfg: hc.FlatsatConfig, camera):
     return load_index(cfg.sim.catalog, cfg.loop.mag_limit, max_sep_deg=math.ceil(diag * 10 + 1) / 10)
 
 
-def make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock=None, e_per_dn=None, irq=None):
+def camera_sigma(cfg: hc.FlatsatConfig, scen: hc.Scenario, calib) -> float:
+    """The loop's camera-model σ (px): the [camera] calibration's residual, else the
+    scenario's or the config's value for an uncalibrated camera."""
+    if calib is not None and calib.cal is not None and calib.cal.camera is not None:
+        return float(calib.cal.camera.residual_rms_px)
+    return scen.camera_sigma_px if scen.camera_sigma_px > 0 else cfg.loop.camera_sigma_px
+
+
+def make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock=None, e_per_dn=None, irq=None, camera_sigma_px=None):
     from ..loop.coupled import CoupledLoop
     from ..starid.pyramid import Pyramid
 
     idx = star_index(cfg, camera)
     ident = Pyramid(idx, camera)
-    return CoupledLoop(loop_params(cfg, e_per_dn), clock, gyro, head, camera, idx, ident, sinks, lat_clock=lat_clock,
-                       irq=irq)
+    return CoupledLoop(loop_params(cfg, e_per_dn, camera_sigma_px), clock, gyro, head, camera, idx, ident, sinks,
+                       lat_clock=lat_clock, irq=irq)
 
 
 # ---------------------------------------------------------------------------- flatsat
@@ -220,6 +230,8 @@ class Flatsat:
     closers: tuple = ()
     irq: object = None
     device_truth: Truth | None = None   # the emulated devices' scenario (also on a half-real flatsat)
+    calibration: object = None          # gyrostar.calibration.apply.RunCalibration in use
+    true_camera: object = None          # the simulated head's real optics (may differ from ``camera``)
 
     def start_scenario(self, t0: float) -> None:
         """Scenario time 0 of the emulated devices is host time ``t0`` (just before the loop starts)."""
@@ -228,7 +240,7 @@ class Flatsat:
 
     def make_loop(self, sinks):
         return make_loop(self.cfg, self.clock, self.gyro, self.head, self.camera, sinks, self.lat_clock,
-                         self.e_per_dn, self.irq)
+                         self.e_per_dn, self.irq, camera_sigma(self.cfg, self.scen, self.calibration))
 
     def clock_now(self) -> float:
         return self.base_clock.now()
@@ -259,7 +271,7 @@ class Flatsat:
 
         cat = load_catalog(self.cfg.sim.catalog, max(self.cfg.loop.mag_limit, self.cfg.sim.mag_limit))
         pos = {int(i): k for k, i in enumerate(cat.ids)}
-        params = self.camera.as_array()
+        params = (self.true_camera or self.camera).as_array()
         sel = np.flatnonzero((out["n_stars"] > 0) & (out["mode"] == 1))[::10]
         if not len(sel):
             return np.zeros((0, 3))
@@ -284,6 +296,30 @@ class Flatsat:
                 c()
             except Exception as exc:  # noqa: BLE001 - closing must not hide the run's result
                 log.debug("close: %s", exc)
+
+
+def true_camera(nominal, tr: hc.TrueDevices):
+    """The simulated head's real optics: ``nominal`` moved by the scenario's [truth]."""
+    return dataclasses.replace(nominal, focal_length_m=nominal.focal_length_m * tr.focal_scale,
+                               cx_px=nominal.cx_px + tr.principal_offset_px[0],
+                               cy_px=nominal.cy_px + tr.principal_offset_px[1], k1=nominal.k1 + tr.k1)
+
+
+def true_mounting(tr: hc.TrueDevices) -> np.ndarray:
+    """The simulated gyro's real mounting: rotation gyro → camera (3×3) from the rotation vector."""
+    from ..calibration.intrinsics import rotvec_dcm
+
+    return rotvec_dcm(np.radians(np.asarray([tr.gyro_rotation_deg], float)))[0]
+
+
+def load_calibration(cfg: hc.FlatsatConfig, meta: dict | None = None):
+    """The run's calibration (:class:`gyrostar.calibration.apply.RunCalibration`): the file of
+    ``cfg.calibration``, or on replay the text kept in the log's META."""
+    from ..calibration import apply
+
+    if meta is not None:
+        return apply.from_meta(meta)
+    return apply.load_for_run(cfg.calibration)
 
 
 HEAD_FAULTS = ("head-disconnect", "link-corruption")
@@ -330,9 +366,12 @@ def preflight(cfg: hc.FlatsatConfig, scen: hc.Scenario, simulated_clock: bool = 
         raise DeviceError(f"gyro I2C bus /dev/i2c-{cfg.gyro.i2c_bus} does not exist (i2cdetect -l lists the buses)")
     if cfg.gyro.kind == "spi" and not os.path.exists(f"/dev/spidev{cfg.gyro.spi_bus}.{cfg.gyro.spi_device}"):
         raise DeviceError(f"gyro SPI device /dev/spidev{cfg.gyro.spi_bus}.{cfg.gyro.spi_device} does not exist")
+    calib = load_calibration(cfg)           # a missing or invalid file: exit 2 naming it
+    if not emulated_head(cfg):
+        calib.camera(None, real_head=True)  # a real head needs the calibrated camera model
 
 
-def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, writer) -> Flatsat:
+def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, writer, calibration=None) -> Flatsat:
     """Devices + recording taps + driver for ``cfg`` running ``scen``.
 
     Every device runs on the host monotonic clock: the head emulator's and the firmware's
@@ -346,7 +385,13 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
     wiring = {}
     irq = None
     preset = scen.preset or cfg.sim.preset
-    camera = camera_preset(preset)
+    calib = calibration if calibration is not None else load_calibration(cfg)
+    camera = calib.camera(camera_preset(preset) if emulated_head(cfg) else None, real_head=not emulated_head(cfg))
+    wiring["calibration"] = calib.describe()
+    calibrated = calib.cal is not None and calib.cal.camera is not None
+    wiring["camera"] = (f"f {camera.focal_length_px:.2f} px, principal point ({camera.cx_px:.2f}, "
+                        f"{camera.cy_px:.2f}) px, k1 {camera.k1:.4g} — "
+                        + ("from the calibration file" if calibrated else f"nominal {preset} preset"))
     base = MONOTONIC
     truth = sim = gsamp = None
     e_per_dn = None
@@ -354,11 +399,16 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
         # the emulated devices' world: each emulated device takes only its own part of it
         from ..mocks.gyro_truth import gyro_params, simulate_gyro
         from ..mocks.sim_preset import load_preset
+        from ..mocks.trajectory import Rotated
 
         sim = load_preset(preset)
+        sim = dataclasses.replace(sim, camera=true_camera(sim.camera, scen.truth))
         gp = gyro_params(scen.gyro_errors or cfg.sim.gyro_errors, range_dps=0.0, odr_hz=float(cfg.gyro.odr_hz))
-        gsamp = simulate_gyro(scenario_profile(scen), scen.duration_s + 60.0, gp, seed=seed)
+        sensed = Rotated(scenario_profile(scen), true_mounting(scen.truth).T)    # camera → gyro axes
+        gsamp = simulate_gyro(sensed, scen.duration_s + 60.0, gp, seed=seed)
         truth = Truth(scen, gsamp, t_origin=base.now())
+        if not scen.truth.nominal:
+            wiring["true_devices"] = f"simulated devices off nominal: {scen.truth}"
         parts = [f"{preset} preset sky and sensor, {cfg.sim.catalog} catalog"] if emulated_head(cfg) else []
         parts += [f"gyro errors '{gp.name}'"] if emulated_gyro(cfg) else []
         wiring["sky"] = ("simulator: " + ", ".join(parts)
@@ -375,7 +425,7 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
         from ..mocks.bmi088_model import Bmi088GyroModel
         from ..mocks.faults import FaultyBus
 
-        model = Bmi088GyroModel(base, _SampleSource(gsamp, truth))
+        model = Bmi088GyroModel(base, _SampleSource(gsamp, truth, scen.truth.gyro_time_offset_ms * 1e-3))
         model.truth_log = False    # the run's truth is the simulator's; the model's test log grows ~90 kB/s
         smbus = FaultyBus(model.smbus(cfg.gyro.i2c_address, bus_hz=None), clock=base, seed=seed)
         faults.gyro_bus = smbus
@@ -397,7 +447,11 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
         wiring["gyro"] = f"{cfg.gyro.model} on /dev/spidev{cfg.gyro.spi_bus}.{cfg.gyro.spi_device}"
     if writer:
         regs = taps.RecordingRegisters(regs, writer, clock=rec_clock)
-    gyro = make_gyro(cfg, regs, rec_clock)
+    gyro = calib.gyro(make_gyro(cfg, regs, rec_clock))
+    if gyro is not None and calib.gyro_map() is not None:
+        m, b, dt = calib.gyro_map()
+        wiring["gyro_calibration"] = (f"ω_camera = M (ω_gyro − b), t_camera = t_gyro + {dt * 1e3:.3f} ms; "
+                                      f"b = {np.degrees(b).round(5).tolist()} °/s")
 
     # head link
     open_link, head_wiring, head_closers = _head_devices(cfg, scen, sim, truth, seed, faults)
@@ -427,7 +481,7 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
                            if irq is not None else "FIFO polls bound the sample times (no interrupt line wired)")
     return Flatsat(cfg, scen, camera, rec_clock, base, gyro, head, truth if cfg.simulated else None,
                    simulated_clock=False, wiring=wiring, e_per_dn=e_per_dn, faults=faults, closers=tuple(closers),
-                   irq=irq, device_truth=truth)
+                   irq=irq, device_truth=truth, calibration=calib, true_camera=sim.camera if sim is not None else None)
 
 
 CH_IRQ = 5
@@ -445,14 +499,18 @@ class _IrqLine:
 
 
 class _SampleSource:
-    """Rate source for the BMI088 register model: the simulator's gyro output at host time t."""
+    """Rate source for the BMI088 register model: the simulator's gyro output at host time t.
 
-    def __init__(self, gsamp, truth: Truth):
+    ``time_offset_s``: the sample stamped t belongs to scenario time t + offset (the
+    calibration's camera-minus-gyro time offset)."""
+
+    def __init__(self, gsamp, truth: Truth, time_offset_s: float = 0.0):
         self.g = gsamp
         self.truth = truth
+        self.offset = time_offset_s
 
     def __call__(self, k, t):
-        ts = np.maximum(np.asarray(t) - self.truth.t_origin, 0.0)
+        ts = np.maximum(np.asarray(t) - self.truth.t_origin + self.offset, 0.0)
         i = np.clip(np.round(ts * self.g.params.odr_hz).astype(np.int64) - 1, 0, len(self.g.t) - 1)
         return self.g.omega_meas[i]
 
@@ -592,7 +650,9 @@ def replay_loop(meta: dict, records, sinks):
 
     cfg = gconfig.from_dict(meta["config"], hc.FlatsatConfig, source="log META")
     scen = gconfig.from_dict(meta["scenario"], hc.Scenario, source="log META")
-    camera = camera_preset(scen.preset or cfg.sim.preset)
+    calib = load_calibration(cfg, meta.get("calibration") or {})
+    camera = calib.camera(camera_preset(scen.preset or cfg.sim.preset) if emulated_head(cfg) else None,
+                          real_head=not emulated_head(cfg))
     clock = taps.ReplayClock([float(np.frombuffer(r.payload, "<f8")[0]) for r in records
                               if r.kind == lf.CLOCK and r.channel == 0])
     lat = [float(np.frombuffer(r.payload, "<f8")[0]) for r in records
@@ -613,10 +673,10 @@ def replay_loop(meta: dict, records, sinks):
     reconnects = deque(r.payload[0] for r in records if r.kind == POLL and r.channel == CH_RECONNECT)
     irq_t = [float(np.frombuffer(r.payload, "<f8")[0]) for r in records if r.kind == lf.CLOCK and r.channel == CH_IRQ]
     irq = taps.ReplayClock(irq_t) if irq_t else None
-    gyro = make_gyro(cfg, regs, clock)
+    gyro = calib.gyro(make_gyro(cfg, regs, clock))
     head = make_head(cfg, link, clock, reconnect=None, head_clock=head_clock, replay_polls=polls,
                      replay_reconnects=reconnects)
-    loop = make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock, e_per_dn, irq)
+    loop = make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock, e_per_dn, irq, camera_sigma(cfg, scen, calib))
 
     def run_all():
         steps = 0

@@ -7,6 +7,9 @@ request the driver makes is checked against what it made when recording. The rep
 outputs are compared with the recorded OUTPUT records byte for byte (``--check`` makes a
 mismatch an error, exit code 1).
 
+``--export calib --out X.npz`` replays the log and writes what camera, alignment and
+gyro-scale calibration read (:mod:`gyrostar.hil.calib_export`).
+
 ``--export csv|hdf5 --out PATH`` writes the recorded outputs (and truth, when the log has
 it) instead: CSV with one row per output (quaternion, rates, bias, covariance diagonal,
 mode, flags, stars), HDF5 (h5py) with the full structured arrays and the run's META.
@@ -76,6 +79,10 @@ def replay(path: str | Path) -> dict:
 
 
 def export(path: str | Path, fmt: str, out: str | Path) -> dict:
+    if fmt == "calib":
+        from .calib_export import export_calib
+
+        return export_calib(path, out)
     log = load_log(path)
     recs = log["outputs"]
     out = Path(out)
@@ -124,7 +131,9 @@ def run(args) -> int:
         if not args.out:
             raise ConfigError("--export needs --out PATH")
         res = export(args.log, args.export, args.out)
-        emit(args, res, f"exported {res['outputs']} outputs to {res['out']} ({res['export']})")
+        what = (f"{res['fields']} star fields ({res['star_observations']} stars) and {res['gyro_samples']} gyro "
+                "samples" if args.export == "calib" else f"{res['outputs']} outputs")
+        emit(args, res, f"exported {what} to {res['out']} ({res['export']})")
         return 0
     res = replay(args.log)
     verdict = "bit-exact" if res["bit_exact"] else (

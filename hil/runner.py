@@ -55,6 +55,8 @@ def make_run_folder(out: str | None, scenario: str) -> Path:
 
 def run(args) -> int:
     cfg = hc.load_flatsat(getattr(args, "config", None))
+    if getattr(args, "calibration", None):
+        cfg.calibration = str(args.calibration)
     from .flatsat import emulated_head, preflight
 
     scen = hc.load_scenario(getattr(args, "scenario", None) or ("demo" if emulated_head(cfg) else "bench"))
@@ -90,10 +92,12 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
     from .status import StatusLine
 
     record = cfg.outputs.record if record is None else record
+    calib = flatsat.load_calibration(cfg)
+    log.warning("calibration: %s", calib.describe())
     writer = lf.LogWriter(folder / "flatsat.gslog", background=True) if record else None
     meta = {"format": "gyrostar flatsat log 1", "config": _cfg_dict(cfg), "scenario": _cfg_dict(scen),
             "duration_s": duration, "seed": seed, "realtime": realtime, "output": describe(),
-            "started_utc": datetime.now(UTC).isoformat()}
+            "started_utc": datetime.now(UTC).isoformat(), "calibration": calib.meta()}
     if writer:
         writer.meta(meta)
     import sys
@@ -122,7 +126,7 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
         udp = UdpSink(cfg.outputs.udp_host, cfg.outputs.udp_port)
         sinks.append(udp)
 
-    fs = flatsat.build(cfg, scen, seed=seed, realtime=realtime, writer=writer)
+    fs = flatsat.build(cfg, scen, seed=seed, realtime=realtime, writer=writer, calibration=calib)
     loop = fs.make_loop(sinks)
     warm["identifier_s"] = loop.warm_identifier()
     import gc
@@ -215,6 +219,7 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
     client = getattr(loop.head, "client", None)
     if client is not None:
         res_top["link"] = dict(client.stats)
+    res_top["calibration"] = {"path": calib.path, "sha256": calib.sha256} if calib.cal is not None else None
     res_top["numba_startup"] = warm
     res_top["wiring"] = wiring
     if rt is not None:
@@ -283,6 +288,9 @@ def human_summary(r: dict) -> str:
         lines.append("  final bias error (°/s): " + " ".join(f"{v:+.4f}" for v in r["bias_error_dps_final"]))
     if r.get("centroid_error_px_rms") is not None:
         lines.append(f"  tracked-star centroid error RMS {r['centroid_error_px_rms']:.3f} px")
+    cal = r.get("calibration")
+    lines.append(f"  calibration: {cal['path']} (sha256 {cal['sha256'][:16]})" if cal else
+                 "  calibration: none (nominal camera and gyro mounting)")
     not_wired = [k for k, v in r.get("wiring", {}).items() if str(v).startswith("NOT WIRED")]
     for k in not_wired:
         lines.append(f"  [red]{k}: {r['wiring'][k]}[/]")

@@ -52,6 +52,18 @@ class RateProfile:
         return self.rate(t0 + (np.arange(m) + 0.5) * duration_s / m)
 
 
+class Rotated(RateProfile):
+    """``profile`` seen in a sensor frame: ω_sensor = R ω_body (``r_body_to_sensor``, 3×3)."""
+
+    def __init__(self, profile: RateProfile, r_body_to_sensor):
+        self.profile = profile
+        self.r = np.asarray(r_body_to_sensor, dtype=np.float64)
+        self.duration_s = profile.duration_s
+
+    def rate(self, t):
+        return self.profile.rate(t) @ self.r.T
+
+
 @dataclasses.dataclass(frozen=True)
 class Constant(RateProfile):
     omega: tuple[float, float, float]

@@ -86,6 +86,7 @@ class CameraCal:
     p2: float = 0.0
     image_size_px: tuple[int, int] = (1024, 1024)
     residual_rms_px: float = 0.0
+    pixel_pitch_um: float = 15.0       # only turns the focal length into metres (the loop works in px)
 
     def validate(self) -> None:
         if not self.focal_length_px > 0:

@@ -12,7 +12,9 @@ REPLAYER = "gyrostar.hil.replay"
 
 def configure(parser) -> None:
     parser.add_argument("log", metavar="LOG", help="recorded log file")
-    parser.add_argument("--export", choices=["csv", "hdf5"], default=None, help="export instead of replaying")
+    parser.add_argument("--export", choices=["csv", "hdf5", "calib"], default=None,
+                        help="export instead of replaying (calib: the .npz that camera, alignment and "
+                             "gyro-scale calibration read)")
     parser.add_argument("--out", metavar="PATH", default=None, help="export path")
     parser.add_argument("--check", action="store_true", help="compare replayed outputs with the recorded ones")
     add_json(parser)

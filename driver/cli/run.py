@@ -16,7 +16,10 @@ def configure(parser) -> None:
     parser.add_argument("--config", metavar="TOML", help="flatsat config (default: built-in simulated flatsat)")
     parser.add_argument("--duration", type=float, default=None, metavar="S",
                         help="run length in seconds of flatsat time (default: the scenario's, ~30 s)")
-    parser.add_argument("--scenario", default=None, help="built-in scenario name or TOML path (default: demo; bench when the head is real)")
+    parser.add_argument("--scenario", default=None,
+                        help="built-in scenario name or TOML path (default: demo; bench when the head is real)")
+    parser.add_argument("--calibration", metavar="TOML", default=None,
+                        help="calibration file from gyrostar calibrate (overrides the config's 'calibration' key)")
     parser.add_argument("--seed", type=int, default=1, help="simulator seed")
     parser.add_argument("--out", metavar="DIR", default=None, help="run folder (default: runs/<timestamp>)")
     parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")

@@ -76,6 +76,7 @@ class LoopParams:
     max_window_pixels: int = 2048
     max_spans: int = 512
     pyramid_sigma_px: float = 0.5
+    camera_sigma_px: float = 0.0      # camera-model uncertainty added to every centroid σ (px; 0: exact model)
 
 
 @dataclass
@@ -475,6 +476,8 @@ class CoupledLoop:
             self.lag_jitter = 0.9 * self.lag_jitter + 0.1 * abs(lag - self.exposure_lag)
             self.exposure_lag = 0.9 * self.exposure_lag + 0.1 * lag
         state, b_mid, sig = measured
+        if self.p.camera_sigma_px > 0:
+            sig = np.sqrt(sig * sig + (self.p.camera_sigma_px / self.f_px) ** 2)
         wins = pend["wins"]
         live = self.active[wins] & (self.star_nav[wins] == pend["nav"])   # dropped/replaced meanwhile: skip
         self.misses[wins[live & (state == MEAS_MISS)]] += 1

@@ -76,6 +76,30 @@ def test_missing_spidev_is_a_device_error(tmp_path):
         preflight(cfg, hc.load_scenario("sim2"))
 
 
+def _camera_cal(tmp_path):
+    from gyrostar.calibration import calfile
+    from gyrostar.camera import camera_preset
+
+    nom = camera_preset("xing2012")
+    path = tmp_path / "cal.toml"
+    calfile.write_section(path, "camera", calfile.CameraCal(nom.focal_length_px, (nom.cx_px, nom.cy_px),
+                                                            image_size_px=(nom.width_px, nom.height_px)), "test")
+    return path
+
+
+def test_real_head_without_camera_model_exits_2_naming_the_key(tmp_path):
+    cfg = _cfg({"kind": "serial", "url": "socket://127.0.0.1:9"}, {"kind": "emulator"}, tmp_path / "f.toml")
+    r = _gyrostar("run", "--config", str(cfg), "--scenario", "bench", "--duration", "1",
+                  "--out", str(tmp_path / "run"), "--no-plots")
+    assert r.returncode == 2, r.stderr
+    assert "camera.focal_length_px" in " ".join(r.stderr.split()) and "Traceback" not in r.stderr
+    cal = tmp_path / "cal.toml"
+    cal.write_text('[alignment]\nq_gyro_to_camera = [0.0, 0.0, 0.0, 1.0]\ntime_offset_s = 0.0\n')
+    r = _gyrostar("run", "--config", str(cfg), "--calibration", str(cal), "--duration", "1",
+                  "--out", str(tmp_path / "run2"), "--no-plots")
+    assert r.returncode == 2 and "camera.focal_length_px" in " ".join(r.stderr.split()) and str(cal) in r.stderr
+
+
 def test_real_serial_head_with_emulated_gyro_runs(tmp_path):
     """The bring-up order that used to crash ('NoneType' has no 't_origin'): the emulated gyro
     takes its rates from the simulator, the serial head is a separate program on a pty."""
@@ -86,6 +110,7 @@ def test_real_serial_head_with_emulated_gyro_runs(tmp_path):
         pytest.skip("firmware host program not built (make fw-host)")
     with FirmwareHost(workdir=str(tmp_path)) as fw:
         cfg = hc.load_flatsat(_cfg({"kind": "serial", "url": fw.path}, {"kind": "emulator"}, tmp_path / "f.toml"))
+        cfg.calibration = str(_camera_cal(tmp_path))
         (tmp_path / "run").mkdir()
         res = run_flatsat(cfg, hc.load_scenario("bench"), duration=2.0, seed=1, folder=tmp_path / "run",
                           plots=False, status=False)

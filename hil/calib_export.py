@@ -1,0 +1,172 @@
+"""``gyrostar replay LOG --export calib --out X.npz``: calibration inputs from a flatsat run.
+
+The log is replayed through the same driver and loop (:func:`gyrostar.hil.flatsat.replay_loop`)
+with two taps on public interfaces:
+
+* the gyro device: every sample as the driver read it — gyro axes and gyro time stamps; on
+  a calibrated run the tap sits under the :class:`~gyrostar.gyro.calibrated.CalibratedGyro`,
+  so the rates are raw;
+* the head port: every windows job, the spans submitted and the pixels and exposure
+  mid-time that came back.
+
+Each window's spot is measured again independently of the loop's filter (window background
+by median/MAD clipping, thresholded centre of gravity: :mod:`gyrostar.core.centroid`) and
+given the catalog star the loop was tracking there: the predicted centroid in the output
+record nearest to the exposure mid-time that lies within ``GATE_PX`` of the measured one,
+with no other prediction within twice that. Fields (frames) with ≥ 3 such stars get a
+QUEST attitude through the run's camera. Layout of the file:
+:mod:`gyrostar.calibration.star_fields`.
+"""
+
+from __future__ import annotations
+
+import json
+from collections import deque
+from pathlib import Path
+
+import numpy as np
+
+GATE_PX = 3.0
+THRESH_SIGMA = 5.0
+
+
+class GyroTap:
+    """A gyro device that also keeps a copy of every sample it appends."""
+
+    def __init__(self, gyro):
+        self.gyro = gyro
+        self.t: list[np.ndarray] = []
+        self.rate: list[np.ndarray] = []
+
+    def read(self, out, event_time=None):
+        n0 = out.n
+        n = self.gyro.read(out, event_time)
+        if n:
+            self.t.append(out.t[n0:n0 + n].copy())
+            self.rate.append(out.rate[n0:n0 + n].copy())
+        return n
+
+    def __getattr__(self, name):
+        return getattr(self.gyro, name)
+
+
+class HeadTap:
+    """A head port that pairs every windows job's spans with the result it returned."""
+
+    def __init__(self, head):
+        self.head = head
+        self.pending: deque = deque()
+        self.frames: list[tuple[float, np.ndarray, np.ndarray]] = []
+
+    def submit_windows(self, spans):
+        self.pending.append(np.array(spans, copy=True))
+        return self.head.submit_windows(spans)
+
+    def poll(self):
+        res = self.head.poll()
+        if res is not None and res.kind == "windows" and self.pending:
+            spans = self.pending.popleft()
+            if res.error is None and res.values is not None:
+                self.frames.append((float(res.t_mid), spans, np.array(res.values, copy=True)))
+        return res
+
+    def __getattr__(self, name):
+        return getattr(self.head, name)
+
+
+def measure(spans: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """(n, 3) [window_id, u, v] of every window with a spot (thresholded CoG)."""
+    from ..core.centroid import cog, window_background, window_spans_of
+
+    rows = []
+    for wid in np.unique(spans[:, 0]):
+        a, e, v0 = window_spans_of(spans, int(wid))
+        sp = np.ascontiguousarray(spans[a:e])
+        npx = int(np.sum(sp[:, 3] - sp[:, 2]))
+        if e <= a or v0 + npx > len(values):
+            continue
+        wv = np.ascontiguousarray(values[v0:v0 + npx], np.float64)
+        bg, noise = window_background(wv, 3.0)
+        u, v, flux, npix = cog(sp, wv, bg, bg + THRESH_SIGMA * noise)
+        if npix >= 3 and np.isfinite(u):
+            rows.append((wid, u, v))
+    return np.array(rows, float).reshape(-1, 3)
+
+
+def identify(uv: np.ndarray, rec) -> np.ndarray:
+    """Catalog id of each measured spot from one output record's predicted centroids (−1: none)."""
+    n = int(rec["n_stars"])
+    ids = np.full(len(uv), -1, np.int64)
+    if n == 0 or not len(uv):
+        return ids
+    pred = rec["centroid_px"][:n].astype(np.float64)
+    d = np.linalg.norm(uv[:, None, :] - pred[None, :, :], axis=2)
+    for i in range(len(uv)):
+        j = int(np.argmin(d[i]))
+        others = np.delete(d[i], j)
+        if d[i, j] <= GATE_PX and (not len(others) or others.min() > 2 * GATE_PX) and int(np.argmin(d[:, j])) == i:
+            ids[i] = int(rec["star_id"][j])
+    return ids
+
+
+def export_calib(path: str | Path, out: str | Path) -> dict:
+    """Replay ``path`` and write the calibration input ``out`` (.npz); returns the figures."""
+    from .. import config as gconfig
+    from ..calibration.star_fields import field_attitudes
+    from ..catalog import load_catalog
+    from ..loop.sinks import CallbackSink
+    from . import config as hc
+    from . import flatsat
+    from .replay import load_log
+
+    log = load_log(path)
+    meta = log["meta"]
+    loop, run_all = flatsat.replay_loop(meta, log["records"], [CallbackSink(lambda r: None)])
+    dev = loop.gyro
+    if hasattr(dev, "raw"):                # CalibratedGyro: tap the raw device under it
+        dev.raw = gtap = GyroTap(dev.raw)
+    else:
+        loop.gyro = gtap = GyroTap(dev)
+    loop.head = htap = HeadTap(loop.head)
+    steps, stopped = run_all()
+
+    outputs = log["outputs"]
+    t_out = outputs["t"]
+    cfg = gconfig.from_dict(meta["config"], hc.FlatsatConfig, source="log META")
+    cat = load_catalog(cfg.sim.catalog, max(cfg.loop.mag_limit, cfg.sim.mag_limit))
+    pos = {int(i): k for k, i in enumerate(cat.ids)}
+    fields, uvs, refs, sids, t_cam = [], [], [], [], []
+    for t_mid, spans, values in htap.frames:
+        spots = measure(spans, values)
+        if not len(spots) or not len(t_out):
+            continue
+        k = int(np.clip(np.searchsorted(t_out, t_mid), 1, len(t_out) - 1))
+        k = k - 1 if abs(t_out[k - 1] - t_mid) <= abs(t_out[k] - t_mid) else k
+        rec = outputs[k]
+        if rec["mode"] != 1:          # TRACK only: identities are those of an attitude that holds
+            continue
+        ids = identify(spots[:, 1:], rec)
+        sel = [i for i in range(len(ids)) if ids[i] >= 0 and int(ids[i]) in pos]
+        if len(sel) < 3:
+            continue
+        f = len(t_cam)
+        t_cam.append(t_mid)
+        for i in sel:
+            fields.append(f)
+            uvs.append(spots[i, 1:])
+            refs.append(cat.vectors[pos[int(ids[i])]])
+            sids.append(int(ids[i]))
+    field = np.array(fields, np.int64)
+    uv = np.array(uvs, float).reshape(-1, 2)
+    ref = np.array(refs, float).reshape(-1, 3)
+    t_cam = np.array(t_cam, float)
+    ok, q_cam = field_attitudes(field, uv, ref, loop.camera, len(t_cam))
+    t_g = np.concatenate(gtap.t) if gtap.t else np.zeros(0)
+    rate = np.concatenate(gtap.rate) if gtap.rate else np.zeros((0, 3))
+    np.savez_compressed(out, t=t_g, rate=rate, field=field, uv=uv, ref=ref, star_id=np.array(sids, np.int64),
+                        t_cam=t_cam, q_cam=q_cam, camera=loop.camera.as_array(),
+                        meta=np.array(json.dumps({"log": str(path), "scenario": meta.get("scenario", {}).get("name"),
+                                                  "calibration": (meta.get("calibration") or {}).get("sha256")})))
+    return {"log": str(path), "export": "calib", "out": str(out), "gyro_samples": int(len(t_g)),
+            "window_frames": len(htap.frames), "fields": int(len(t_cam)), "fields_with_attitude": int(ok.sum()),
+            "star_observations": int(len(field)), "replay_steps": steps, "stopped": stopped}

@@ -1,0 +1,85 @@
+"""A calibration file reaching the loop: the gyro mapped into camera axes and time, the camera
+model from [camera], the file identified by its hash, a real head refused without a camera."""
+
+import hashlib
+import math
+
+import numpy as np
+import pytest
+from gyrostar.calibration import apply, calfile
+from gyrostar.camera import camera_preset
+from gyrostar.errors import ConfigError
+from gyrostar.gyro import GyroSamples
+from gyrostar.gyro.calibrated import CalibratedGyro
+
+
+class _ListGyro:
+    """Appends fixed rows (t, rate) per read, like a FIFO holding them."""
+
+    odr_hz = 400.0
+    range_dps = 500.0
+
+    def __init__(self, t, rate):
+        self.t, self.rate = t, rate
+        self.k = 0
+
+    def read(self, out, event_time=None):
+        n = min(2, len(self.t) - self.k)
+        out.t[out.n:out.n + n] = self.t[self.k:self.k + n]
+        out.rate[out.n:out.n + n] = self.rate[self.k:self.k + n]
+        out.n += n
+        self.k += n
+        return n
+
+
+def test_calibrated_gyro_maps_axes_bias_and_time():
+    rng = np.random.default_rng(3)
+    t = np.arange(5) * 0.0025
+    w = rng.normal(size=(5, 3))
+    c = math.cos(0.01)
+    s = math.sin(0.01)
+    m = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ np.diag([1.001, 0.999, 1.002])
+    b = np.array([1e-3, -2e-3, 5e-4])
+    g = CalibratedGyro(_ListGyro(t, w), m, b, 0.002)
+    out = GyroSamples(16)
+    out.n = 1                                  # rows already there stay untouched
+    out.rate[0] = [9.0, 9.0, 9.0]
+    while g.read(out):
+        pass
+    assert out.n == 6 and np.all(out.rate[0] == 9.0)
+    for i in range(5):
+        expect = m @ (w[i] - b)                # hand-computed ω_camera = M (ω_meas − b)
+        assert np.allclose(out.rate[1 + i], expect, rtol=0, atol=1e-15)
+        assert out.t[1 + i] == pytest.approx(t[i] + 0.002, abs=1e-15)
+
+
+def test_run_calibration_camera_gyro_and_hash(tmp_path):
+    path = tmp_path / "cal.toml"
+    nom = camera_preset("xing2012")
+    calfile.write_section(path, "camera", calfile.CameraCal(6640.0, (515.5, 508.5), k1=0.3), "test")
+    calfile.write_section(path, "alignment", calfile.AlignmentCal((0.0, 0.0, math.sin(0.0025), math.cos(0.0025)),
+                                                                  0.002), "test")
+    rc = apply.load_for_run(path)
+    assert rc.sha256 == hashlib.sha256(path.read_bytes()).hexdigest()
+    assert str(path) in rc.describe() and rc.sha256[:16] in rc.describe()
+    cam = rc.camera(nom, real_head=False)
+    assert (cam.focal_length_px, cam.cx_px, cam.cy_px, cam.k1) == pytest.approx((6640.0, 515.5, 508.5, 0.3))
+    real = rc.camera(None, real_head=True)         # a real head: from the file alone
+    assert real.focal_length_px == pytest.approx(6640.0) and (real.width_px, real.height_px) == (1024, 1024)
+    m, b, dt = rc.gyro_map()
+    assert dt == 0.002 and np.allclose(b, 0.0)
+    # A(q) of gyrostar.attitude maps gyro-frame components to camera-frame ones (passive form)
+    assert np.allclose(m, [[math.cos(0.005), math.sin(0.005), 0], [-math.sin(0.005), math.cos(0.005), 0], [0, 0, 1]])
+    again = apply.from_meta(rc.meta())             # replay rebuilds it from the log's META text
+    assert again.sha256 == rc.sha256 and again.cal == rc.cal
+
+
+def test_real_head_without_camera_table_names_the_key(tmp_path):
+    with pytest.raises(ConfigError, match="camera.focal_length_px"):
+        apply.load_for_run(None).camera(None, real_head=True)
+    path = tmp_path / "cal.toml"
+    calfile.write_section(path, "alignment", calfile.AlignmentCal((0.0, 0.0, 0.0, 1.0), 0.0), "test")
+    with pytest.raises(ConfigError, match="camera.focal_length_px"):
+        apply.load_for_run(path).camera(None, real_head=True)
+    with pytest.raises(ConfigError, match="does not exist"):
+        apply.load_for_run(tmp_path / "nope.toml")
