@@ -4,7 +4,9 @@ time offset between gyro samples and exposure mid-times, from slews
 
 Input: an ``.npz`` with the gyro log ``t`` (s, gyro time stamps), ``rate`` (N×3 rad/s, gyro
 axes) and the tracker's attitudes ``t_cam`` (K,) s (exposure mid-times) and ``q_cam``
-(K×4 [x, y, z, w] ICRS → camera), both on the host clock. ``--gyro-cal TOML`` applies a
+(K×4 [x, y, z, w] ICRS → camera), both on the host clock — e.g. from ``gyrostar replay LOG
+--export calib``; when that file also holds the identified stars and the target ``--out``
+file already has a [camera] table, the attitudes are recomputed through that camera. ``--gyro-cal TOML`` applies a
 [gyro_scale] correction first (scale and non-orthogonality are not a rotation).
 
 ``--simulate``: the body slews back and forth (one sinusoid per axis, ``--amplitudes``),
@@ -76,24 +78,23 @@ def simulate(args):
 
 
 def run(args) -> int:
-    from ..errors import ConfigError, NotAvailableError
+    from pathlib import Path
+
+    from ..errors import ConfigError
     from . import calfile, report
     from .align_fit import fit_alignment, rotation_angle
 
     source = report.check_source(args)
     folder = report.report_dir(args, "alignment")
     truth = None
-    if source == "live":
-        raise NotAvailableError("record a slew with the coupled loop (gyro log + tracker attitudes) and pass "
-                                "the .npz as INPUT")
+    extra_in = {}
     if source == "simulate":
         t_g, rate, t_cam, q_cam, truth = simulate(args)
     else:
-        with np.load(args.input) as z:
-            missing = {"t", "rate", "t_cam", "q_cam"} - set(z.files)
-            if missing:
-                raise ConfigError(f"{args.input} lacks arrays {sorted(missing)}")
-            t_g, rate, t_cam, q_cam = z["t"], z["rate"], z["t_cam"], z["q_cam"]
+        from .star_fields import load_slew_input
+
+        target = calfile.load(args.toml) if args.toml and Path(args.toml).exists() else None
+        t_g, rate, t_cam, q_cam, extra_in["attitudes"] = load_slew_input(args.input, target)
     if args.gyro_cal:
         gs = calfile.load(args.gyro_cal).gyro_scale
         if gs is None:
@@ -103,7 +104,7 @@ def run(args) -> int:
     table = report.ParamTable()
     q = fit.quaternion
     extra = {"n_windows": fit.n_windows, "coarse_offset_ms": fit.coarse_offset * 1e3,
-             "residual_rms_arcsec": fit.residual_rms / ARCSEC, "rotation_matrix": fit.rotation}
+             "residual_rms_arcsec": fit.residual_rms / ARCSEC, "rotation_matrix": fit.rotation, **extra_in}
     checks = None
     if truth is None:
         table.add("q_gyro_to_camera", q, "[x, y, z, w]")

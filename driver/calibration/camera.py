@@ -3,7 +3,8 @@ distortion from many identified star fields (robust bundle least squares,
 :mod:`gyrostar.calibration.intrinsics`).
 
 Input: a table of identified stars, ``.npz`` with ``field`` (N,), ``uv`` (N, 2) px
-[column, row] and ``ref`` (N, 3) ICRS unit vectors, or a CSV with the header
+[column, row] and ``ref`` (N, 3) ICRS unit vectors (what ``gyrostar replay LOG --export calib``
+writes from a flatsat run), or a CSV with the header
 ``field,u,v,ra_deg,dec_deg``. The nominal camera (start point, sensor size) is a
 ``gyrostar.camera`` preset (``--camera``).
 
@@ -34,6 +35,11 @@ def configure(parser) -> None:
 
     add_common_args(parser, "identified-star table (.npz: field, uv, ref; or .csv: field,u,v,ra_deg,dec_deg)")
     parser.add_argument("--camera", default="xing2012", help="nominal camera preset (default xing2012)")
+    parser.add_argument("--fix", default=None, metavar="NAMES",
+                        help="parameters held at their nominal value; default k3,p1,p2 for an INPUT file (in a "
+                             "narrow field the tangential terms trade with the principal point), none with "
+                             "--simulate (its camera has tangential terms); '' fits all of "
+                             "f_px,cx_px,cy_px,k1,k2,k3,p1,p2")
     parser.add_argument("--fields", type=int, default=2000, help="--simulate: star fields (default 2000)")
     parser.add_argument("--mag-limit", type=float, default=7.0, help="--simulate: faintest V used (default 7.0)")
     parser.add_argument("--centroid-noise", type=float, default=0.02,
@@ -118,6 +124,7 @@ def simulate(args, nominal):
 
 def run(args) -> int:
     from ..camera import camera_preset
+    from ..errors import ConfigError
     from . import calfile, report
     from .intrinsics import NAMES, fit, model_difference
 
@@ -127,18 +134,18 @@ def run(args) -> int:
     truth_cam, bad = None, None
     if source == "simulate":
         stars, truth_cam, bad = simulate(args, nominal)
-    elif source == "live":
-        from ..errors import NotAvailableError
-
-        raise NotAvailableError("camera calibration reads identified-star tables; record one with the tracker "
-                                "(gyrostar run --record) and pass it as INPUT")
     else:
         stars = load_table(args.input)
     theta0 = nominal.as_array()[:8]
     r_corner = np.hypot(w, h) / 2.0 / nominal.focal_length_px
     f0 = nominal.focal_length_px
     before = fit(stars, theta0, free=np.zeros(8, bool), reject_k=5.0)
-    res = fit(stars, theta0, prior_k2=1.0 / (f0 * r_corner**5), prior_k3=1.0 / (f0 * r_corner**7))
+    fix = args.fix if args.fix is not None else ("" if source == "simulate" else "k3,p1,p2")
+    fixed = {n.strip() for n in fix.split(",") if n.strip()}
+    if fixed - set(NAMES):
+        raise ConfigError(f"--fix: unknown parameter(s) {sorted(fixed - set(NAMES))} (known: {', '.join(NAMES)})")
+    free = np.array([n not in fixed for n in NAMES])
+    res = fit(stars, theta0, free=free, prior_k2=1.0 / (f0 * r_corner**5), prior_k3=1.0 / (f0 * r_corner**7))
     params = res.params(w, h)
     folder = report.report_dir(args, "camera")
     table = report.ParamTable()
@@ -147,7 +154,7 @@ def run(args) -> int:
     for i, name in enumerate(NAMES):
         table.add(name, res.theta[i], units.get(name, "1"), None if tvec is None else tvec[i])
         table.rows[name]["sigma"] = float(res.sigma[i])
-    extra = {"n_fields": int(stars.n_fields), "n_stars": int(len(stars.field)),
+    extra = {"fixed": sorted(fixed), "n_fields": int(stars.n_fields), "n_stars": int(len(stars.field)),
              "n_rejected": int((~res.inlier).sum()), "residual_rms_before_px": before.rms_px,
              "residual_rms_after_px": res.rms_px}
     checks = None

@@ -27,7 +27,7 @@ HELP = "dark frames at several exposures -> dark-current map, hot pixels, read n
 def configure(parser) -> None:
     from .report import add_common_args
 
-    add_common_args(parser, "folder of FITS dark frames (EXPTIME header) or .npz (frames, exposure)")
+    add_common_args(parser, "folder of FITS dark frames (EXPTIME header) or .npz (frames, exposure)", live=True)
     parser.add_argument("--preset", default="xing2012", help="--simulate: simulator preset (default xing2012)")
     parser.add_argument("--exposures", default="0.005,0.03,0.055,0.08",
                         help="--simulate: exposure times, s, comma separated")

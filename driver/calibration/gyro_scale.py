@@ -8,10 +8,12 @@ Inputs:
   (N,) run id (−1 while the table changes rate) and ``table_rate`` (K×3 rad/s, the known
   rate vector of each run in the gyro reference frame). ``--trim`` s are dropped at both
   ends of each run.
-* ``--method slew``: an ``.npz`` with the gyro log (``t``, ``rate``) and the tracker's
-  attitudes ``t_cam`` (K,) s and ``q_cam`` (K×4, [x, y, z, w] ICRS → camera) on the same
-  clock. The result maps gyro readings to camera axes (mounting included) unless
-  ``--alignment`` names a calibration TOML whose [alignment] rotation is removed first.
+* ``--method slew`` (the default for a file without ``run``): an ``.npz`` with the gyro log
+  (``t``, ``rate``) and the tracker's attitudes ``t_cam`` (K,) s and ``q_cam`` (K×4, [x, y, z, w]
+  ICRS → camera) on the same clock, e.g. ``gyrostar replay LOG --export calib``. The result
+  maps gyro readings to camera axes (mounting included) unless
+  ``--alignment`` names a calibration TOML whose [alignment] rotation is removed first (by
+  default the ``--out`` file's, when it has one).
 
 ``--simulate``: the simulator's gyro model (:mod:`gyrostar.calibration.gyro_sim`, parameter
 set ``--gyro-params``) turned at ±``--rates`` about each axis for ``--run-seconds`` per run
@@ -30,9 +32,11 @@ def configure(parser) -> None:
     from .report import add_common_args
 
     add_common_args(parser, "gyro log .npz (see --help: t, rate, run, table_rate; or t_cam, q_cam for slews)")
-    parser.add_argument("--method", choices=("rate-table", "slew"), default="rate-table")
+    parser.add_argument("--method", choices=("rate-table", "slew"), default=None,
+                        help="default: slew when INPUT has no 'run' array (a flatsat run's export), else rate-table")
     parser.add_argument("--trim", type=float, default=0.5, help="rate table: seconds dropped at each run end")
-    parser.add_argument("--alignment", default=None, help="slew: calibration TOML whose [alignment] is applied")
+    parser.add_argument("--alignment", default=None,
+                        help="slew: calibration TOML whose [alignment] is applied (default: the --out file's, if any)")
     parser.add_argument("--gyro-params", default="bmi088", help="--simulate: gyro error-model parameter set")
     parser.add_argument("--set", action="append", default=None, metavar="KEY=VALUE",
                         help="--simulate: override a gyro parameter (repeatable)")
@@ -91,15 +95,25 @@ def _from_slews(t_g, w_g, t_cam, q_cam, lag: int = 5):
 
 
 def run(args) -> int:
-    from ..errors import ConfigError, NotAvailableError
+    from pathlib import Path
+
+    from ..errors import ConfigError
     from . import calfile, gyro_sim, report
 
     source = report.check_source(args)
     folder = report.report_dir(args, "gyro-scale")
     truth = None
-    if source == "live":
-        raise NotAvailableError("a rate-table session is driven by the table's controller: record the gyro "
-                                "with run ids and pass the .npz as INPUT")
+    if args.method is None:
+        args.method = "rate-table"
+        if source == "file":
+            with np.load(args.input) as z:
+                args.method = "rate-table" if "run" in z.files else "slew"
+    target = None
+    if source == "file" and args.toml and Path(args.toml).exists():
+        target = calfile.load(args.toml)
+        if args.method == "slew" and not args.alignment and target.alignment is not None:
+            args.alignment = str(args.toml)
+    note = None
     if args.method == "rate-table":
         if source == "simulate":
             try:
@@ -127,11 +141,9 @@ def run(args) -> int:
             t_g = t - truth["delay_s"]  # the alignment calibration's time offset, applied
             t_cam, q_cam = sl.t_cam, sl.q_cam
         else:
-            with np.load(args.input) as z:
-                missing = {"t", "rate", "t_cam", "q_cam"} - set(z.files)
-                if missing:
-                    raise ConfigError(f"{args.input} lacks arrays {sorted(missing)}")
-                t_g, rate, t_cam, q_cam = z["t"], z["rate"], z["t_cam"], z["q_cam"]
+            from .star_fields import load_slew_input
+
+            t_g, rate, t_cam, q_cam, note = load_slew_input(args.input, target)
             if args.alignment:
                 al = calfile.load(args.alignment).alignment
                 if al is None:
@@ -155,7 +167,8 @@ def run(args) -> int:
                   None if ts is None else (ts - np.diag(np.diag(ts))) * 1e6)
     table_out.add("bias_dps", fit.bias / DEG, "deg/s", None if truth is None else truth["bias"] / DEG)
     table_out.rows["scale_factor_ppm"]["sigma"] = (np.diag(fit.sensitivity_sigma) * 1e6).tolist()
-    extra = {"method": args.method, "residual_rms": fit.residual_rms, "sensitivity": fit.sensitivity}
+    extra = {"method": args.method, "residual_rms": fit.residual_rms, "sensitivity": fit.sensitivity,
+             "alignment_removed": args.alignment, "attitudes": note}
     checks = None
     if ts is not None:
         sf_err = (np.diag(fit.sensitivity) - np.diag(ts)) * 1e6

@@ -34,7 +34,7 @@ def configure(parser) -> None:
     from .gyro_log import add_live_args
     from .report import add_common_args
 
-    add_common_args(parser, "static gyro log (.npz with t [s], rate [rad/s, N×3], optional temperature [C])")
+    add_common_args(parser, "static gyro log (.npz with t [s], rate [rad/s, N×3], optional temperature [C])", live=True)
     add_live_args(parser)
     parser.add_argument("--gyro-params", default="bmi088", help="--simulate: gyro error-model parameter set")
     parser.add_argument("--set", action="append", default=None, metavar="KEY=VALUE",

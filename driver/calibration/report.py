@@ -13,17 +13,20 @@ import numpy as np
 from ..errors import ConfigError
 
 
-def add_common_args(parser, input_help: str) -> None:
-    """``INPUT``/``--simulate``/``--seed``/``--toml``/``--report``/``--json`` for one command."""
+def add_common_args(parser, input_help: str, live: bool = False) -> None:
+    """``INPUT``/``--simulate``/``--seed``/``--toml``(``--out``)/``--report``/``--json`` for one
+    command; ``--live`` only where the command records from a device itself (``live``)."""
     from ..cli.main import add_json
 
     parser.add_argument("input", nargs="?", type=Path, help=input_help)
     parser.add_argument("--simulate", action="store_true",
                         help="generate simulated data with known truth and calibrate on it")
     parser.add_argument("--seed", type=int, default=1, help="random seed for --simulate (default 1)")
-    parser.add_argument("--live", action="store_true", help="record from the connected device")
-    parser.add_argument("--toml", type=Path, default=None,
-                        help="calibration TOML to update (default: calibration.toml in the report folder)")
+    if live:
+        parser.add_argument("--live", action="store_true", help="record from the connected device")
+    parser.add_argument("--toml", "--out", dest="toml", type=Path, default=None,
+                        help="calibration TOML to update: this command replaces its own table and keeps the others "
+                             "(default: calibration.toml in the report folder)")
     parser.add_argument("--report", type=Path, default=None,
                         help="report folder for plots and products (default: runs/calibrate/NAME-TIME)")
     parser.add_argument("--no-plots", action="store_true", help="skip the report plots")
@@ -32,12 +35,14 @@ def add_common_args(parser, input_help: str) -> None:
 
 def check_source(args) -> str:
     """Which data source the arguments ask for: 'simulate', 'live' or 'file'."""
-    chosen = [bool(args.simulate), bool(args.live), args.input is not None]
+    live = bool(getattr(args, "live", False))
+    chosen = [bool(args.simulate), live, args.input is not None]
     if sum(chosen) != 1:
-        raise ConfigError("give exactly one of: an input file, --live, or --simulate")
+        raise ConfigError("give exactly one of: an input file, --live, or --simulate" if hasattr(args, "live")
+                          else "give exactly one of: an input file or --simulate")
     if args.input is not None and not Path(args.input).exists():
         raise ConfigError(f"input file {args.input} does not exist")
-    return "simulate" if args.simulate else "live" if args.live else "file"
+    return "simulate" if args.simulate else "live" if live else "file"
 
 
 def report_dir(args, name: str) -> Path:
