@@ -127,6 +127,12 @@ def _export_hdf5(recs: np.ndarray, truth, meta: dict, out: Path) -> None:
 
 
 def run(args) -> int:
+    if getattr(args, "compare_calibration", None):
+        from .calib_truth import compare
+
+        res = compare(args.log, args.compare_calibration)
+        emit(args, res, json.dumps(res, indent=2))
+        return 0
     if args.export:
         if not args.out:
             raise ConfigError("--export needs --out PATH")

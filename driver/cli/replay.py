@@ -17,6 +17,8 @@ def configure(parser) -> None:
                              "gyro-scale calibration read)")
     parser.add_argument("--out", metavar="PATH", default=None, help="export path")
     parser.add_argument("--check", action="store_true", help="compare replayed outputs with the recorded ones")
+    parser.add_argument("--compare-calibration", metavar="TOML", default=None,
+                        help="simulated runs: compare a calibration file with the simulator's true devices")
     add_json(parser)
 
 

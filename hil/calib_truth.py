@@ -1,0 +1,83 @@
+"""A calibration file against the simulator truth of a logged run (``gyrostar replay LOG
+--compare-calibration CAL.toml``): how far the calibration chain landed from the devices the
+simulator really had.
+
+Truth is rebuilt from the log's META (scenario [truth], gyro error set and seed):
+
+* camera — :func:`gyrostar.hil.flatsat.true_camera` of the nominal preset;
+* gyro — the emulated gyro senses ``ω_g = S Rᵀ ω_camera + b`` (``S`` the drawn scale and
+  misalignment, ``R`` the true mounting), so the map a calibration should find is
+  ``M = R S⁻¹``. The gyro's own misalignment has a rotation part that no slew can tell from
+  the mounting, so the rotation is compared with the rotation factor of ``M`` (polar
+  decomposition) as well as with the mounting alone;
+* time offset — the scenario's offset minus the gyro's low-pass group delay (its reading
+  lags the body rate; :func:`gyrostar.calibration.gyro_sim.filter_delay_s`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+ARCSEC = np.pi / 180.0 / 3600.0
+
+
+def _polar_rotation(m: np.ndarray) -> np.ndarray:
+    u, _, vt = np.linalg.svd(m)
+    return u @ np.diag([1.0, 1.0, np.linalg.det(u @ vt)]) @ vt
+
+
+def _angle(a: np.ndarray, b: np.ndarray) -> float:
+    c = (np.trace(a @ b.T) - 1.0) / 2.0
+    return float(np.arccos(np.clip(c, -1.0, 1.0)))
+
+
+def compare(log_path, cal_path) -> dict:
+    from .. import config as gconfig
+    from ..calibration import calfile
+    from ..calibration.gyro_sim import filter_delay_s
+    from ..camera import camera_preset
+    from ..mocks.gyro_truth import gyro_params, simulate_gyro
+    from ..mocks.trajectory import Rotated
+    from . import config as hc
+    from .flatsat import scenario_profile, true_camera, true_mounting
+    from .replay import load_log
+
+    meta = load_log(log_path)["meta"]
+    cfg = gconfig.from_dict(meta["config"], hc.FlatsatConfig, source="log META")
+    scen = gconfig.from_dict(meta["scenario"], hc.Scenario, source="log META")
+    if not cfg.simulated:
+        from ..errors import NotAvailableError
+
+        raise NotAvailableError(f"{log_path} is from a flatsat with real devices: no simulator truth to compare with")
+    cal = calfile.load(cal_path)
+    res: dict = {"log": str(log_path), "calibration": str(cal_path), "scenario": scen.name}
+    cam_t = true_camera(camera_preset(scen.preset or cfg.sim.preset), scen.truth)
+    if cal.camera is not None:
+        c = cal.camera
+        res["camera"] = {
+            "focal_length_px": c.focal_length_px, "focal_length_true_px": cam_t.focal_length_px,
+            "focal_length_rel_error_percent": 100.0 * (c.focal_length_px / cam_t.focal_length_px - 1.0),
+            "principal_point_px": list(c.principal_point_px),
+            "principal_point_true_px": [cam_t.cx_px, cam_t.cy_px],
+            "principal_point_error_px": float(np.hypot(c.principal_point_px[0] - cam_t.cx_px,
+                                                       c.principal_point_px[1] - cam_t.cy_px)),
+            "k1": c.k1, "k1_true": cam_t.k1}
+    gp = gyro_params(scen.gyro_errors or cfg.sim.gyro_errors, range_dps=0.0, odr_hz=float(cfg.gyro.odr_hz))
+    r_mount = true_mounting(scen.truth)
+    g = simulate_gyro(Rotated(scenario_profile(scen), r_mount.T), 1.0, gp, seed=int(meta["seed"]))
+    sens = np.diag(1.0 + g.scale) @ g.misalignment
+    m_true = r_mount @ np.linalg.inv(sens)
+    dt_true = scen.truth.gyro_time_offset_ms * 1e-3 - filter_delay_s(gp)
+    m_cal, b_cal, dt_cal = calfile.gyro_to_camera(cal)
+    res["gyro"] = {"map_max_error_ppm": float(np.abs(m_cal - m_true).max() * 1e6),
+                   "time_offset_ms": dt_cal * 1e3, "time_offset_true_ms": dt_true * 1e3,
+                   "time_offset_error_ms": (dt_cal - dt_true) * 1e3,
+                   "filter_delay_ms": filter_delay_s(gp) * 1e3}
+    if cal.alignment is not None:
+        from ..attitude import quat_to_dcm
+
+        r_cal = quat_to_dcm(np.asarray(cal.alignment.q_gyro_to_camera, float))
+        res["gyro"]["rotation_error_arcsec"] = _angle(r_cal, _polar_rotation(m_true)) / ARCSEC
+        res["gyro"]["rotation_vs_mounting_only_arcsec"] = _angle(r_cal, r_mount) / ARCSEC
+        res["gyro"]["full_map_rotation_error_arcsec"] = _angle(_polar_rotation(m_cal), _polar_rotation(m_true)) / ARCSEC
+    return res
