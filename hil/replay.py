@@ -87,7 +87,7 @@ def export(path: str | Path, fmt: str, out: str | Path) -> dict:
     recs = log["outputs"]
     out = Path(out)
     if fmt == "csv":
-        _export_csv(recs, log["truth"], out)
+        _export_csv(recs, log["truth"], log["meta"], out)
     elif fmt == "hdf5":
         _export_hdf5(recs, log["truth"], log["meta"], out)
     else:
@@ -96,31 +96,58 @@ def export(path: str | Path, fmt: str, out: str | Path) -> dict:
             "truth": log["truth"] is not None}
 
 
-def _export_csv(recs: np.ndarray, truth, out: Path) -> None:
-    cols = ["t", "seq", "mode", "flags", "n_stars", "qx", "qy", "qz", "qw", "wx", "wy", "wz", "bx", "by", "bz",
-            "var_tx", "var_ty", "var_tz", "var_bx", "var_by", "var_bz", "latency_us", "star_ids"]
+def _export_csv(recs: np.ndarray, truth, meta: dict, out: Path) -> None:
+    """CSV of the schema's columns (+ UTC, star ids, truth), and a W3C CSVW metadata file
+    ``<out>-metadata.json`` giving every column's unit and meaning."""
+    from ..telemetry import schema, timescale
+
+    tmap = timescale.from_meta(meta.get("time"))
+    cols = schema.table(recs, tmap)
+    utc = tmap.utc_iso(recs["t"]) if tmap is not None and len(recs) else [""] * len(recs)
     has_truth = truth is not None and len(truth) == len(recs)
-    if has_truth:
-        cols += ["true_qx", "true_qy", "true_qz", "true_qw"]
+    names = list(cols) + ["utc", "star_ids"] + (["true_q_x", "true_q_y", "true_q_z", "true_q_w"] if has_truth else [])
     with open(out, "w") as fh:
-        fh.write(",".join(cols) + "\n")
+        fh.write(",".join(names) + "\n")
         for i, r in enumerate(recs):
-            ids = " ".join(str(v) for v in r["star_id"][: r["n_stars"]])
-            row = [repr(float(r["t"])), str(int(r["seq"])), str(int(r["mode"])), str(int(r["flags"])),
-                   str(int(r["n_stars"]))]
-            row += [repr(float(v)) for v in r["q"]] + [repr(float(v)) for v in r["omega"]]
-            row += [repr(float(v)) for v in r["bias"]] + [repr(float(v)) for v in np.diag(r["cov"])]
-            row += [repr(float(r["latency_us"])), ids]
+            row = [repr(v.item()) if v.dtype.kind == "f" else str(v.item()) for v in (c[i] for c in cols.values())]
+            row += [utc[i], " ".join(str(v) for v in r["star_id"][: r["n_stars"]])]
             if has_truth:
                 row += [repr(float(v)) for v in truth[i]["q"]]
             fh.write(",".join(row) + "\n")
+    desc = [{"name": c.name, "titles": c.name, "datatype": "double" if c.dtype.startswith("f") else "integer",
+             "unit": c.unit, "dc:description": c.description} for c in schema.COLUMNS]
+    desc += [{"name": "utc", "datatype": "dateTime", "unit": "",
+              "dc:description": "UTC of the same instant (ISO 8601)"},
+             {"name": "star_ids", "datatype": "string", "unit": "", "dc:description": "catalog ids of tracked stars"}]
+    if has_truth:
+        desc += [{"name": f"true_q_{a}", "datatype": "double", "unit": "1",
+                  "dc:description": f"simulator truth attitude ICRS → body, {a} component"} for a in "xyzw"]
+    Path(f"{out}-metadata.json").write_text(json.dumps(
+        {"@context": "http://www.w3.org/ns/csvw", "url": Path(out).name, "tableSchema": {"columns": desc},
+         "dc:description": "gyrostar loop outputs at the gyro rate; time mapping in 'time'",
+         "time": meta.get("time")}, indent=1))
 
 
 def _export_hdf5(recs: np.ndarray, truth, meta: dict, out: Path) -> None:
+    """HDF5: the raw records (``outputs``), one dataset per schema column under ``columns``
+    with ``unit`` and ``description`` attributes, UTC strings, truth, the run's META."""
     import h5py
 
+    from ..telemetry import schema, timescale
+
+    tmap = timescale.from_meta(meta.get("time"))
     with h5py.File(out, "w") as h5:
         h5.create_dataset("outputs", data=recs)
+        grp = h5.create_group("columns")
+        cols = schema.table(recs, tmap)
+        for c in schema.COLUMNS:
+            ds = grp.create_dataset(c.name, data=cols[c.name])
+            ds.attrs["unit"] = c.unit
+            ds.attrs["description"] = c.description
+        if tmap is not None and len(recs):
+            ds = grp.create_dataset("utc", data=np.array(tmap.utc_iso(recs["t"]), dtype=h5py.string_dtype()))
+            ds.attrs["unit"] = ""
+            ds.attrs["description"] = "UTC of the same instant (ISO 8601)"
         if truth is not None:
             h5.create_dataset("truth", data=truth)
         h5.attrs["meta"] = json.dumps(meta)

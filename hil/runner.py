@@ -85,7 +85,7 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
     late and how many overruns coincided with that."""
     from ..loop.record import describe
     from ..loop.scheduler import PeriodicScheduler, StepGate, realtime_setup
-    from ..loop.sinks import CallbackSink, RecorderSink, UdpSink
+    from ..loop.sinks import CallbackSink, RecorderSink, SpacePacketSink, UdpSink
     from ..recording import logfile as lf
     from . import flatsat
     from .analysis import summarize
@@ -94,10 +94,14 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
     record = cfg.outputs.record if record is None else record
     calib = flatsat.load_calibration(cfg)
     log.warning("calibration: %s", calib.describe())
+    from ..telemetry import timescale
+
+    timemap = timescale.capture()
     writer = lf.LogWriter(folder / "flatsat.gslog", background=True) if record else None
     meta = {"format": "gyrostar flatsat log 1", "config": _cfg_dict(cfg), "scenario": _cfg_dict(scen),
             "duration_s": duration, "seed": seed, "realtime": realtime, "output": describe(),
-            "started_utc": datetime.now(UTC).isoformat(), "calibration": calib.meta()}
+            "started_utc": datetime.now(UTC).isoformat(), "calibration": calib.meta(),
+            "time": timemap.meta()}
     if writer:
         writer.meta(meta)
     import sys
@@ -123,8 +127,13 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
         sinks.append(RecorderSink(writer))
     udp = None
     if cfg.outputs.udp:
-        udp = UdpSink(cfg.outputs.udp_host, cfg.outputs.udp_port)
+        udp = UdpSink(cfg.outputs.udp_host, cfg.outputs.udp_port, allow_remote=cfg.outputs.allow_remote)
         sinks.append(udp)
+    tm = None
+    if cfg.outputs.space_packets:
+        tm = SpacePacketSink(cfg.outputs.tm_host, cfg.outputs.tm_port, timemap, apid=cfg.outputs.tm_apid,
+                             allow_remote=cfg.outputs.allow_remote)
+        sinks.append(tm)
 
     fs = flatsat.build(cfg, scen, seed=seed, realtime=realtime, writer=writer, calibration=calib)
     loop = fs.make_loop(sinks)
@@ -224,6 +233,13 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
     res_top["wiring"] = wiring
     if rt is not None:
         res_top["realtime_setup"] = {"sched_fifo": rt.sched_fifo, "cpus": rt.cpus, "notes": rt.notes}
+    if tm is not None:
+        res_top["space_packets"] = {"sent": tm.sent, "dropped": tm.dropped, "to": f"{tm.addr[0]}:{tm.addr[1]}",
+                                    "apid": tm.apid}
+    t_first = float(out["t"][0]) if len(out) else timemap.monotonic_s
+    res_top["time"] = {"clock": "host CLOCK_MONOTONIC (s); TAI/UTC from the start pair (docs/TELEMETRY.md)",
+                       "first_output_monotonic_s": t_first, "first_output_tai_s": float(timemap.tai(t_first)),
+                       "first_output_utc": timemap.utc_iso(t_first)[0], "tai_minus_utc_s": timemap.tai_minus_utc_s}
     if udp is not None:
         res_top["udp"] = {"sent": udp.sent, "dropped": udp.dropped, "to": f"{udp.addr[0]}:{udp.addr[1]}"}
     if probe is not None:

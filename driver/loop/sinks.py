@@ -7,13 +7,14 @@ sink drops datagrams the kernel refuses (counted), the recorder buffers in user 
 
 from __future__ import annotations
 
-import socket
 import struct
 
 import numpy as np
 
 from ..errors import ConfigError
 from ..recording import logfile as lf
+from ..telemetry.packets import SpacePacketSink  # noqa: F401  (CCSDS Space Packets: one more sink)
+from ..telemetry.udp import open_udp
 from .record import OUTPUT_DTYPE, UDP_MAGIC
 
 _UDP_HEAD = struct.Struct("<4sHH")
@@ -56,14 +57,7 @@ class UdpSink:
     """
 
     def __init__(self, host: str = "127.0.0.1", port: int = 47800, allow_remote: bool = False):
-        if not allow_remote and host not in ("127.0.0.1", "localhost", "::1"):
-            raise ConfigError(f"UDP output to {host} refused: the stream is loopback-only "
-                              "unless allow_remote = true")
-        if not 0 < port < 65536:
-            raise ConfigError(f"UDP port {port} out of range 1..65535")
-        self.addr = (host, port)
-        self.sock = socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.setblocking(False)
+        self.sock, self.addr = open_udp(host, port, allow_remote, "UDP output")
         self.sent = 0
         self.dropped = 0
 

@@ -85,11 +85,22 @@ def test_export_csv_and_hdf5(demo_run, tmp_path):
     res, folder, _ = demo_run
     info = export(folder / "flatsat.gslog", "csv", tmp_path / "o.csv")
     lines = (tmp_path / "o.csv").read_text().splitlines()
-    assert len(lines) == info["outputs"] + 1 and lines[0].startswith("t,seq,mode")
+    assert len(lines) == info["outputs"] + 1 and lines[0].startswith("t_monotonic_s,tai_s,seq,mode")
+    meta = json.loads((tmp_path / "o.csv-metadata.json").read_text())
+    cols = {c["name"]: c for c in meta["tableSchema"]["columns"]}
+    assert cols["omega_x"]["unit"] == "rad/s" and cols["tai_s"]["unit"] == "s"
+    assert set(lines[0].split(",")) <= set(cols)
+    first = dict(zip(lines[0].split(","), lines[1].split(",")))
+    tm = meta["time"]                          # TAI = UTC + 37 s (2017 onwards), from the start pair
+    assert tm["tai_minus_utc_s"] == 37.0
+    t = float(first["t_monotonic_s"])
+    assert float(first["tai_s"]) == pytest.approx(tm["tai_at_monotonic0_s"] + t - tm["monotonic_s"], abs=1e-6)
     export(folder / "flatsat.gslog", "hdf5", tmp_path / "o.h5")
     with h5py.File(tmp_path / "o.h5") as h5:
         assert h5["outputs"].shape == (info["outputs"],)
         assert np.array_equal(h5["outputs"]["q"][:], load_log(folder / "flatsat.gslog")["outputs"]["q"])
+        assert h5["columns/q_w"].attrs["unit"] == "1" and h5["columns/sigma_theta_x"].attrs["unit"] == "rad"
+        assert h5["columns/utc"][0].decode() == first["utc"]
 
 
 def test_sigkill_leaves_a_replayable_log(tmp_path):

@@ -1,0 +1,77 @@
+"""XTCE 1.2 definition of the attitude telemetry packets, generated with yamcs-pymdb.
+
+The layout is the one :mod:`gyrostar.telemetry.packets` packs (one definition: the payload
+struct there and the parameter list here are checked against each other by the tests).
+Every parameter carries a unit ("1" for dimensionless values, identifiers and flags).
+``python -m gyrostar.telemetry.xtce OUT.xml`` (``make xtce``) writes ``docs/telemetry.xtce.xml``.
+"""
+
+from __future__ import annotations
+
+import sys
+
+from . import packets
+
+SYSTEM = "gyrostar"
+
+
+def build(apid: int = packets.APID_ATTITUDE):
+    """The yamcs-pymdb ``System`` of the packets."""
+    import yamcs.pymdb as y
+
+    sysm = y.System(SYSTEM, short_description="gyrostar star tracker: attitude telemetry (CCSDS Space Packets)")
+
+    def uint(name, bits, unit, desc):
+        return y.IntegerParameter(sysm, name, signed=False, bits=bits, units=unit, short_description=desc,
+                                  encoding=y.IntegerEncoding(bits=bits))
+
+    def f64(name, unit, desc):
+        return y.FloatParameter(sysm, name, bits=64, units=unit, short_description=desc, encoding=y.FloatEncoding(64))
+
+    def f32(name, unit, desc):
+        return y.FloatParameter(sysm, name, bits=32, units=unit, short_description=desc, encoding=y.FloatEncoding(32))
+
+    head = [uint("ccsds_version", 3, "1", "CCSDS packet version number (0)"),
+            uint("ccsds_type", 1, "1", "packet type: 0 telemetry"),
+            uint("ccsds_sec_header", 1, "1", "secondary header flag (1: CUC time present)"),
+            uint("ccsds_apid", 11, "1", "application process identifier"),
+            uint("ccsds_seq_flags", 2, "1", "sequence flags (3: unsegmented)"),
+            uint("ccsds_seq_count", 14, "count", "packet sequence count = output counter mod 16384"),
+            uint("ccsds_length", 16, "octets", "packet data length − 1")]
+    base = y.Container(sysm, "ccsds_space_packet", entries=[y.ParameterEntry(p) for p in head], abstract=True)
+    time_coarse = uint("tai_coarse", 32, "s", "CUC coarse time: whole TAI seconds since 1958-01-01")
+    time_fine = uint("tai_fine", 16, "s/65536", "CUC fine time: 2^-16 s")
+    body = [time_coarse, time_fine,
+            uint("seq", 32, "count", "output counter"),
+            uint("mode", 8, "1", "0 ACQUIRE, 1 TRACK, 2 COAST"),
+            uint("n_stars", 8, "count", "stars tracked"),
+            uint("flags", 16, "1", "quality flags (gyrostar.loop.record FLAG_*)")]
+    body += [f64(f"q_{a}", "1", f"attitude quaternion ICRS → body, {a} (scalar last)") for a in "xyzw"]
+    body += [f64(f"omega_{a}", "rad/s", f"body rate, bias-corrected, {a}") for a in "xyz"]
+    body += [f64(f"bias_{a}", "rad/s", f"gyro bias estimate, {a}") for a in "xyz"]
+    body += [f32(f"sigma_theta_{a}", "rad", f"1-sigma attitude error about body {a}") for a in "xyz"]
+    body += [f32(f"sigma_bias_{a}", "rad/s", f"1-sigma gyro bias error, {a}") for a in "xyz"]
+    body += [f32("latency_us", "us", "host time from the gyro FIFO read to this output")]
+    y.Container(sysm, "attitude", base=base, entries=[y.ParameterEntry(p) for p in body],
+                condition=y.EqExpression(head[3], apid), rate=400.0,
+                short_description="one 400 Hz loop output (gyrostar.telemetry.packets)")
+    return sysm
+
+
+def xml(apid: int = packets.APID_ATTITUDE) -> str:
+    return build(apid).dumps()
+
+
+def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    text = xml()
+    if argv:
+        with open(argv[0], "w") as fh:
+            fh.write(text)
+    else:
+        sys.stdout.write(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,96 @@
+"""Telemetry a ground station reads as it is: TAI/UTC from host time, CCSDS Space Packets of
+a 10 s run decoded by ``spacepackets`` with no sequence gap at 400 Hz, and the XTCE definition
+(yamcs-pymdb) matching the packet layout with a unit on every parameter."""
+
+import calendar
+import socket
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+from gyrostar.hil import config as hc
+from gyrostar.hil.replay import load_log
+from gyrostar.hil.runner import run_flatsat
+from gyrostar.telemetry import packets, timescale, xtce
+from spacepackets.ccsds.spacepacket import PacketId, PacketType, parse_space_packets
+
+NS = {"x": "http://www.omg.org/spec/XTCE/20180204"}
+
+
+def test_tai_utc_leap_seconds_from_astropy():
+    # POSIX seconds of two UTC instants either side of the 2016-12-31 leap second
+    before = calendar.timegm((2016, 6, 1, 0, 0, 0))
+    after = calendar.timegm((2017, 6, 1, 0, 0, 0))
+    assert timescale.from_pair(100.0, before).tai_minus_utc_s == 36.0
+    tm = timescale.from_pair(100.0, after)
+    assert tm.tai_minus_utc_s == 37.0
+    # TAI seconds since 1958-01-01 TAI: days × 86400 + leap-second count (+ the 1958–1972
+    # offset of 10 s at 1972-01-01 included in the 37 s); hand count of days 1958-01-01 → 2017-06-01
+    days = (calendar.timegm((2017, 6, 1, 0, 0, 0)) - calendar.timegm((1958, 1, 1, 0, 0, 0))) // 86400
+    assert tm.tai(100.0) == pytest.approx(days * 86400 + 37.0, abs=1e-6)
+    assert tm.tai(101.5) - tm.tai(100.0) == pytest.approx(1.5)
+    assert tm.utc_iso(102.25) == ["2017-06-01T00:00:02.250000"]
+
+
+def test_xtce_matches_the_packet_layout_and_every_parameter_has_a_unit(repo):
+    text = xtce.xml()
+    assert (repo / "docs" / "telemetry.xtce.xml").read_text() == text, "run make xtce"
+    root = ET.fromstring(text)
+    types = {t.get("name"): t for t in root.find("x:TelemetryMetaData/x:ParameterTypeSet", NS)}
+    params = root.findall("x:TelemetryMetaData/x:ParameterSet/x:Parameter", NS)
+    assert len(params) == 7 + 2 + 4 + 4 + 3 + 3 + 3 + 3 + 1
+    for p in params:
+        unit = types[p.get("parameterTypeRef")].find("x:UnitSet/x:Unit", NS)
+        assert unit is not None and unit.text, p.get("name")
+    bits = {t.get("name"): int(t.find("*[@sizeInBits]", NS).get("sizeInBits")) for t in types.values()}
+    containers = {c.get("name"): c for c in root.findall("x:TelemetryMetaData/x:ContainerSet/x:SequenceContainer",
+                                                          NS)}
+    total = 0
+    for name in ("ccsds_space_packet", "attitude"):
+        for e in containers[name].find("x:EntryList", NS):
+            total += bits[e.get("parameterRef")]
+    assert total == 8 * packets.PACKET_LEN
+
+
+@pytest.fixture(scope="module")
+def packet_run(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("tm")
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 23)
+    rx.bind(("127.0.0.1", 0))
+    rx.setblocking(False)
+    cfg = hc.load_flatsat()
+    cfg.outputs.space_packets = True
+    cfg.outputs.tm_port = rx.getsockname()[1]
+    got = bytearray()
+
+    def drain(_records):
+        while True:
+            try:
+                got.extend(rx.recv(65535))
+            except BlockingIOError:
+                return
+
+    res = run_flatsat(cfg, hc.load_scenario("sim2"), duration=10.0, seed=2, folder=folder, plots=False, status=False,
+                      on_output=drain)
+    drain(None)
+    rx.close()
+    return res, folder, bytes(got)
+
+
+def test_space_packets_decode_without_gaps(packet_run):
+    res, folder, stream = packet_run
+    parsed = parse_space_packets(stream, [PacketId(PacketType.TM, True, packets.APID_ATTITUDE)])
+    assert not parsed.skipped_ranges
+    pk = parsed.tm_list
+    out = load_log(folder / "flatsat.gslog")["outputs"]
+    assert res["space_packets"]["dropped"] == 0 and len(pk) == res["space_packets"]["sent"] == len(out)
+    assert len(pk) >= 0.95 * 10.0 * 400
+    dec = [packets.decode(bytes(p)) for p in pk]
+    count = np.array([d["seq_count"] for d in dec])
+    assert np.all(np.diff(count) % packets.SEQ_MODULO == 1)            # no sequence gap
+    tai = np.array([d["tai_s"] for d in dec])
+    assert np.all(np.diff(tai) > 0) and np.median(np.diff(tai)) == pytest.approx(0.0025, abs=1e-4)
+    tm = timescale.from_meta(load_log(folder / "flatsat.gslog")["meta"]["time"])
+    assert np.allclose(tai, tm.tai(out["t"]), atol=2.0 ** -16)
+    assert np.allclose([d["q"] for d in dec], out["q"]) and [d["seq"] for d in dec] == list(out["seq"])
