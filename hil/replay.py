@@ -7,6 +7,8 @@ request the driver makes is checked against what it made when recording. The rep
 outputs are compared with the recorded OUTPUT records byte for byte (``--check`` makes a
 mismatch an error, exit code 1).
 
+``--export aem --out X.aem`` writes a CCSDS Attitude Ephemeris Message (:mod:`gyrostar.telemetry.aem`).
+
 ``--export calib --out X.npz`` replays the log and writes what camera, alignment and
 gyro-scale calibration read (:mod:`gyrostar.hil.calib_export`).
 
@@ -86,12 +88,17 @@ def export(path: str | Path, fmt: str, out: str | Path) -> dict:
     log = load_log(path)
     recs = log["outputs"]
     out = Path(out)
+    if fmt == "aem":
+        from ..telemetry import aem, timescale
+
+        counts = aem.write(out, recs, timescale.from_meta(log["meta"].get("time")))
+        return {"log": str(path), "export": fmt, "out": str(out), "outputs": counts["lines"], **counts}
     if fmt == "csv":
         _export_csv(recs, log["truth"], log["meta"], out)
     elif fmt == "hdf5":
         _export_hdf5(recs, log["truth"], log["meta"], out)
     else:
-        raise ConfigError(f"unknown export format {fmt!r} (csv, hdf5)")
+        raise ConfigError(f"unknown export format {fmt!r} (csv, hdf5, aem, calib)")
     return {"log": str(path), "export": fmt, "out": str(out), "outputs": int(len(recs)),
             "truth": log["truth"] is not None}
 

@@ -12,7 +12,7 @@ REPLAYER = "gyrostar.hil.replay"
 
 def configure(parser) -> None:
     parser.add_argument("log", metavar="LOG", help="recorded log file")
-    parser.add_argument("--export", choices=["csv", "hdf5", "calib"], default=None,
+    parser.add_argument("--export", choices=["csv", "hdf5", "aem", "calib"], default=None,
                         help="export instead of replaying (calib: the .npz that camera, alignment and "
                              "gyro-scale calibration read)")
     parser.add_argument("--out", metavar="PATH", default=None, help="export path")
