@@ -12,7 +12,7 @@ from .analysis import ARCSEC, attitude_errors
 MODE_COLOURS = {MODE_TRACK: "#d8f0d8", MODE_COAST: "#f6e2c0"}
 
 
-def _shade_modes(ax, t, mode):
+def shade_modes(ax, t, mode):
     """Shade TRACK (green) and COAST (orange) stretches; ACQUIRE is left white."""
     if not len(t):
         return
@@ -42,7 +42,7 @@ def write_plots(folder: Path, out: np.ndarray, truth: np.ndarray | None,
     if truth is not None and len(truth) == len(out):
         err = attitude_errors(out, truth) * ARCSEC
         fig, ax = plt.subplots(figsize=(9, 4))
-        _shade_modes(ax, t, out["mode"])
+        shade_modes(ax, t, out["mode"])
         for i, lab in enumerate(("x (cross-boresight)", "y (cross-boresight)", "roll")):
             ax.plot(t, err[:, i], lw=0.7, label=lab)
         lim = np.percentile(np.abs(err[:, :2]), 99) * 3 if len(err) else 10
@@ -54,7 +54,7 @@ def write_plots(folder: Path, out: np.ndarray, truth: np.ndarray | None,
         paths.append(_save(fig, folder / "attitude_error.png"))
 
         fig, ax = plt.subplots(figsize=(9, 4))
-        _shade_modes(ax, t, out["mode"])
+        shade_modes(ax, t, out["mode"])
         deg_h = 180 / np.pi * 3600
         for i, c in enumerate("rgb"):
             ax.plot(t, out["bias"][:, i] * deg_h, c, lw=0.8, label=f"estimate {'xyz'[i]}")

@@ -229,6 +229,9 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
     if client is not None:
         res_top["link"] = dict(client.stats)
     res_top["calibration"] = {"path": calib.path, "sha256": calib.sha256} if calib.cal is not None else None
+    from .health import health
+
+    res_top["health"] = health(out, loop.gyro.odr_hz, counters, dict(client.stats) if client is not None else None)
     res_top["numba_startup"] = warm
     res_top["wiring"] = wiring
     if rt is not None:
@@ -262,7 +265,9 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
         cerr = fs.centroid_errors(out) if truth is not None else None
         if cerr is not None and len(cerr):
             res_top["centroid_error_px_rms"] = float(np.sqrt(np.mean(cerr[:, 1:] ** 2)))
-        res_top["plots"] = [str(p) for p in write_plots(folder, out, truth, cerr)]
+        from .health import plot_overview
+
+        res_top["plots"] = [str(p) for p in write_plots(folder, out, truth, cerr) + [plot_overview(folder, out)]]
     (folder / "summary.json").write_text(json.dumps(_jsonable(res_top), indent=2))
     return res_top
 
@@ -304,6 +309,13 @@ def human_summary(r: dict) -> str:
         lines.append("  final bias error (°/s): " + " ".join(f"{v:+.4f}" for v in r["bias_error_dps_final"]))
     if r.get("centroid_error_px_rms") is not None:
         lines.append(f"  tracked-star centroid error RMS {r['centroid_error_px_rms']:.3f} px")
+    h = r.get("health") or {}
+    if h.get("outputs"):
+        lines.append(f"  without truth: TRACK {100 * h['track_fraction']:.0f} %, {h['mode_switches']} mode switches, "
+                     f"stars tracked median {h['stars_tracked_median']:.0f}, frames "
+                     f"{h.get('frames_hz', 0):.1f} Hz, attitude 3σ (cross, median) "
+                     f"{f(h.get('attitude_3sigma_arcsec_cross_median'), '.1f')}″, "
+                     f"link errors {h['link_error_outputs']}")
     cal = r.get("calibration")
     lines.append(f"  calibration: {cal['path']} (sha256 {cal['sha256'][:16]})" if cal else
                  "  calibration: none (nominal camera and gyro mounting)")
