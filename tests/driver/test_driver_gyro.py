@@ -12,7 +12,17 @@ import numpy as np
 import pytest
 from gyrostar.clock import SimulatedClock
 from gyrostar.errors import DeviceError
-from gyrostar.gyro import FLAG_GAP, FLAG_SAT_X, FLAG_SATURATED, FLAG_TIME_EST, Bmi088Gyro, GyroSamples, L3gd20hGyro, bmi088, l3gd20h
+from gyrostar.gyro import (
+    FLAG_GAP,
+    FLAG_SAT_X,
+    FLAG_SATURATED,
+    FLAG_TIME_EST,
+    Bmi088Gyro,
+    GyroSamples,
+    L3gd20hGyro,
+    bmi088,
+    l3gd20h,
+)
 from gyrostar.mocks.bmi088_model import Bmi088GyroModel
 from gyrostar.mocks.fake_rates import ProfileRates
 from gyrostar.mocks.faults import FaultyBus
