@@ -159,7 +159,9 @@ def test_pack10_bit_layout_by_hand():
 
 def test_spans_roundtrip_and_bad_input():
     spans = np.array([[0, 10, 5, 11], [0, 11, 6, 12], [4, 3, 0, 6]], dtype=np.int32)
-    assert (payloads.decode_spans(payloads.encode_spans(spans)[4:]) == spans).all()
+    assert (payloads.decode_spans(payloads.encode_spans(spans, frame=9)[8:]) == spans).all()
+    assert payloads.decode_request(decode_frame(encode_frame(MsgType.SET_WINDOWS, 1, payloads.encode_spans(
+        spans, frame=9))[:-1]))["frame"] == 9
     with pytest.raises(errors.ProtocolUsageError):
         payloads.encode_spans([[0, 0, 0, 70000]])
     with pytest.raises(errors.ProtocolUsageError):
