@@ -106,9 +106,11 @@ def _exchanges() -> list[dict]:
     add("set_gain", encode_frame(MsgType.SET_GAIN, 5, struct.pack("<H", 32)),
         _reply(MsgType.SET_GAIN, 5, gain_x16=32), {"gain_x16": 32})
     spans = [[3, 10, 20, 26], [3, 11, 20, 27], [7, 500, 1018, 1024]]
-    add("set_windows", _spans_req(6, spans), _reply(MsgType.SET_WINDOWS, 6, n_windows=2, n_spans=3, n_pixels=19, frame=0),
+    add("set_windows", _spans_req(6, spans),
+        _reply(MsgType.SET_WINDOWS, 6, n_windows=2, n_spans=3, n_pixels=19, frame=0),
         {"n_windows": 2, "n_spans": 3, "n_pixels": 19})
-    add("set_windows_clear", _spans_req(7, []), _reply(MsgType.SET_WINDOWS, 7, n_windows=0, n_spans=0, n_pixels=0, frame=0))
+    add("set_windows_clear", _spans_req(7, []),
+        _reply(MsgType.SET_WINDOWS, 7, n_windows=0, n_spans=0, n_pixels=0, frame=0))
     # outside a stream the named frame is ignored: the set applies at once (reply frame 0)
     add("set_windows_frame_idle", _spans_req(10, spans, frame=77),
         _reply(MsgType.SET_WINDOWS, 10, n_windows=2, n_spans=3, n_pixels=19, frame=0),
