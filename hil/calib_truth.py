@@ -36,10 +36,8 @@ def compare(log_path, cal_path) -> dict:
     from ..calibration import calfile
     from ..calibration.gyro_sim import filter_delay_s
     from ..camera import camera_preset
-    from ..mocks.gyro_truth import gyro_params, simulate_gyro
-    from ..mocks.trajectory import Rotated
     from . import config as hc
-    from .flatsat import scenario_profile, true_camera, true_mounting
+    from .flatsat import simulated_gyro, true_camera, true_mounting
     from .replay import load_log
 
     meta = load_log(log_path)["meta"]
@@ -62,9 +60,9 @@ def compare(log_path, cal_path) -> dict:
             "principal_point_error_px": float(np.hypot(c.principal_point_px[0] - cam_t.cx_px,
                                                        c.principal_point_px[1] - cam_t.cy_px)),
             "k1": c.k1, "k1_true": cam_t.k1}
-    gp = gyro_params(scen.gyro_errors or cfg.sim.gyro_errors, range_dps=0.0, odr_hz=float(cfg.gyro.odr_hz))
     r_mount = true_mounting(scen.truth)
-    g = simulate_gyro(Rotated(scenario_profile(scen), r_mount.T), 1.0, gp, seed=int(meta["seed"]))
+    g = simulated_gyro(cfg, scen, int(meta["seed"]))
+    gp = g.params
     sens = np.diag(1.0 + g.scale) @ g.misalignment
     m_true = r_mount @ np.linalg.inv(sens)
     dt_true = scen.truth.gyro_time_offset_ms * 1e-3 - filter_delay_s(gp)

@@ -72,12 +72,13 @@ class Truth:
     Scenario time is host time minus ``t_origin`` (the run's start on the host clock).
     """
 
-    def __init__(self, scen: hc.Scenario, gyro_samples, t_origin: float = 0.0):
+    def __init__(self, scen: hc.Scenario, gyro_stream, t_origin: float = 0.0):
+        """``gyro_stream``: the run's simulated gyro (:class:`gyrostar.mocks.gyro_truth.GyroStream`)."""
         from ..attitude import quat_from_boresight
 
         self.profile = scenario_profile(scen)
         self.q0 = np.asarray(quat_from_boresight(scen.ra_deg * DEG, scen.dec_deg * DEG, scen.roll_deg * DEG))
-        self.gyro = gyro_samples
+        self.gyro = gyro_stream
         self.t_origin = t_origin
         self._cache: dict = {}
         self._lock = threading.Lock()
@@ -122,8 +123,7 @@ class Truth:
         out["q"][order] = q
         out["omega"] = self.profile.rate(ts)
         g = self.gyro
-        k = np.clip(np.round(ts * g.params.odr_hz).astype(np.int64) - 1, 0, len(g.t) - 1)
-        out["bias"] = g.bias[k]
+        out["bias"] = g.bias(np.maximum(np.round(ts * g.odr_hz).astype(np.int64) - 1, 0))
         return out
 
     def at(self, t: float):
@@ -133,6 +133,19 @@ class Truth:
         row["t"] = t
         row["q"] = self.q_at(t, "status")
         return row
+
+
+def simulated_gyro(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int):
+    """The simulated gyro's output for a run of any length: the scenario's rate profile (held
+    at its last rate after the scenario ends) through the configured error model, ideal
+    sampling (the register model quantises at the range the driver sets)."""
+    from ..mocks.gyro_truth import GyroStream, gyro_params
+
+    gp = gyro_params(scen.gyro_errors or cfg.sim.gyro_errors, range_dps=0.0, odr_hz=float(cfg.gyro.odr_hz))
+    from ..mocks.trajectory import Rotated
+
+    sensed = Rotated(scenario_profile(scen), true_mounting(scen.truth).T)    # camera → gyro axes
+    return GyroStream(sensed, gp, seed=seed)
 
 
 class ScenarioScene:
@@ -237,6 +250,7 @@ class Flatsat:
         """Scenario time 0 of the emulated devices is host time ``t0`` (just before the loop starts)."""
         if self.device_truth is not None:
             self.device_truth.restart(t0)
+    lockstep: object = None    # fast mode: the lock-step schedule (gyrostar.hil.lockstep.Lockstep)
 
     def make_loop(self, sinks):
         return make_loop(self.cfg, self.clock, self.gyro, self.head, self.camera, sinks, self.lat_clock,
@@ -249,8 +263,14 @@ class Flatsat:
         self.base_clock.sleep(dt)
 
     def start_faults(self, t0: float) -> None:
-        if self.faults is not None:
+        """Real time: the fault plan's own thread applies it; fast mode: :meth:`apply_faults`."""
+        if self.faults is not None and self.lockstep is None:
             self.faults.start(t0, self.base_clock)
+
+    def apply_faults(self, t: float) -> None:
+        """Fast mode: the faults and eclipses due at scenario time ``t`` (s), from the runner."""
+        if self.faults is not None:
+            self.faults.apply(t)
 
     def loop_stalled(self, t: float) -> bool:
         return self.faults is not None and self.faults.stalled(t)
@@ -371,17 +391,20 @@ def preflight(cfg: hc.FlatsatConfig, scen: hc.Scenario, simulated_clock: bool = 
         calib.camera(None, real_head=True)  # a real head needs the calibrated camera model
 
 
-def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, writer, calibration=None) -> Flatsat:
+def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, writer, fast: bool = False,
+          calibration=None) -> Flatsat:
     """Devices + recording taps + driver for ``cfg`` running ``scen``.
 
-    Every device runs on the host monotonic clock: the head emulator's and the firmware's
-    exposures take their real time, so a simulated flatsat runs in real time too.
+    Real time (default): every device runs on the host monotonic clock; the head emulator's
+    and the firmware's exposures take their real time. ``fast``: every device on one
+    simulated clock in lock-step (:mod:`gyrostar.hil.lockstep`), the head emulator in this
+    process behind the link's line-rate model; needs the emulated head and gyro.
     """
     from ..camera import camera_preset
-    from ..clock import MONOTONIC
+    from ..clock import MONOTONIC, SimulatedClock
     from ..transport import I2CBus, I2CRegisters
 
-    preflight(cfg, scen)
+    preflight(cfg, scen, simulated_clock=fast)
     wiring = {}
     irq = None
     preset = scen.preset or cfg.sim.preset
@@ -393,24 +416,30 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
                         f"{camera.cy_px:.2f}) px, k1 {camera.k1:.4g} — "
                         + ("from the calibration file" if calibrated else f"nominal {preset} preset"))
     base = MONOTONIC
+    lockstep = None
+    if fast:
+        from ..errors import NotAvailableError
+        from .lockstep import Lockstep
+
+        if cfg.head.kind != "emulator" or cfg.gyro.kind != "emulator":
+            raise NotAvailableError(f"--fast runs the emulated head and gyro only (this config: head.kind = "
+                                    f"'{cfg.head.kind}', gyro.kind = '{cfg.gyro.kind}'); run it in real time")
+        base = SimulatedClock(FAST_T0)
+        lockstep = Lockstep(base)
     truth = sim = gsamp = None
     e_per_dn = None
     if emulated_head(cfg) or emulated_gyro(cfg):
         # the emulated devices' world: each emulated device takes only its own part of it
-        from ..mocks.gyro_truth import gyro_params, simulate_gyro
         from ..mocks.sim_preset import load_preset
-        from ..mocks.trajectory import Rotated
 
         sim = load_preset(preset)
         sim = dataclasses.replace(sim, camera=true_camera(sim.camera, scen.truth))
-        gp = gyro_params(scen.gyro_errors or cfg.sim.gyro_errors, range_dps=0.0, odr_hz=float(cfg.gyro.odr_hz))
-        sensed = Rotated(scenario_profile(scen), true_mounting(scen.truth).T)    # camera → gyro axes
-        gsamp = simulate_gyro(sensed, scen.duration_s + 60.0, gp, seed=seed)
+        gsamp = simulated_gyro(cfg, scen, seed)
         truth = Truth(scen, gsamp, t_origin=base.now())
         if not scen.truth.nominal:
             wiring["true_devices"] = f"simulated devices off nominal: {scen.truth}"
         parts = [f"{preset} preset sky and sensor, {cfg.sim.catalog} catalog"] if emulated_head(cfg) else []
-        parts += [f"gyro errors '{gp.name}'"] if emulated_gyro(cfg) else []
+        parts += [f"gyro errors '{gsamp.params.name}'"] if emulated_gyro(cfg) else []
         wiring["sky"] = ("simulator: " + ", ".join(parts)
                          + ("" if cfg.simulated else " (emulated devices only; no truth for the run's figures)"))
         if emulated_head(cfg):
@@ -423,9 +452,11 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
     # gyro bus
     if cfg.gyro.kind == "emulator":
         from ..mocks.bmi088_model import Bmi088GyroModel
+        from ..mocks.fake_rates import StreamRates
         from ..mocks.faults import FaultyBus
 
-        model = Bmi088GyroModel(base, _SampleSource(gsamp, truth, scen.truth.gyro_time_offset_ms * 1e-3))
+        offset = scen.truth.gyro_time_offset_ms * 1e-3   # a sample stamped t measured scenario time t + offset
+        model = Bmi088GyroModel(base, StreamRates(gsamp, lambda: truth.t_origin - offset))
         model.truth_log = False    # the run's truth is the simulator's; the model's test log grows ~90 kB/s
         smbus = FaultyBus(model.smbus(cfg.gyro.i2c_address, bus_hz=None), clock=base, seed=seed)
         faults.gyro_bus = smbus
@@ -454,7 +485,7 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
                                       f"b = {np.degrees(b).round(5).tolist()} °/s")
 
     # head link
-    open_link, head_wiring, head_closers = _head_devices(cfg, scen, sim, truth, seed, faults)
+    open_link, head_wiring, head_closers = _head_devices(cfg, scen, sim, truth, seed, faults, lockstep)
     wiring["head"] = head_wiring
     closers += head_closers
     current = {}
@@ -479,12 +510,20 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
                       "windows), CoG + smeared-PSF centroids (gyrostar.core.centroid)")
     wiring["gyro_time"] = ("FIFO watermark interrupt edges (emulated INT3 line) anchor the sample times"
                            if irq is not None else "FIFO polls bound the sample times (no interrupt line wired)")
+    lat_clock = None
+    if fast:
+        # host compute time from FIFO read to outputs (simulated time stands still in a step)
+        lat_clock = taps.RecordingClock(MONOTONIC, writer, channel=lf.CH_LATENCY) if writer else MONOTONIC
+        wiring["clock"] = ("simulated clock in lock-step (gyrostar.hil.lockstep): devices, link and loop on "
+                           "one time line; the host's compute time is not simulated")
     return Flatsat(cfg, scen, camera, rec_clock, base, gyro, head, truth if cfg.simulated else None,
-                   simulated_clock=False, wiring=wiring, e_per_dn=e_per_dn, faults=faults, closers=tuple(closers),
-                   irq=irq, device_truth=truth, calibration=calib, true_camera=sim.camera if sim is not None else None)
+                   simulated_clock=fast, wiring=wiring, lat_clock=lat_clock, e_per_dn=e_per_dn, faults=faults,
+                   closers=tuple(closers), irq=irq, lockstep=lockstep, device_truth=truth, calibration=calib,
+                   true_camera=sim.camera if sim is not None else None)
 
 
 CH_IRQ = 5
+FAST_T0 = 1000.0    # s: start of the simulated clock in fast mode
 
 
 class _IrqLine:
@@ -498,28 +537,33 @@ class _IrqLine:
         return float("nan") if t is None else float(t)
 
 
-class _SampleSource:
-    """Rate source for the BMI088 register model: the simulator's gyro output at host time t.
+def _sim_head(cfg, scen, sim, truth, seed, faults, lockstep):
+    """The head emulator in this process on a device clock, behind the line-rate link model."""
+    from ..catalog import load_catalog
+    from ..clock import SimulatedClock
+    from ..mocks.head_emulator import HeadEmulator
+    from ..mocks.sky import Sky
+    from ..transport.linkrate import preset as link_preset
+    from .lockstep import SimHead
 
-    ``time_offset_s``: the sample stamped t belongs to scenario time t + offset (the
-    calibration's camera-minus-gyro time offset)."""
-
-    def __init__(self, gsamp, truth: Truth, time_offset_s: float = 0.0):
-        self.g = gsamp
-        self.truth = truth
-        self.offset = time_offset_s
-
-    def __call__(self, k, t):
-        ts = np.maximum(np.asarray(t) - self.truth.t_origin + self.offset, 0.0)
-        i = np.clip(np.round(ts * self.g.params.odr_hz).astype(np.int64) - 1, 0, len(self.g.t) - 1)
-        return self.g.omega_meas[i]
+    cat = load_catalog(cfg.sim.catalog, scen.mag_limit or cfg.sim.mag_limit)
+    dev_clock = SimulatedClock(lockstep.clock.now())
+    emu = HeadEmulator(Sky(cat, sim, seed=seed), ScenarioScene(truth, sim.detector.exposure_s), noise=True,
+                       clock=dev_clock)
+    head = SimHead(emu, dev_clock, link_preset(cfg.head.link), lockstep)
+    head.start()
+    faults.head_emulator = head
+    return (head.open_link, f"Python head emulator (mocks) in process on a simulated clock, link "
+            f"{head.preset.description}", [head.stop])
 
 
-def _head_devices(cfg, scen, sim, truth, seed, faults):
+def _head_devices(cfg, scen, sim, truth, seed, faults, lockstep=None):
     """(open_link() -> SerialLink, wiring text, closers) for the configured head."""
     from ..transport import SerialLink
 
     h = cfg.head
+    if lockstep is not None:
+        return _sim_head(cfg, scen, sim, truth, seed, faults, lockstep)
     if h.kind == "emulator":
         from .emuproc import EmulatorProcess
 
