@@ -342,6 +342,17 @@ def load_calibration(cfg: hc.FlatsatConfig, meta: dict | None = None):
     return apply.load_for_run(cfg.calibration)
 
 
+def with_hot_pixels(head, calib, camera, wiring: dict):
+    """``head`` with the calibration's hot pixels repaired in every readout (itself without any)."""
+    hot = calib.hot_pixels()
+    if not len(hot):
+        return head
+    from ..calibration.hot_pixels import HotPixelRepair
+
+    wiring["hot_pixels"] = f"{len(hot)} hot pixels of [dark] repaired in every readout (row-neighbour mean)"
+    return HotPixelRepair(head, hot, camera.width_px)
+
+
 HEAD_FAULTS = ("head-disconnect", "link-corruption")
 GYRO_FAULTS = ("gyro-nack",)
 
@@ -503,6 +514,7 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
 
     head = make_head(cfg, connect(), rec_clock, reconnect=connect, head_clock=head_clock,
                      poll_log=writer)
+    head = with_hot_pixels(head, calib, camera, wiring)
     closers.insert(0, head.close)
     closers.append(lambda: current["link"].close())
     wiring["loop"] = ("gyrostar.loop.coupled: attitude MEKF (gyrostar.core.mekf) with star-vector updates, "
@@ -720,6 +732,7 @@ def replay_loop(meta: dict, records, sinks):
     gyro = calib.gyro(make_gyro(cfg, regs, clock))
     head = make_head(cfg, link, clock, reconnect=None, head_clock=head_clock, replay_polls=polls,
                      replay_reconnects=reconnects)
+    head = with_hot_pixels(head, calib, camera, {})
     loop = make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock, e_per_dn, irq, camera_sigma(cfg, scen, calib))
 
     def run_all():

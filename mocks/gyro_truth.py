@@ -90,6 +90,13 @@ GYRO_PARAMS = {
     # BMI088 datasheet class: zero-rate offset +-1 deg/s (max ~ 3 sigma), noise density
     # 0.014 deg/s/rtHz, bias instability ~2 deg/h, sensitivity tolerance +-1 % (~3 sigma),
     # cross-axis sensitivity +-1 % (~3 mrad sigma); RRW not given (assumed 3e-5 deg/s/rts).
+    # BMI088 scale-factor and cross-axis errors as above, its zero-rate offset already removed by a
+    # static calibration (gyrostar calibrate gyro-static) down to paper 000's drift of 0.02 deg/s:
+    # what camera/gyro calibration on a flatsat starts from (scenario miscal)
+    "bmi088_offset_removed": GyroErrorParams("bmi088_offset_removed", bias_dps=(0.02, -0.02, 0.02),
+                                             bias_instability_dph=2.0, bias_tau_s=100.0, rrw_dps_per_rts=3e-5,
+                                             noise_density_dps_rthz=0.014, scale_factor_sigma_ppm=3300.0,
+                                             misalignment_sigma_mrad=3.3, range_dps=2000.0),
     "bmi088": GyroErrorParams("bmi088", bias_sigma_dps=0.33, bias_instability_dph=2.0, bias_tau_s=100.0,
                               rrw_dps_per_rts=3e-5, noise_density_dps_rthz=0.014, scale_factor_sigma_ppm=3300.0,
                               misalignment_sigma_mrad=3.3, range_dps=2000.0),

@@ -83,3 +83,47 @@ def test_real_head_without_camera_table_names_the_key(tmp_path):
         apply.load_for_run(path).camera(None, real_head=True)
     with pytest.raises(ConfigError, match="does not exist"):
         apply.load_for_run(tmp_path / "nope.toml")
+
+
+def test_hot_pixels_repaired_in_window_readouts_and_frames():
+    from types import SimpleNamespace
+
+    from gyrostar.calibration.hot_pixels import HotPixelRepair, repair_frame
+
+    spans = np.array([[0, 10, 4, 9], [0, 11, 4, 9], [1, 30, 0, 3]], np.int32)
+    vals = np.array([10, 11, 900, 13, 14,      # row 10, cols 4..8: col 6 hot
+                     20, 21, 22, 23, 800,      # row 11: col 8 hot (span edge: one neighbour)
+                     700, 31, 32], np.uint16)  # row 30, cols 0..2: col 0 hot
+    hot = np.array([[6, 10], [8, 11], [0, 30], [500, 500]])
+
+    class Port:
+        step_gate = None
+
+        def __init__(self):
+            self.res = None
+
+        def submit_windows(self, s):
+            self.res = SimpleNamespace(kind="windows", values=vals.copy(), error=None)
+
+        def submit_frame(self, post=None):
+            self.res = SimpleNamespace(kind="frame", measured=post(frame))
+
+        def poll(self):
+            return self.res
+
+    port = Port()
+    head = HotPixelRepair(port, hot, 1024)
+    head.step_gate = "gate"                       # attributes the runner sets reach the port
+    assert port.step_gate == "gate"
+    head.submit_windows(spans)
+    got = head.poll().values
+    expect = vals.copy()
+    expect[2] = (11 + 13) // 2
+    expect[9] = 23
+    expect[10] = 31
+    assert np.array_equal(got, expect) and head.repaired == 3
+    frame = np.full((600, 1024), 50, np.uint16)
+    frame[500, 500] = 4000
+    head.submit_frame(lambda img: img[500, 500])
+    assert head.poll().measured == 50
+    assert repair_frame(frame, np.array([500]), np.array([500]))[500, 500] == 50

@@ -1,0 +1,101 @@
+"""The dark calibration's hot-pixel map applied to every readout the loop gets.
+
+:class:`HotPixelRepair` wraps the loop's head port: each windows readout (pixels in span
+order, spans as submitted) and each full frame (before the job's ``post``, i.e. before
+lost-in-space detection) has its hot pixels replaced by the mean of their non-hot
+neighbours on the same row (one numba call per readout). A hot pixel inside a star's window
+would otherwise pull its centroid by up to its excess signal / the star's flux.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def repair_spans(spans, values, keys, width):
+    """Replace, in place, the values of hot pixels (sorted ``keys`` = row·width + column)
+    inside ``spans`` [id, row, c0, c1) by the mean of their non-hot row neighbours in the span.
+    Returns the number of pixels repaired."""
+    k = 0
+    fixed = 0
+    for i in range(spans.shape[0]):
+        row, c0, c1 = spans[i, 1], spans[i, 2], spans[i, 3]
+        lo = np.searchsorted(keys, row * width + c0)
+        hi = np.searchsorted(keys, row * width + c1)
+        for j in range(lo, hi):
+            c = keys[j] - row * width
+            p = k + (c - c0)
+            s = 0.0
+            n = 0
+            for d in (-1, 1):
+                cc = c + d
+                if c0 <= cc < c1:
+                    kk = row * width + cc
+                    m = np.searchsorted(keys, kk)
+                    if m >= keys.shape[0] or keys[m] != kk:
+                        s += values[p + d]
+                        n += 1
+            if n:
+                values[p] = s / n
+                fixed += 1
+        k += c1 - c0
+    return fixed
+
+
+def repair_frame(image: np.ndarray, cols: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """A copy of the full frame with the hot pixels replaced by their row neighbours' mean."""
+    h, w = image.shape
+    out = np.array(image, dtype=np.float64 if image.dtype.kind == "f" else image.dtype, copy=True)
+    left = np.clip(cols - 1, 0, w - 1)
+    right = np.clip(cols + 1, 0, w - 1)
+    out[rows, cols] = (image[rows, left].astype(np.float64) + image[rows, right]) / 2.0
+    return out
+
+
+class HotPixelRepair:
+    """The loop's head port with the hot pixels ``hot`` ((n, 2) [column, row]) repaired."""
+
+    _own = ("head", "width", "keys", "cols", "rows", "pending", "repaired")
+
+    def __init__(self, head, hot: np.ndarray, width: int):
+        hot = np.asarray(hot, np.int64).reshape(-1, 2)
+        object.__setattr__(self, "head", head)
+        object.__setattr__(self, "width", int(width))
+        object.__setattr__(self, "keys", np.unique(hot[:, 1] * int(width) + hot[:, 0]))
+        object.__setattr__(self, "cols", hot[:, 0])
+        object.__setattr__(self, "rows", hot[:, 1])
+        object.__setattr__(self, "pending", deque())
+        object.__setattr__(self, "repaired", 0)
+
+    def submit_windows(self, spans):
+        self.pending.append(np.ascontiguousarray(spans, np.int32))
+        return self.head.submit_windows(spans)
+
+    def submit_frame(self, post=None):
+        if post is None:
+            return self.head.submit_frame(None)
+        return self.head.submit_frame(lambda image: post(repair_frame(image, self.cols, self.rows)))
+
+    def poll(self):
+        res = self.head.poll()
+        if res is not None and res.kind == "windows" and self.pending:
+            spans = self.pending.popleft()
+            if res.error is None and res.values is not None:
+                vals = np.array(res.values, dtype=np.float64)
+                n = repair_spans(spans, vals, self.keys, self.width)
+                object.__setattr__(self, "repaired", self.repaired + int(n))
+                res.values = vals.astype(np.asarray(res.values).dtype) if n else res.values
+        return res
+
+    def __getattr__(self, name):
+        return getattr(self.head, name)
+
+    def __setattr__(self, name, value):
+        if name in self._own:
+            object.__setattr__(self, name, value)
+        else:
+            setattr(self.head, name, value)
