@@ -12,7 +12,7 @@ PYTEST_ARGS ?=
 RUN_ARGS ?= --realtime   # SCHED_FIFO for the loop thread when permitted (else it says why and runs normally)
 SECONDS  ?= 60
 
-.PHONY: run test setup lint xtce fw-host fw-test fw-arm fw-fuzz fuzz soak bench clean help
+.PHONY: run test setup lint xtce config-doc fw-host fw-test fw-arm fw-fuzz fuzz soak bench clean help
 
 help:
 	@echo "make run    - set up and run the coupled loop on the built-in simulated flatsat"
@@ -70,6 +70,9 @@ lint: setup
 
 xtce: setup
 	$(PY) -m gyrostar.telemetry.xtce docs/telemetry.xtce.xml
+
+config-doc: setup
+	$(PY) -m gyrostar.hil.config_doc docs/CONFIG.md
 
 bench: setup fw-host
 	$(GYROSTAR) bench

@@ -143,7 +143,9 @@ class HeadPort:
         if exposure_s:
             self.exposure_s = exposure_s
         link = _GatedLink(self.link, self) if self.step_gate is not None else self.link
-        self.client = HeadClient(link, timeout=1.0, retries=self.retries)   # set-up: be patient
+        # the client starts its sequence numbers at random; a replay takes the logged one
+        first = self.link.next_sent_seq() if hasattr(self.link, "next_sent_seq") else None
+        self.client = HeadClient(link, timeout=1.0, retries=self.retries, first_seq=first)   # set-up: be patient
         self.info = self.client.get_info()
         self.client.set_exposure(int(round(self.exposure_s * 1e6)))
         self.client.sync(8)

@@ -164,6 +164,19 @@ class ReplayLink:
                                    f"{lf.KIND_NAMES.get(rec.kind, rec.kind)} at t={rec.t_ns} ns")
         return rec
 
+    def next_sent_seq(self) -> int | None:
+        """Sequence number of the next frame the log says the driver sent (None: not a TX
+        next, or not decodable): a new head client starts its sequence there on replay."""
+        from ..protocol.errors import FrameError
+        from ..protocol.framing import decode_frame
+
+        if not self._q or self._q[0].kind != lf.TX:
+            return None
+        try:
+            return decode_frame(self._q[0].payload[_RX.size:].split(b"\x00")[0]).seq
+        except FrameError:
+            return None
+
     def send(self, data) -> float:
         data = bytes(data)
         rec = self._next(lf.TX, f"send of {len(data)} bytes")

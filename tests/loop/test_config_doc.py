@@ -1,0 +1,17 @@
+"""docs/CONFIG.md is generated from the config schema and kept current; every key is in it."""
+
+import dataclasses
+
+from gyrostar.hil import config as hc
+from gyrostar.hil.config_doc import render
+
+
+def test_config_reference_is_current_and_complete(repo):
+    text = render()
+    assert (repo / "docs" / "CONFIG.md").read_text() == text, "run make config-doc"
+    for cls, prefix in ((hc.HeadConfig, "head."), (hc.GyroConfig, "gyro."), (hc.OutputsConfig, "outputs."),
+                        (hc.LoopConfig, "loop."), (hc.TrueDevices, "truth.")):
+        for f in dataclasses.fields(cls):
+            row = next((ln for ln in text.splitlines() if ln.startswith(f"| `{prefix}{f.name}`")), None)
+            assert row is not None, f"{prefix}{f.name}"
+            assert not row.endswith("|  |"), f"{prefix}{f.name} has no meaning"
