@@ -74,9 +74,14 @@ class HeadTap:
         return getattr(self.head, name)
 
 
-def measure(spans: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """(n, 3) [window_id, u, v] of every window with a spot (thresholded CoG)."""
-    from ..core.centroid import cog, window_background, window_spans_of
+def measure(spans: np.ndarray, values: np.ndarray, omega=None, camera=None, exposure_s: float = 0.0,
+            psf_sigma_px: float = 0.85, e_per_dn: float = 5.0) -> np.ndarray:
+    """(n, 3) [window_id, u, v] of every window with a spot: thresholded CoG, refined by the
+    fit of the PSF smeared along the spot's path over the exposure (from the body rate
+    ``omega`` rad/s, camera axes) when given — a CoG is pulled towards the window's centre
+    when the window clips the spot, and the windows were placed through the run's camera
+    model, the very model being calibrated."""
+    from ..core.centroid import cog, smear_fit, window_background, window_spans_of
 
     rows = []
     for wid in np.unique(spans[:, 0]):
@@ -88,9 +93,27 @@ def measure(spans: np.ndarray, values: np.ndarray) -> np.ndarray:
         wv = np.ascontiguousarray(values[v0:v0 + npx], np.float64)
         bg, noise = window_background(wv, 3.0)
         u, v, flux, npix = cog(sp, wv, bg, bg + THRESH_SIGMA * noise)
-        if npix >= 3 and np.isfinite(u):
-            rows.append((wid, u, v))
+        if npix < 3 or not np.isfinite(u):
+            continue
+        if omega is not None and camera is not None:
+            off = smear_offsets(u, v, omega, camera, exposure_s)
+            fu, fv, _, _, _, _ = smear_fit(sp, wv, bg, u, v, off, psf_sigma_px, noise * noise, e_per_dn, 20, 1e-4)
+            if not (np.isfinite(fu) and np.isfinite(fv) and abs(fu - u) < 2.0 and abs(fv - v) < 2.0):
+                continue                   # a spot the model does not describe: not a calibration point
+            u, v = fu, fv
+        rows.append((wid, u, v))
     return np.array(rows, float).reshape(-1, 3)
+
+
+def smear_offsets(u: float, v: float, omega: np.ndarray, camera, exposure_s: float) -> np.ndarray:
+    """The spot's path over the exposure relative to its mean (m, 2) px, ≤ 0.4 px apart:
+    image-plane velocity ``V_x = ω_z·y − ω_y·f``, ``V_y = −ω_z·x + ω_x·f`` (ARCHITECTURE, frames)."""
+    f = camera.focal_length_px
+    x, y = u - camera.cx_px, v - camera.cy_px
+    vel = np.array([omega[2] * y - omega[1] * f, -omega[2] * x + omega[0] * f])
+    m = max(2, int(np.ceil(np.hypot(*vel) * exposure_s / 0.4)) + 1)
+    t = (np.arange(m) + 0.5) / m - 0.5
+    return np.ascontiguousarray(t[:, None] * exposure_s * vel[None, :])
 
 
 def identify(uv: np.ndarray, rec) -> np.ndarray:
@@ -136,8 +159,13 @@ def export_calib(path: str | Path, out: str | Path) -> dict:
     cat = load_catalog(cfg.sim.catalog, max(cfg.loop.mag_limit, cfg.sim.mag_limit))
     pos = {int(i): k for k, i in enumerate(cat.ids)}
     fields, uvs, refs, sids, t_cam = [], [], [], [], []
+    t_g = np.concatenate(gtap.t) if gtap.t else np.zeros(0)
+    rate = np.concatenate(gtap.rate) if gtap.rate else np.zeros((0, 3))
+    exposure_s = cfg.head.exposure_ms * 1e-3
     for t_mid, spans, values in htap.frames:
-        spots = measure(spans, values)
+        # the loop's bias-corrected body rate over the exposure (camera axes)
+        omega = np.array([np.interp(t_mid, t_out, outputs["omega"][:, k]) for k in range(3)]) if len(t_out) else None
+        spots = measure(spans, values, omega, loop.camera, exposure_s, loop.p.psf_sigma_px, loop.p.e_per_dn)
         if not len(spots) or not len(t_out):
             continue
         k = int(np.clip(np.searchsorted(t_out, t_mid), 1, len(t_out) - 1))
@@ -161,8 +189,6 @@ def export_calib(path: str | Path, out: str | Path) -> dict:
     ref = np.array(refs, float).reshape(-1, 3)
     t_cam = np.array(t_cam, float)
     ok, q_cam = field_attitudes(field, uv, ref, loop.camera, len(t_cam))
-    t_g = np.concatenate(gtap.t) if gtap.t else np.zeros(0)
-    rate = np.concatenate(gtap.rate) if gtap.rate else np.zeros((0, 3))
     np.savez_compressed(out, t=t_g, rate=rate, field=field, uv=uv, ref=ref, star_id=np.array(sids, np.int64),
                         t_cam=t_cam, q_cam=q_cam, camera=loop.camera.as_array(),
                         meta=np.array(json.dumps({"log": str(path), "scenario": meta.get("scenario", {}).get("name"),

@@ -99,7 +99,8 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
     log.warning("calibration: %s", calib.describe())
     from ..telemetry import timescale
 
-    timemap = timescale.capture()
+    # fast mode: the simulated clock's start (flatsat.FAST_T0) is mapped to this instant
+    timemap = timescale.from_pair(flatsat.FAST_T0, time.time()) if fast else timescale.capture()
     writer = lf.LogWriter(folder / "flatsat.gslog", background=True) if record else None
     if fast and (realtime or probe is not None):
         raise ConfigError("--fast runs on a simulated clock: it cannot be combined with --realtime or a probe")
