@@ -17,7 +17,6 @@ from ..errors import DeviceError
 
 def _child(conn, make, parent_pid):
     emu, truth = make()
-    saved = None
     while True:
         try:
             # the forked child holds the parent's end of the pipe too, so a killed parent
@@ -34,8 +33,7 @@ def _child(conn, make, parent_pid):
                 reply = emu.start()
             elif cmd == "disconnect":
                 emu.disconnect()
-                if emu._thread is not None:
-                    emu._thread.join(timeout=1.0)
+                emu.wait_stopped(1.0)
                 reply = None
             elif cmd == "faults":
                 from ..mocks.faults import ByteFaults
@@ -51,12 +49,7 @@ def _child(conn, make, parent_pid):
                 f = emu.faults
                 reply = None if f is None else {"writes": f.writes, "mangled": f.mangled} | dict(f.injected)
             elif cmd == "eclipse":
-                sky = emu._sky_for(emu.exposure_us)
-                if arg:
-                    saved = sky.electrons.copy()
-                    sky.electrons[:] = 0.0
-                elif saved is not None:
-                    sky.electrons[:] = saved
+                emu.eclipse(bool(arg))
                 reply = None
             elif cmd == "origin":
                 truth.restart(arg)

@@ -587,10 +587,7 @@ def _head_devices(cfg, scen, sim, truth, seed, faults, lockstep=None):
 
             cat = load_catalog(cfg.sim.catalog, scen.mag_limit or cfg.sim.mag_limit)
             emu = HeadEmulator(Sky(cat, sim, seed=seed), ScenarioScene(truth, sim.detector.exposure_s), noise=True)
-            # render once up front (numba load, fixed-pattern noise)
-            warm = emu._sky_for(emu.exposure_us)
-            warm.render_frame(truth.q0, np.zeros(3), frame=0)
-            warm.render_windows(np.array([[0, 10, 10, 16]], np.int32), truth.q0, np.zeros(3), frame=0)
+            emu.warm_up(truth.q0)        # render once up front (numba load, fixed-pattern noise)
             return emu, truth
 
         emu = EmulatorProcess(make)

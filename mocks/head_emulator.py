@@ -584,10 +584,23 @@ class HeadEmulator:
                     pass
         self.master = self.slave = None
 
+    def wait_stopped(self, timeout: float = 1.0) -> None:
+        """Wait (up to ``timeout`` s) for the serving thread to end after :meth:`disconnect`."""
+        if self._thread is not None:
+            self._thread.join(timeout=timeout)
+
     def stop(self) -> None:
         self.disconnect()
-        if self._thread is not None:
-            self._thread.join(timeout=1.0)
+        self.wait_stopped()
+
+    def warm_up(self, q0) -> None:
+        """Render once at the current exposure (numba load, fixed-pattern noise), so the first
+        CAPTURE of a run takes its normal time."""
+        import numpy as np
+
+        sky = self._sky_for(self.exposure_us)
+        sky.render_frame(q0, np.zeros(3), frame=0)
+        sky.render_windows(np.array([[0, 10, 10, 16]], np.int32), q0, np.zeros(3), frame=0)
 
     def __enter__(self):
         self.start()
