@@ -302,7 +302,8 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
         from ..mocks.sim_preset import load_preset
 
         sim = load_preset(preset)
-        gp = gyro_params(scen.gyro_errors or cfg.sim.gyro_errors, range_dps=0.0, odr_hz=float(cfg.gyro.odr_hz))
+        gp = gyro_params(scen.gyro_errors or cfg.sim.gyro_errors, range_dps=0.0, odr_hz=float(cfg.gyro.odr_hz),
+                         **scen.gyro_overrides)
         gsamp = simulate_gyro(scenario_profile(scen), scen.duration_s + 60.0, gp, seed=seed)
         truth = Truth(scen, gsamp, t_origin=base.now())
         wiring["sky"] = f"simulator: {preset} preset, {cfg.sim.catalog} catalog, gyro errors '{gp.name}'"
@@ -415,7 +416,8 @@ def _head_devices(cfg, scen, sim, truth, seed, faults):
             from ..mocks.sky import Sky
 
             cat = load_catalog(cfg.sim.catalog, scen.mag_limit or cfg.sim.mag_limit)
-            emu = HeadEmulator(Sky(cat, sim, seed=seed), ScenarioScene(truth, sim.detector.exposure_s), noise=True)
+            sky = Sky(cat, sim, seed=seed, false_spots=scen.false_spots or None)
+            emu = HeadEmulator(sky, ScenarioScene(truth, sim.detector.exposure_s), noise=True)
             # render once up front (numba load, fixed-pattern noise)
             warm = emu._sky_for(emu.exposure_us)
             warm.render_frame(truth.q0, np.zeros(3), frame=0)
@@ -433,6 +435,9 @@ def _head_devices(cfg, scen, sim, truth, seed, faults):
             return SerialLink(emu.path, baudrate=h.baudrate)
 
         return open_link, f"Python head emulator (mocks) in a child process, on pty {emu.path}", [emu.stop]
+    if scen.false_spots:
+        raise ConfigError(f"scenario '{scen.name}': false_spots are rendered by the head emulator only "
+                          f"(head.kind = 'emulator'), not by head.kind = '{h.kind}'")
     if h.kind == "firmware-host":
         from .fwhead import FirmwareHead
 
