@@ -47,7 +47,7 @@ def run(args) -> int:
     from ..cli.output import _clean, emit
     from ..errors import ConfigError
     from ..paths import runs_dir
-    from .montecarlo.campaign import Cluster, TlsFiles, run_campaign, summarize, write_table
+    from .montecarlo.campaign import Cluster, TlsFiles, summarize, write_table
     from .montecarlo.plots import write_plots
 
     if args.runs < 1:

@@ -5,7 +5,6 @@ import math
 import numpy as np
 from gyrostar.attitude import quat_from_boresight
 from gyrostar.mocks.sky import Sky
-
 from sim_helpers import IDENTITY_Q, one_star_catalog
 
 SPOT = (300.4, 611.7, 4.5)
