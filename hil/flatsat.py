@@ -229,6 +229,7 @@ class Flatsat:
     faults: object = None
     closers: tuple = ()
     irq: object = None
+    lockstep: object = None    # fast mode: the lock-step schedule (gyrostar.hil.lockstep.Lockstep)
 
     def make_loop(self, sinks):
         return make_loop(self.cfg, self.clock, self.gyro, self.head, self.camera, sinks, self.lat_clock,
@@ -241,8 +242,14 @@ class Flatsat:
         self.base_clock.sleep(dt)
 
     def start_faults(self, t0: float) -> None:
-        if self.faults is not None:
+        """Real time: the fault plan's own thread applies it; fast mode: :meth:`apply_faults`."""
+        if self.faults is not None and self.lockstep is None:
             self.faults.start(t0, self.base_clock)
+
+    def apply_faults(self, t: float) -> None:
+        """Fast mode: the faults and eclipses due at scenario time ``t`` (s), from the runner."""
+        if self.faults is not None:
+            self.faults.apply(t)
 
     def loop_stalled(self, t: float) -> bool:
         return self.faults is not None and self.faults.stalled(t)
@@ -290,14 +297,16 @@ class Flatsat:
                 log.debug("close: %s", exc)
 
 
-def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, writer) -> Flatsat:
+def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, writer, fast: bool = False) -> Flatsat:
     """Devices + recording taps + driver for ``cfg`` running ``scen``.
 
-    Every device runs on the host monotonic clock: the head emulator's and the firmware's
-    exposures take their real time, so a simulated flatsat runs in real time too.
+    Real time (default): every device runs on the host monotonic clock; the head emulator's
+    and the firmware's exposures take their real time. ``fast``: every device on one
+    simulated clock in lock-step (:mod:`gyrostar.hil.lockstep`), the head emulator in this
+    process behind the link's line-rate model; needs the emulated head and gyro.
     """
     from ..camera import camera_preset
-    from ..clock import MONOTONIC
+    from ..clock import MONOTONIC, SimulatedClock
     from ..transport import I2CBus, I2CRegisters
 
     wiring = {}
@@ -305,6 +314,16 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
     preset = scen.preset or cfg.sim.preset
     camera = camera_preset(preset)
     base = MONOTONIC
+    lockstep = None
+    if fast:
+        from ..errors import NotAvailableError
+        from .lockstep import Lockstep
+
+        if cfg.head.kind != "emulator" or cfg.gyro.kind != "emulator":
+            raise NotAvailableError(f"--fast runs the emulated head and gyro only (this config: head.kind = "
+                                    f"'{cfg.head.kind}', gyro.kind = '{cfg.gyro.kind}'); run it in real time")
+        base = SimulatedClock(FAST_T0)
+        lockstep = Lockstep(base)
     truth = sim = gsamp = None
     e_per_dn = None
     if cfg.simulated:
@@ -354,7 +373,7 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
     gyro = make_gyro(cfg, regs, rec_clock)
 
     # head link
-    open_link, head_wiring, head_closers = _head_devices(cfg, scen, sim, truth, seed, faults)
+    open_link, head_wiring, head_closers = _head_devices(cfg, scen, sim, truth, seed, faults, lockstep)
     wiring["head"] = head_wiring
     closers += head_closers
     current = {}
@@ -379,11 +398,19 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
                       "windows), CoG + smeared-PSF centroids (gyrostar.core.centroid)")
     wiring["gyro_time"] = ("FIFO watermark interrupt edges (emulated INT3 line) anchor the sample times"
                            if irq is not None else "FIFO polls bound the sample times (no interrupt line wired)")
-    return Flatsat(cfg, scen, camera, rec_clock, base, gyro, head, truth, simulated_clock=False, wiring=wiring,
-                   e_per_dn=e_per_dn, faults=faults, closers=tuple(closers), irq=irq)
+    lat_clock = None
+    if fast:
+        # host compute time from FIFO read to outputs (simulated time stands still in a step)
+        lat_clock = taps.RecordingClock(MONOTONIC, writer, channel=lf.CH_LATENCY) if writer else MONOTONIC
+        wiring["clock"] = ("simulated clock in lock-step (gyrostar.hil.lockstep): devices, link and loop on "
+                           "one time line; the host's compute time is not simulated")
+    return Flatsat(cfg, scen, camera, rec_clock, base, gyro, head, truth, simulated_clock=fast, wiring=wiring,
+                   lat_clock=lat_clock, e_per_dn=e_per_dn, faults=faults, closers=tuple(closers), irq=irq,
+                   lockstep=lockstep)
 
 
 CH_IRQ = 5
+FAST_T0 = 1000.0    # s: start of the simulated clock in fast mode
 
 
 class _IrqLine:
@@ -397,11 +424,33 @@ class _IrqLine:
         return float("nan") if t is None else float(t)
 
 
-def _head_devices(cfg, scen, sim, truth, seed, faults):
+def _sim_head(cfg, scen, sim, truth, seed, faults, lockstep):
+    """The head emulator in this process on a device clock, behind the line-rate link model."""
+    from ..catalog import load_catalog
+    from ..clock import SimulatedClock
+    from ..mocks.head_emulator import HeadEmulator
+    from ..mocks.sky import Sky
+    from ..transport.linkrate import preset as link_preset
+    from .lockstep import SimHead
+
+    cat = load_catalog(cfg.sim.catalog, scen.mag_limit or cfg.sim.mag_limit)
+    dev_clock = SimulatedClock(lockstep.clock.now())
+    emu = HeadEmulator(Sky(cat, sim, seed=seed), ScenarioScene(truth, sim.detector.exposure_s), noise=True,
+                       clock=dev_clock)
+    head = SimHead(emu, dev_clock, link_preset(cfg.head.link), lockstep)
+    head.start()
+    faults.head_emulator = head
+    return (head.open_link, f"Python head emulator (mocks) in process on a simulated clock, link "
+            f"{head.preset.description}", [head.stop])
+
+
+def _head_devices(cfg, scen, sim, truth, seed, faults, lockstep=None):
     """(open_link() -> SerialLink, wiring text, closers) for the configured head."""
     from ..transport import SerialLink
 
     h = cfg.head
+    if lockstep is not None:
+        return _sim_head(cfg, scen, sim, truth, seed, faults, lockstep)
     if h.kind == "emulator":
         from .emuproc import EmulatorProcess
 
