@@ -33,7 +33,8 @@ def _setup(tmp_path, apt_ok=True, uid="0"):
     (fakebin / "id").write_text(f'#!/bin/sh\necho {uid}\n')
     for f in fakebin.iterdir():
         f.chmod(0o755)
-    env = dict(os.environ, PATH=f"{fakebin}:{os.environ['PATH']}")
+    env = {k: v for k, v in os.environ.items() if k not in ("MAKEFLAGS", "MFLAGS", "MAKELEVEL")}  # run by make
+    env["PATH"] = f"{fakebin}:{os.environ['PATH']}"
     return shadow, log, env
 
 
@@ -73,7 +74,9 @@ def test_missing_cmocka_is_skipped_in_one_line_saying_why(tmp_path, case, why):
 def test_make_test_runs_the_python_tests_after_a_skip(tmp_path):
     """The top-level ``test`` target goes on to pytest when the C tests were skipped (a
     dry run of make shows the order; the skip exits 0, as above)."""
-    proc = subprocess.run(["make", "-n", "-C", str(REPO), "test"], capture_output=True, text=True, timeout=60)
+    env = {k: v for k, v in os.environ.items() if k not in ("MAKEFLAGS", "MFLAGS", "MAKELEVEL")}
+    proc = subprocess.run(["make", "-n", "-C", str(REPO), "test"], capture_output=True, text=True, env=env,
+                          timeout=60)
     out = proc.stdout
     assert proc.returncode == 0
     assert out.index("test-or-skip") < out.index("-m pytest")
