@@ -279,6 +279,7 @@ def _run_lockstep(fs, loop, duration: float, period: float, step_wall: list, lin
     cpu = 0.0
     shown = time.perf_counter()
     while True:
+        lk.horizon = t_next
         while True:
             w = lk.wake_time
             if w is None or w > t_next:

@@ -13,7 +13,9 @@ the replies matched by sequence number, so the link is never idle between chunks
 Window pixels default to U16 on the wire: 1.6× the bytes of PACKED10, but decoding a
 10-window reply is ~10× cheaper (``bench/bench_driver.py``), and the link has room.
 
-Times: captures report MCU microseconds; the client keeps a :class:`~.timesync.ClockSync`
+Times: every reading of the host clock goes through the injected ``clock`` (``now()`` s;
+default the monotonic clock), so a simulated or recorded clock drives timeouts and sync.
+Captures report MCU microseconds; the client keeps a :class:`~.timesync.ClockSync`
 fed by TIME_SYNC exchanges (``sync()``, and automatically every ``sync_every_s``), and
 gives each capture's exposure mid-time in host monotonic seconds.
 """
@@ -21,10 +23,10 @@ gives each capture's exposure mid-time in host monotonic seconds.
 from __future__ import annotations
 
 import dataclasses
-import time
 
 import numpy as np
 
+from ..clock import MONOTONIC
 from ..errors import DeviceError
 from ..protocol import MsgType, PixelFormat, Plane
 from ..protocol.defs import LIMITS, REPLY_FLAG
@@ -57,8 +59,9 @@ class Capture:
 
 class HeadClient:
     def __init__(self, link, timeout: float = 0.5, retries: int = 2, sync: ClockSync | None = None,
-                 sync_every_s: float = 1.0, depth: int = 4):
+                 sync_every_s: float = 1.0, depth: int = 4, clock=None):
         self.link = link
+        self.clock = MONOTONIC if clock is None else clock
         self.timeout = timeout
         self.retries = retries
         self.sync_state = sync or ClockSync()
@@ -83,7 +86,7 @@ class HeadClient:
     def _await(self, pending: dict, deadline: float):
         """Next reply matching one of ``pending`` {seq: type} before ``deadline``: (frame, t_rx) or None."""
         while True:
-            left = deadline - time.monotonic()
+            left = deadline - self.clock.now()
             if left <= 0:
                 return None
             got = self.link.recv(left)
@@ -110,7 +113,7 @@ class HeadClient:
             if attempt:
                 self.stats["retries"] += 1
             seq, t_send = self._send(msg_type, payload)
-            got = self._await({seq: int(msg_type)}, time.monotonic() + timeout)
+            got = self._await({seq: int(msg_type)}, self.clock.now() + timeout)
             if got is not None:
                 frame, t_rx = got
                 return decode_reply(frame, expect=msg_type), t_send, t_rx
@@ -152,16 +155,16 @@ class HeadClient:
 
     def _sync_once(self) -> None:
         seq, t1 = self._send(MsgType.TIME_SYNC, encode_request(MsgType.TIME_SYNC, host_us=0))
-        got = self._await({seq: int(MsgType.TIME_SYNC)}, time.monotonic() + self.timeout)
+        got = self._await({seq: int(MsgType.TIME_SYNC)}, self.clock.now() + self.timeout)
         if got is None:
             return  # a lost exchange is just not used
         frame, t4 = got
         f = decode_reply(frame, expect=MsgType.TIME_SYNC)
         self.sync_state.add(t1, f["mcu_rx_us"], f["mcu_tx_us"], t4)
-        self._last_sync = time.monotonic()
+        self._last_sync = self.clock.now()
 
     def maybe_sync(self, n: int = 2) -> None:
-        if time.monotonic() - self._last_sync >= self.sync_every_s:
+        if self.clock.now() - self._last_sync >= self.sync_every_s:
             self.sync(n)
 
     def capture(self, fetch: bool = True, pixel_format: int = PixelFormat.U16, dark: bool = False) -> Capture:
@@ -188,7 +191,7 @@ class HeadClient:
             seqs[self._send(msg, payload)[0]] = int(msg)
         pending = dict(seqs)
         replies = {}
-        deadline = time.monotonic() + self.timeout + self._exposure_s
+        deadline = self.clock.now() + self.timeout + self._exposure_s
         while pending:
             got = self._await(pending, deadline)
             if got is None:
@@ -267,7 +270,7 @@ class HeadClient:
                                          plane=plane)
                 seq, _ = self._send(MsgType.FULL_FRAME, payload)
                 inflight[seq] = off
-            got = self._await(dict.fromkeys(inflight, int(MsgType.FULL_FRAME)), time.monotonic() + self.timeout)
+            got = self._await(dict.fromkeys(inflight, int(MsgType.FULL_FRAME)), self.clock.now() + self.timeout)
             if got is None:  # every chunk still in flight is re-requested (bounded)
                 for off in inflight.values():
                     attempts[off] += 1

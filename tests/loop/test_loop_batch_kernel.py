@@ -1,0 +1,77 @@
+"""The 400 Hz batch kernel against the per-sample path it replaces (MEKF predict + star
+projection per sample, flags by hand)."""
+
+import math
+
+import numpy as np
+from gyrostar.core.mekf import mekf_predict
+from gyrostar.gyro.convert import FLAG_GAP, FLAG_SAT_Y, FLAG_STUCK_AXIS
+from gyrostar.loop import record as R
+from gyrostar.loop.attitude_filter import AttitudeFilter
+from gyrostar.loop.kernels import project_refs
+
+
+def test_batch_matches_per_sample_predict_and_projection():
+    rng = np.random.default_rng(3)
+    cam = np.array([6666.6, 511.5, 511.5, 0, 0, 0, 0, 0, 1024, 1024])
+    refs = rng.normal(size=(5, 3)) * 0.02 + np.array([0, 0, 1.0])
+    refs /= np.linalg.norm(refs, axis=1)[:, None]
+    ids = np.arange(100, 105, dtype=np.int32)
+    n = 7
+    t = 10.0 + np.arange(n) * 0.0025
+    t[4:] += 0.0025                                  # a late sample: its own dt
+    rate = rng.normal(size=(n, 3)) * 0.01
+    flags = np.zeros(n, np.uint8)
+    flags[2] = FLAG_GAP
+    flags[3] = FLAG_SAT_Y
+    flags[5] = FLAG_STUCK_AXIS
+
+    f = AttitudeFilter(1.7e-4, 1e-6, 0.02, 0.0025)
+    f.ts[0] = 10.0 - 0.0025
+    q, b, P = f.q.copy(), f.b.copy(), f.P.copy()
+    out = R.empty(n)
+    uv_last = np.zeros((5, 2))
+
+    class Smp:
+        pass
+    smp = Smp()
+    smp.t, smp.rate, smp.flags, smp.n = t, rate, flags, n
+    stuck = f.predict(smp, R.FLAG_OVERRUN, R.FLAG_ATTITUDE_VALID, R.MODE_TRACK, refs, ids, cam, uv_last, out)
+    assert stuck == 1
+    t_prev = 10.0 - 0.0025
+    for i in range(n):
+        mekf_predict(q, b, P, rate[i], t[i] - t_prev, 1.7e-4, 1e-6)
+        t_prev = t[i]
+        np.testing.assert_array_equal(out["q"][i], q)
+        np.testing.assert_array_equal(out["cov"][i], P)
+        np.testing.assert_array_equal(out["omega"][i], rate[i] - b)
+        uv, _ = project_refs(cam, q, refs)
+        np.testing.assert_allclose(out["centroid_px"][i][:5], uv, rtol=0, atol=1e-3)   # f4 field
+        assert list(out["star_id"][i][:5]) == list(ids) and out["n_stars"][i] == 5
+        assert out["seq"][i] == i and out["mode"][i] == R.MODE_TRACK
+    np.testing.assert_array_equal(f.q, q)
+    np.testing.assert_array_equal(uv_last, uv)
+    fl = out["flags"]
+    assert all(x & R.FLAG_ATTITUDE_VALID for x in fl)
+    assert [bool(x & R.FLAG_OVERRUN) for x in fl] == [True] + [False] * (n - 1)
+    assert [i for i in range(n) if fl[i] & R.FLAG_GYRO_GAP] == [2]
+    assert [i for i in range(n) if fl[i] & R.FLAG_GYRO_SATURATED] == [3]
+    assert [i for i in range(n) if fl[i] & R.FLAG_GYRO_STUCK] == [5]
+    # history: the attitude at a sample time is the output at that sample
+    np.testing.assert_allclose(f.q_at(t[3]), out["q"][3], atol=1e-15)
+    assert math.isclose(f.t_last, t[-1])
+
+
+def test_batch_without_stars_writes_no_centroids():
+    f = AttitudeFilter(1.7e-4, 1e-6, 0.02, 0.0025)
+    out = R.empty(2)
+
+    class Smp:
+        t = np.array([1.0, 1.0025])
+        rate = np.zeros((2, 3))
+        flags = np.zeros(2, np.uint8)
+        n = 2
+    f.predict(Smp, 0, 0, R.MODE_ACQUIRE, np.zeros((0, 3)), np.zeros(0, np.int32),
+              np.array([6666.6, 511.5, 511.5, 0, 0, 0, 0, 0, 1024, 1024]), np.zeros((0, 2)), out)
+    assert list(out["n_stars"]) == [0, 0] and (out["star_id"] == -1).all()
+    assert list(out["seq"]) == [0, 1]
