@@ -189,6 +189,7 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
         "frames": counters["frames"],
         "gyro_samples": counters["gyro_samples"],
         "samples_lost": counters["samples_lost"],
+        "host_us_per_gyro_sample": loop.host_us_per_gyro_sample(),
     }
     res_top.update({k: v for k, v in res.items() if k not in res_top})
     res_top["step_wall_p99_ms"] = float(np.percentile(step_wall, 99)) * 1e3 if step_wall else None

@@ -41,7 +41,8 @@ def predict_batch(smp_t, smp_rate, smp_flags, n, q, b, P, ts, hist_t, hist_q, ih
     (rad/s)²]. flags_first: flags only the first output carries (overrun, gyro gap);
     flags_base: flags every output carries. refs (k, 3), ids (k,): tracked stars' catalog
     vectors and ids (k = 0 when the attitude is not valid); cam: camera array. uv_last (k, 2):
-    their centroids at the last sample (px). out: OUTPUT_DTYPE records, first ``n`` written.
+    their centroids at the last sample (px). out: OUTPUT_DTYPE records, first ``n`` written
+    (every field but ``latency_us``).
     Returns the count of samples with a stuck gyro axis.
     """
     period = prm[0]
@@ -102,5 +103,9 @@ def predict_batch(smp_t, smp_rate, smp_flags, n, q, b, P, ts, hist_t, hist_q, ih
                 if i == n - 1:
                     uv_last[s, 0] = u
                     uv_last[s, 1] = v
-            r.n_stars = k
+        for s in range(k, r.star_id.shape[0]):
+            r.star_id[s] = -1
+            r.centroid_px[s, 0] = 0.0
+            r.centroid_px[s, 1] = 0.0
+        r.n_stars = k
     return stuck

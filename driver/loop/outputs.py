@@ -1,8 +1,9 @@
 """Outputs: the loop's records to its sinks (callback, recorder, UDP).
 
 The 400 Hz records are written in place by the filter's batch kernel into a preallocated
-buffer (:data:`gyrostar.loop.record.OUTPUT_DTYPE`); this stage stamps their latency (host
-time from the FIFO read to the emit, µs) and hands the batch to every sink in one call.
+buffer (:data:`gyrostar.loop.record.OUTPUT_DTYPE`; the kernel writes every field but the
+latency); this stage stamps their latency (host time from the FIFO read to the emit, µs)
+and hands the batch to every sink in one call.
 """
 
 from __future__ import annotations
@@ -15,21 +16,25 @@ class OutputStage:
         self.sinks = list(sinks)
         self.lat_clock = lat_clock
         self.buf = R.empty(capacity)
-        self._blank = R.empty(1)[0]
-        self.last = None
+        self._latency = self.buf["latency_us"]    # a field view made once (making one costs µs)
+        self._last = R.empty(1)
         self.count = 0
 
+    @property
+    def last(self):
+        """The newest record emitted (None before the first)."""
+        return self._last[0] if self.count else None
+
     def batch(self, n: int):
-        """The first ``n`` records of the buffer, cleared, for the kernel to write."""
-        out = self.buf[:n]
-        out[:] = self._blank
-        return out
+        """The first ``n`` records of the buffer, for the kernel to write."""
+        return self.buf[:n]
 
     def emit(self, out, t_read: float, t_last: float) -> None:
         """Stamp latency (from ``t_read``, the FIFO read on the latency clock) and send."""
-        out["latency_us"] = (self.lat_clock.now() - t_read) * 1e6
+        n = len(out)
+        self._latency[:n] = (self.lat_clock.now() - t_read) * 1e6
         t_ns = int(t_last * 1e9)
         for sink in self.sinks:
             sink.put(out, t_ns)
-        self.last = out[-1].copy()
-        self.count += len(out)
+        self._last[:] = out[n - 1:n]
+        self.count += n
