@@ -7,7 +7,7 @@ from numba import njit
 
 from ..attitude import quat_to_dcm
 from ..camera import project_point
-from ..core.mekf import mekf_predict
+from ..core.mekf import mekf_predict_blocks
 from ..gyro.convert import FLAG_GAP, FLAG_SATURATED, FLAG_STUCK_AXIS
 from .record import FLAG_BIAS_CONVERGED, FLAG_GYRO_GAP, FLAG_GYRO_SATURATED, FLAG_GYRO_STUCK
 
@@ -31,7 +31,7 @@ def project_refs(params, q, refs):
 def predict_batch(smp_t, smp_rate, smp_flags, n, q, b, P, ts, hist_t, hist_q, ih, prm, flags_first, flags_base,
                   mode, refs, ids, cam, uv_last, out):
     """One FIFO batch through the 400 Hz path: for every sample predict the attitude MEKF
-    (:func:`gyrostar.core.mekf.mekf_predict`), keep the attitude history, project the
+    (:func:`gyrostar.core.mekf.mekf_predict_blocks`), keep the attitude history, project the
     tracked stars and write the output record — no Python object per sample.
 
     smp_t (s), smp_rate (rad/s, body), smp_flags (gyro sample flags): the batch, first ``n``.
@@ -50,6 +50,8 @@ def predict_batch(smp_t, smp_rate, smp_flags, n, q, b, P, ts, hist_t, hist_q, ih
     k = refs.shape[0]
     stuck = 0
     w = np.empty(3)
+    E = np.empty((3, 3))
+    T = np.empty((3, 3))
     for i in range(n):
         t = smp_t[i]
         dt = period if ts[0] != ts[0] else t - ts[0]
@@ -58,7 +60,7 @@ def predict_batch(smp_t, smp_rate, smp_flags, n, q, b, P, ts, hist_t, hist_q, ih
         ts[0] = t
         for j in range(3):
             w[j] = smp_rate[i, j]
-        mekf_predict(q, b, P, w, dt, prm[1], prm[2])
+        mekf_predict_blocks(q, b, P, w, dt, prm[1], prm[2], E, T)
         h = (ih[0] + 1) % H
         ih[0] = h
         hist_t[h] = t

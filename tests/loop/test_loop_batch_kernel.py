@@ -1,5 +1,5 @@
 """The 400 Hz batch kernel against the per-sample path it replaces (MEKF predict + star
-projection per sample, flags by hand)."""
+projection per sample, flags by hand), and the block-wise predict against the 6×6 one."""
 
 import math
 
@@ -42,15 +42,15 @@ def test_batch_matches_per_sample_predict_and_projection():
     for i in range(n):
         mekf_predict(q, b, P, rate[i], t[i] - t_prev, 1.7e-4, 1e-6)
         t_prev = t[i]
-        np.testing.assert_array_equal(out["q"][i], q)
-        np.testing.assert_array_equal(out["cov"][i], P)
-        np.testing.assert_array_equal(out["omega"][i], rate[i] - b)
+        np.testing.assert_allclose(out["q"][i], q, rtol=0, atol=1e-15)
+        np.testing.assert_allclose(out["cov"][i], P, rtol=0, atol=1e-14 * abs(P).max())   # by blocks: other order
+        np.testing.assert_allclose(out["omega"][i], rate[i] - b, rtol=0, atol=1e-15)
         uv, _ = project_refs(cam, q, refs)
         np.testing.assert_allclose(out["centroid_px"][i][:5], uv, rtol=0, atol=1e-3)   # f4 field
         assert list(out["star_id"][i][:5]) == list(ids) and out["n_stars"][i] == 5
         assert out["seq"][i] == i and out["mode"][i] == R.MODE_TRACK
-    np.testing.assert_array_equal(f.q, q)
-    np.testing.assert_array_equal(uv_last, uv)
+    np.testing.assert_allclose(f.q, q, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(uv_last, uv, rtol=0, atol=1e-9)
     fl = out["flags"]
     assert all(x & R.FLAG_ATTITUDE_VALID for x in fl)
     assert [bool(x & R.FLAG_OVERRUN) for x in fl] == [True] + [False] * (n - 1)
@@ -75,3 +75,21 @@ def test_batch_without_stars_writes_no_centroids():
               np.array([6666.6, 511.5, 511.5, 0, 0, 0, 0, 0, 1024, 1024]), np.zeros((0, 2)), out)
     assert list(out["n_stars"]) == [0, 0] and (out["star_id"] == -1).all()
     assert list(out["seq"]) == [0, 1]
+
+
+def test_block_predict_matches_the_full_predict():
+    from gyrostar.core.mekf import mekf_init, mekf_predict_blocks
+
+    rng = np.random.default_rng(1)
+    for scale in (1e-9, 0.1, 1.0):          # the small-angle branch and large rotations
+        q, b, P = mekf_init(np.array([0.1, 0.2, 0.3, 0.9]), rng.normal(size=3) * 1e-3, 1e-3, 1e-2)
+        a = rng.normal(size=(6, 6)) * 1e-3
+        P += a @ a.T
+        q2, b2, P2 = q.copy(), b.copy(), P.copy()
+        E, T = np.zeros((3, 3)), np.zeros((3, 3))
+        for _ in range(50):
+            w = rng.normal(size=3) * scale
+            mekf_predict(q, b, P, w, 0.0025, 1.7e-4, 1e-6)
+            mekf_predict_blocks(q2, b2, P2, w, 0.0025, 1.7e-4, 1e-6, E, T)
+        np.testing.assert_allclose(P2, P, rtol=0, atol=1e-14 * np.abs(P).max())
+        np.testing.assert_allclose(q2, q, rtol=0, atol=1e-15)
