@@ -19,6 +19,7 @@ import numpy as np
 
 from ..attitude import quat_conj, quat_mult, quat_normalize, quat_propagate, quat_to_dcm
 from ..core.mekf import mekf_update
+from . import record as R
 from .kernels import predict_batch
 
 HIST = 2048              # gyro samples of history (5 s at 400 Hz) for delayed measurements
@@ -38,6 +39,7 @@ class AttitudeFilter:
         self.ih = np.array([HIST - 1, 0], np.int64)   # [ring head, output seq]
         self.prm = np.array([period_s, arw, sigma_bias_rw, (1e-4) ** 2])
         self.valid = False                            # q is an identified attitude
+        self.mid = np.full(R.MID_N, np.nan)           # [t_mid, q_mid, cov_mid]: the newest frame's product
 
     @property
     def omega(self) -> np.ndarray:
@@ -54,7 +56,7 @@ class AttitudeFilter:
         returns the count of stuck-axis samples."""
         return predict_batch(smp.t, smp.rate, smp.flags, smp.n, self.q, self.b, self.P, self.ts, self.hist_t,
                              self.hist_q, self.ih, self.prm, flags_first, flags_base, mode, refs, ids, cam,
-                             uv_last, out)
+                             uv_last, self.mid, out)
 
     def q_at(self, t: float) -> np.ndarray:
         """Attitude estimate at host time ``t`` (s): the newest sample at or before it,
@@ -70,12 +72,40 @@ class AttitudeFilter:
 
     def update(self, t_mid: float, b_mid, refs, sigmas, accepted) -> int:
         """Star directions measured at mid-exposure ``t_mid`` (body unit vectors (n, 3)),
-        catalog vectors (n, 3), σ (n,) rad: carried to now with the gyro-propagated attitude
-        and applied (χ² gated per star; ``accepted`` (n,) uint8 written). Returns the count used."""
-        rot = quat_to_dcm(quat_mult(self.q, quat_conj(self.q_at(t_mid))))   # body(t_mid) → body(now)
+        catalog vectors (n, 3), σ (n,) rad, applied now (χ² gated per star; ``accepted``
+        (n,) uint8 written). Returns the count used.
+
+        A delayed measurement: the state now is the state at ``t_mid`` carried by the gyro
+        (rotation R from the attitude history) plus the gyro's random walk since then,
+        Q_Δ = N² Δ I (Δ = now − t_mid), which the measurement knows nothing of. So the
+        update runs on P − Q_Δ (the prior at ``t_mid`` seen from now) with the directions
+        rotated to now, and Q_Δ is added back after it: P⁺ = Φ P⁺_mid Φᵀ + Q_Δ (exact for
+        this linear structure; adding Q_Δ to the star noise instead would ignore that the
+        same random walk is in the state).
+
+        Also sets the mid-exposure product (:attr:`mid`): the updated attitude carried back
+        to ``t_mid`` along R, with the attitude block of Φ P⁺_mid Φᵀ rotated back to the body
+        axes at ``t_mid``."""
+        rq = quat_mult(self.q, quat_conj(self.q_at(t_mid)))                # body(t_mid) → body(now)
+        rot = quat_to_dcm(rq)
         bvecs = np.ascontiguousarray(b_mid @ rot.T)
-        return int(mekf_update(self.q, self.b, self.P, bvecs, np.ascontiguousarray(refs),
-                               np.ascontiguousarray(sigmas), GATE, accepted))
+        lag = max((self.t_last if self.t_last is not None else t_mid) - t_mid, 0.0)
+        qd = self.prm[1] ** 2 * lag
+        P = self.P
+        if qd > 0 and min(P[0, 0], P[1, 1], P[2, 2]) > 2.0 * qd:       # else: no usable prior at t_mid
+            for i in range(3):
+                P[i, i] -= qd
+        else:
+            qd = 0.0
+        n = int(mekf_update(self.q, self.b, P, bvecs, np.ascontiguousarray(refs),
+                            np.ascontiguousarray(sigmas), GATE, accepted))
+        if n:
+            self.mid[0] = t_mid
+            self.mid[1:5] = quat_mult(quat_conj(rq), self.q)
+            self.mid[5:] = (rot.T @ P[:3, :3] @ rot).ravel()
+        for i in range(3):
+            P[i, i] += qd
+        return n
 
     def set_attitude(self, q_ident, t_mid: float, now: float, sigma_rad: float) -> None:
         """A lost-in-space attitude ``q_ident`` measured at ``t_mid``: carried to now along

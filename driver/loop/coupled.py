@@ -13,12 +13,13 @@ The loop composes one stage per job:
 One :meth:`CoupledLoop.step` (every gyro period, from a real-time scheduler or the
 lock-step runner of ``gyrostar run --fast``):
 
-1. read the gyro FIFO and push the batch through the filter's kernel, emit the outputs —
-   before any image work, so the sample-to-output latency is the predict cost only;
-2. image cycle through the head port (a worker thread, so the gyro path never waits for
-   an exposure): apply the previous readout's centroids (measured meanwhile on the
-   measuring thread) at their mid-exposure time, command the next exposure's windows at
-   once, hand the new readout to the measuring thread; in ACQUIRE take full frames whose
+1. apply the readout centroided on the measuring thread since the last step (at its
+   mid-exposure time, carried to now along the gyro history): the first gyro step after
+   the pixels arrived updates the filter before its samples are predicted;
+2. read the gyro FIFO and push the batch through the filter's kernel, emit the outputs;
+3. image cycle through the head port (a worker thread, so the gyro path never waits for
+   an exposure): command the next exposure's windows at once when a readout arrives and
+   hand the readout to the measuring thread; in ACQUIRE take full frames whose
    identification runs on the head worker; a lost link (:class:`gyrostar.errors.LinkLostError`,
    or ``head_timeouts_lost`` timeouts in a row) coasts and reconnects.
 
@@ -41,6 +42,7 @@ from ..head.client import HeadTimeoutError
 from . import modes
 from . import record as R
 from .attitude_filter import GATE, AttitudeFilter
+from .floor import FloorInputs
 from .image import ImagePipeline
 from .outputs import OutputStage
 from .tracks import MODEL, StarTracks
@@ -152,6 +154,7 @@ class CoupledLoop:
         self._uv = np.zeros((0, 2))
         self._tracks_version = -1
         self.gyro_path_s = 0.0         # host s in the 400 Hz path after the FIFO read (filter, outputs, sinks)
+        self.floor = FloorInputs()     # what the run's attitude floor depends on (per update)
 
     # ------------------------------------------------------------------ views
     @property
@@ -206,6 +209,9 @@ class CoupledLoop:
             self.overruns += 1
             self.flags_pending |= R.FLAG_OVERRUN
         self.t_step_prev = t_step
+        done = self.image.result()       # the readout handed over last step: apply it before this
+        if done is not None:             # step's samples, so their outputs are the first to carry it
+            self._process_windows(*done, t_step)
         n_out = self._gyro_phase()
         try:
             self._image_phase()
@@ -270,9 +276,6 @@ class CoupledLoop:
     # ------------------------------------------------------------------ images
     def _image_phase(self) -> None:
         now = self.clock.now()
-        done = self.image.result()
-        if done is not None:
-            self._process_windows(*done, now)
         res = self.head.poll()
         if res is not None and res.kind == "reconnect":
             if res.error is None:
@@ -398,6 +401,10 @@ class CoupledLoop:
             updated = self.filter.update(res.t_mid, b_mid[use], tr.ref[slots], sig[use], acc)
             self.c.updates += updated
             good = acc.astype(np.bool_)
+            if updated:
+                self.flags_pending |= R.FLAG_UPDATE_APPLIED
+                t_next = (self.filter.t_last or now) + self.filter.prm[0]   # its first output
+                self.floor.add(res.t_mid, t_next, 1.0 / float(np.sum(1.0 / sig[use][good] ** 2)), updated)
             self.c.rejected_updates += int(np.count_nonzero(~good))
             wrong = tr.score(slots, good)
             if updated >= self.p.min_stars:
@@ -436,6 +443,10 @@ class CoupledLoop:
         return {k: getattr(c, k) for k in c.__dataclass_fields__ if k != "mode_changes"} | {
             "mode_changes": list(c.mode_changes)}
 
+    def floor_summary(self) -> dict:
+        """The steady-state floor for this run's gyro ARW, star noise, star count and timing."""
+        return self.floor.summary(self.p.gyro_arw)
+
     def host_us_per_gyro_sample(self) -> float | None:
         """Host µs per gyro sample in the 400 Hz path after the FIFO read (wall clock)."""
         return self.gyro_path_s / self.c.gyro_samples * 1e6 if self.c.gyro_samples else None
@@ -471,7 +482,7 @@ def warmup() -> dict:
     calls = [
         (kernels.predict_batch, (np.zeros(4), np.zeros((4, 3)), np.zeros(4, np.uint8), 1, af.q, af.b, af.P, af.ts,
                                  af.hist_t, af.hist_q, af.ih, af.prm, 0, 0, 0, ref, ref[:, 0].astype(np.int32), cam,
-                                 np.zeros((2, 2)), R.empty(4))),
+                                 np.zeros((2, 2)), af.mid, R.empty(4))),
         (mekf_update, (q, b, P, ref, ref, np.array([1e-5, 1e-5]), GATE, np.zeros(2, np.uint8))),
         (kernels.project_refs, (cam, q, ref)),
         (quat_propagate, (q, w, 0.001)),

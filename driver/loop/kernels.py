@@ -29,7 +29,7 @@ def project_refs(params, q, refs):
 
 @njit(cache=True)
 def predict_batch(smp_t, smp_rate, smp_flags, n, q, b, P, ts, hist_t, hist_q, ih, prm, flags_first, flags_base,
-                  mode, refs, ids, cam, uv_last, out):
+                  mode, refs, ids, cam, uv_last, mid, out):
     """One FIFO batch through the 400 Hz path: for every sample predict the attitude MEKF
     (:func:`gyrostar.core.mekf.mekf_predict_blocks`), keep the attitude history, project the
     tracked stars and write the output record — no Python object per sample.
@@ -41,7 +41,8 @@ def predict_batch(smp_t, smp_rate, smp_flags, n, q, b, P, ts, hist_t, hist_q, ih
     (rad/s)²]. flags_first: flags only the first output carries (overrun, gyro gap);
     flags_base: flags every output carries. refs (k, 3), ids (k,): tracked stars' catalog
     vectors and ids (k = 0 when the attitude is not valid); cam: camera array. uv_last (k, 2):
-    their centroids at the last sample (px). out: OUTPUT_DTYPE records, first ``n`` written
+    their centroids at the last sample (px). mid (14,): the mid-exposure product
+    [t_mid, q_mid, cov_mid] copied to every record. out: OUTPUT_DTYPE records, first ``n`` written
     (every field but ``latency_us``).
     Returns the count of samples with a stuck gyro axis.
     """
@@ -110,4 +111,10 @@ def predict_batch(smp_t, smp_rate, smp_flags, n, q, b, P, ts, hist_t, hist_q, ih
             r.centroid_px[s, 0] = 0.0
             r.centroid_px[s, 1] = 0.0
         r.n_stars = k
+        r.t_mid = mid[0]
+        for j in range(4):
+            r.q_mid[j] = mid[1 + j]
+        for a in range(3):
+            for c in range(3):
+                r.cov_mid[a, c] = mid[5 + 3 * a + c]
     return stuck

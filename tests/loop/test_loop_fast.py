@@ -93,3 +93,11 @@ def test_fast_run_repeats_and_replays_exactly(tmp_path):
         np.testing.assert_array_equal(o1[key], o2[key])      # latency (host time) aside: same run
     rep = replay(r1["log"])
     assert rep["bit_exact"], rep
+    # the summary carries the floor, the mid-exposure product and the NEES
+    for key in ("floor_arcsec", "measured_over_floor", "mid_exposure_error_arcsec_1sigma", "nees_after_update",
+                "nees_before_update", "host_us_per_gyro_sample"):
+        assert r1[key] is not None, key
+    assert 0.5 < r1["measured_over_floor"] < 2.0
+    mid = o1[np.isfinite(o1["t_mid"])]
+    assert len(np.unique(mid["t_mid"])) > 30 and np.all(mid["t_mid"] < mid["t"])
+    assert np.any(o1["flags"] & 0x0800)
