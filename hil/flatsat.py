@@ -156,6 +156,7 @@ def loop_params(cfg: hc.FlatsatConfig, e_per_dn: float | None = None, scen: hc.S
 
     lc = cfg.loop
     arw = lc.gyro_arw_deg_rts * DEG
+    delay = lc.gyro_delay_ms * 1e-3
     if cfg.simulated:
         from ..mocks.gyro_truth import gyro_params
 
@@ -169,7 +170,8 @@ def loop_params(cfg: hc.FlatsatConfig, e_per_dn: float | None = None, scen: hc.S
                    max_stars=lc.max_stars, min_stars=lc.min_stars, coast_timeout_s=lc.coast_timeout_s,
                    acquire_every_s=lc.acquire_every_s, mag_limit=lc.mag_limit, confirm_images=lc.confirm_images,
                    wrong_id_rejects=lc.wrong_id_rejects, neighbour_sep_px=lc.neighbour_sep_px,
-                   reconnect_every_s=lc.reconnect_every_s, head_timeouts_lost=lc.head_timeouts_lost, gyro_arw=arw)
+                   reconnect_every_s=lc.reconnect_every_s, head_timeouts_lost=lc.head_timeouts_lost, gyro_arw=arw,
+                   gyro_delay_s=delay)
     if e_per_dn:
         p.e_per_dn = e_per_dn
     return p

@@ -8,6 +8,10 @@ samples, 5 s at 400 Hz) so an image, which arrives after its exposure, is applie
 mid-exposure time: the measured directions are carried to now along the gyro-propagated
 attitude (:meth:`update`).
 
+Gyro delay: ``delay_s`` τ, the group delay of the gyro's low-pass filter: a sample stamped
+t measured the rate at t − τ, so the filter, its history and the image updates run on
+t − τ and each output's attitude is carried on to t (:func:`~gyrostar.loop.kernels.predict_batch`).
+
 Process noise: ``arw`` is the gyro's angle random walk N (rad/√s, the IEEE coefficient:
 σ²(angle) = N² t); a one-sided rate noise density n gives N = n/√2 (white noise
 band-limited to the internal rate's Nyquist frequency).
@@ -27,7 +31,7 @@ GATE = 13.815510557964274  # χ² 2 dof, P = 0.001
 
 
 class AttitudeFilter:
-    def __init__(self, arw: float, sigma_bias_rw: float, bias_prior: float, period_s: float):
+    def __init__(self, arw: float, sigma_bias_rw: float, bias_prior: float, period_s: float, delay_s: float = 0.0):
         self.q = np.array([0.0, 0.0, 0.0, 1.0])   # ACQUIRE: gyro-relative attitude from the start
         self.b = np.zeros(3)
         self.P = np.zeros((6, 6))
@@ -37,7 +41,7 @@ class AttitudeFilter:
         self.hist_t = np.full(HIST, -np.inf)
         self.hist_q = np.zeros((HIST, 4))
         self.ih = np.array([HIST - 1, 0], np.int64)   # [ring head, output seq]
-        self.prm = np.array([period_s, arw, sigma_bias_rw, (1e-4) ** 2])
+        self.prm = np.array([period_s, arw, sigma_bias_rw, (1e-4) ** 2, delay_s])
         self.valid = False                            # q is an identified attitude
         self.mid = np.full(R.MID_N, np.nan)           # [t_mid, q_mid, cov_mid]: the newest frame's product
 
@@ -48,6 +52,7 @@ class AttitudeFilter:
 
     @property
     def t_last(self) -> float | None:
+        """Time of the filter state (s): the last sample's stamp less the gyro delay."""
         t = self.ts[0]
         return None if t != t else float(t)
 

@@ -66,6 +66,7 @@ class LoopParams:
     mag_limit: float = 6.5
     e_per_dn: float = 5.0             # detector gain, e⁻ per DN (shot noise in centroid variances)
     gyro_arw: float = 1.7277e-4       # gyro angle random walk N, rad/√s (BMI088: 0.014 °/s/√Hz one-sided / √2)
+    gyro_delay_s: float = 0.0         # group delay of the gyro's low-pass filter, s (compensated)
     sigma_bias_rw: float = 1e-6       # drift random walk, rad/s/√s
     psf_sigma_px: float = 0.85        # PSF σ of the optics (px), for the smeared-spot fit
     bias_prior: float = 0.02          # initial drift uncertainty, rad/s (≈ 1.1 °/s: BMI088 offset ±1 °/s)
@@ -132,7 +133,7 @@ class CoupledLoop:
         self.c = Counters()
         self.samples = GyroSamples(256)
         self.filter = AttitudeFilter(params.gyro_arw, params.sigma_bias_rw, params.bias_prior,
-                                     1.0 / gyro.odr_hz if gyro.odr_hz else 0.0025)
+                                     1.0 / gyro.odr_hz if gyro.odr_hz else 0.0025, params.gyro_delay_s)
         self.tracks = StarTracks(params, camera, star_index)
         self.image = ImagePipeline(params, camera, identifier)
         self.outputs = OutputStage(sinks, self.lat_clock)
@@ -268,7 +269,7 @@ class CoupledLoop:
             self.tracks.uv[self._slots] = uv
         self.c.gyro_samples += n
         self.c.gyro_saturated += int(smp.saturated)
-        self.outputs.emit(out, t_read, f.t_last)
+        self.outputs.emit(out, t_read, float(smp.t[n - 1]))
         self.c.outputs += n
         self.gyro_path_s += time.perf_counter() - w0
         return n
@@ -403,7 +404,8 @@ class CoupledLoop:
             good = acc.astype(np.bool_)
             if updated:
                 self.flags_pending |= R.FLAG_UPDATE_APPLIED
-                t_next = (self.filter.t_last or now) + self.filter.prm[0]   # its first output
+                # its first output: the next sample's stamp
+                t_next = (self.filter.t_last or now) + self.filter.prm[0] + self.p.gyro_delay_s
                 self.floor.add(res.t_mid, t_next, 1.0 / float(np.sum(1.0 / sig[use][good] ** 2)), updated)
             self.c.rejected_updates += int(np.count_nonzero(~good))
             wrong = tr.score(slots, good)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..attitude import quat_to_dcm
+from ..attitude import quat_mult, quat_normalize, quat_to_dcm, rotvec_to_quat
 from ..camera import project_point
 from ..core.mekf import mekf_predict_blocks
 from ..gyro.convert import FLAG_GAP, FLAG_SATURATED, FLAG_STUCK_AXIS
@@ -38,23 +38,28 @@ def predict_batch(smp_t, smp_rate, smp_flags, n, q, b, P, ts, hist_t, hist_q, ih
     q, b, P: filter state, in place. ts (4,): [t of the last sample (s, nan: none), ω̂ (rad/s)]
     in place. hist_t (H,), hist_q (H, 4): history ring; ih (2,) int64: [ring head, output seq]
     in place. prm: [gyro period s, σ_v rad/s/√Hz, σ_u rad/s/√s, bias-converged variance
-    (rad/s)²]. flags_first: flags only the first output carries (overrun, gyro gap);
-    flags_base: flags every output carries. refs (k, 3), ids (k,): tracked stars' catalog
-    vectors and ids (k = 0 when the attitude is not valid); cam: camera array. uv_last (k, 2):
+    (rad/s)², gyro group delay τ s]. A sample stamped t measured the rate at t − τ: the
+    filter and its history run on t − τ, and each record's attitude is carried on to t
+    with the current rate (``t`` stays the sample's stamp). flags_first: flags only the
+    first output carries (overrun, gyro gap); flags_base: flags every output carries.
+    refs (k, 3), ids (k,): tracked stars' catalog vectors and ids (k = 0 when the attitude is
+    not valid); cam: camera array. uv_last (k, 2):
     their centroids at the last sample (px). mid (14,): the mid-exposure product
     [t_mid, q_mid, cov_mid] copied to every record. out: OUTPUT_DTYPE records, first ``n`` written
     (every field but ``latency_us``).
     Returns the count of samples with a stuck gyro axis.
     """
     period = prm[0]
+    tau = prm[4]
     H = hist_t.shape[0]
     k = refs.shape[0]
     stuck = 0
     w = np.empty(3)
     E = np.empty((3, 3))
     T = np.empty((3, 3))
+    wt = np.empty(3)
     for i in range(n):
-        t = smp_t[i]
+        t = smp_t[i] - tau
         dt = period if ts[0] != ts[0] else t - ts[0]
         if not 0.0 < dt < 2.0:      # across a FIFO gap: propagate over one period (P grows with the gap flag)
             dt = period
@@ -83,13 +88,19 @@ def predict_batch(smp_t, smp_rate, smp_flags, n, q, b, P, ts, hist_t, hist_q, ih
         if max(P[3, 3], max(P[4, 4], P[5, 5])) < prm[3]:
             flags |= FLAG_BIAS_CONVERGED
         r = out[i]
-        r.t = t
+        r.t = smp_t[i]
         r.seq = ih[1]
         ih[1] += 1
         r.mode = mode
         r.flags = flags
+        if tau > 0.0:
+            for j in range(3):
+                wt[j] = ts[1 + j] * tau
+            qo = quat_normalize(quat_mult(rotvec_to_quat(wt), q))
+        else:
+            qo = q
         for j in range(4):
-            r.q[j] = q[j]
+            r.q[j] = qo[j]
         for j in range(3):
             r.omega[j] = ts[1 + j]
             r.bias[j] = b[j]
@@ -97,7 +108,7 @@ def predict_batch(smp_t, smp_rate, smp_flags, n, q, b, P, ts, hist_t, hist_q, ih
             for c in range(6):
                 r.cov[a, c] = P[a, c]
         if k > 0:
-            A = quat_to_dcm(q)
+            A = quat_to_dcm(qo)
             for s in range(k):
                 u, v, _ = project_point(cam, A @ refs[s])
                 r.star_id[s] = ids[s]

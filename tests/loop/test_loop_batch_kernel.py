@@ -4,6 +4,7 @@ projection per sample, flags by hand), and the block-wise predict against the 6�
 import math
 
 import numpy as np
+import pytest
 from gyrostar.core.mekf import mekf_predict
 from gyrostar.gyro.convert import FLAG_GAP, FLAG_SAT_Y, FLAG_STUCK_AXIS
 from gyrostar.loop import record as R
@@ -93,3 +94,23 @@ def test_block_predict_matches_the_full_predict():
             mekf_predict_blocks(q2, b2, P2, w, 0.0025, 1.7e-4, 1e-6, E, T)
         np.testing.assert_allclose(P2, P, rtol=0, atol=1e-14 * np.abs(P).max())
         np.testing.assert_allclose(q2, q, rtol=0, atol=1e-15)
+
+
+def test_gyro_delay_shifts_the_history_and_carries_outputs_on():
+    from gyrostar.attitude import quat_propagate
+
+    tau = 0.0048
+    f = AttitudeFilter(1.7e-4, 1e-6, 0.02, 0.0025, delay_s=tau)
+    out = R.empty(3)
+
+    class Smp:
+        t = np.array([1.0, 1.0025, 1.005])
+        rate = np.tile([0.01, -0.02, 0.03], (3, 1))
+        flags = np.zeros(3, np.uint8)
+        n = 3
+    f.predict(Smp, 0, 0, R.MODE_TRACK, np.zeros((0, 3)), np.zeros(0, np.int32),
+              np.array([6666.6, 511.5, 511.5, 0, 0, 0, 0, 0, 1024, 1024]), np.zeros((0, 2)), out)
+    assert list(out["t"]) == list(Smp.t)                       # stamps unchanged
+    assert f.t_last == pytest.approx(1.005 - tau)              # the filter runs on t − τ
+    np.testing.assert_allclose(out["q"][2], quat_propagate(f.q, f.omega, tau), atol=1e-12)
+    np.testing.assert_allclose(f.q_at(1.005 - tau), f.q, atol=1e-15)
