@@ -71,12 +71,13 @@ class Truth:
     Scenario time is host time minus ``t_origin`` (the run's start on the host clock).
     """
 
-    def __init__(self, scen: hc.Scenario, gyro_samples, t_origin: float = 0.0):
+    def __init__(self, scen: hc.Scenario, gyro_stream, t_origin: float = 0.0):
+        """``gyro_stream``: the run's simulated gyro (:class:`gyrostar.mocks.gyro_truth.GyroStream`)."""
         from ..attitude import quat_from_boresight
 
         self.profile = scenario_profile(scen)
         self.q0 = np.asarray(quat_from_boresight(scen.ra_deg * DEG, scen.dec_deg * DEG, scen.roll_deg * DEG))
-        self.gyro = gyro_samples
+        self.gyro = gyro_stream
         self.t_origin = t_origin
         self._cache: dict = {}
         self._lock = threading.Lock()
@@ -121,8 +122,7 @@ class Truth:
         out["q"][order] = q
         out["omega"] = self.profile.rate(ts)
         g = self.gyro
-        k = np.clip(np.round(ts * g.params.odr_hz).astype(np.int64) - 1, 0, len(g.t) - 1)
-        out["bias"] = g.bias[k]
+        out["bias"] = g.bias(np.maximum(np.round(ts * g.odr_hz).astype(np.int64) - 1, 0))
         return out
 
     def at(self, t: float):
@@ -132,6 +132,16 @@ class Truth:
         row["t"] = t
         row["q"] = self.q_at(t, "status")
         return row
+
+
+def simulated_gyro(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int):
+    """The simulated gyro's output for a run of any length: the scenario's rate profile (held
+    at its last rate after the scenario ends) through the configured error model, ideal
+    sampling (the register model quantises at the range the driver sets)."""
+    from ..mocks.gyro_truth import GyroStream, gyro_params
+
+    gp = gyro_params(scen.gyro_errors or cfg.sim.gyro_errors, range_dps=0.0, odr_hz=float(cfg.gyro.odr_hz))
+    return GyroStream(scenario_profile(scen), gp, seed=seed)
 
 
 class ScenarioScene:
@@ -333,14 +343,13 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
     truth = sim = gsamp = None
     e_per_dn = None
     if cfg.simulated:
-        from ..mocks.gyro_truth import gyro_params, simulate_gyro
         from ..mocks.sim_preset import load_preset
 
         sim = load_preset(preset)
-        gp = gyro_params(scen.gyro_errors or cfg.sim.gyro_errors, range_dps=0.0, odr_hz=float(cfg.gyro.odr_hz))
-        gsamp = simulate_gyro(scenario_profile(scen), scen.duration_s + 60.0, gp, seed=seed)
+        gsamp = simulated_gyro(cfg, scen, seed)
         truth = Truth(scen, gsamp, t_origin=base.now())
-        wiring["sky"] = f"simulator: {preset} preset, {cfg.sim.catalog} catalog, gyro errors '{gp.name}'"
+        wiring["sky"] = (f"simulator: {preset} preset, {cfg.sim.catalog} catalog, "
+                         f"gyro errors '{gsamp.params.name}'")
         e_per_dn = sim.detector.gain_e_per_adu
     rec_clock = taps.RecordingClock(base, writer) if writer else base
     head_clock = taps.RecordingClock(base, writer, channel=CH_HEAD_CLOCK) if writer else base
@@ -350,11 +359,12 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
     # gyro bus
     if cfg.gyro.kind == "emulator":
         from ..mocks.bmi088_model import Bmi088GyroModel
+        from ..mocks.fake_rates import StreamRates
         from ..mocks.faults import FaultyBus
 
         if cfg.gyro.model != "bmi088":
             raise ConfigError("the gyro emulator models the BMI088 (gyro.model = 'bmi088')")
-        model = Bmi088GyroModel(base, _SampleSource(gsamp, truth))
+        model = Bmi088GyroModel(base, StreamRates(gsamp, lambda: truth.t_origin))
         model.truth_log = False    # the run's truth is the simulator's; the model's test log grows ~90 kB/s
         smbus = FaultyBus(model.smbus(cfg.gyro.i2c_address, bus_hz=None), clock=base, seed=seed)
         faults.gyro_bus = smbus
@@ -428,19 +438,6 @@ class _IrqLine:
     def now(self) -> float:
         t = self.model.watermark_time()
         return float("nan") if t is None else float(t)
-
-
-class _SampleSource:
-    """Rate source for the BMI088 register model: the simulator's gyro output at host time t."""
-
-    def __init__(self, gsamp, truth: Truth):
-        self.g = gsamp
-        self.truth = truth
-
-    def __call__(self, k, t):
-        ts = np.maximum(np.asarray(t) - self.truth.t_origin, 0.0)
-        i = np.clip(np.round(ts * self.g.params.odr_hz).astype(np.int64) - 1, 0, len(self.g.t) - 1)
-        return self.g.omega_meas[i]
 
 
 def _sim_head(cfg, scen, sim, truth, seed, faults, lockstep):

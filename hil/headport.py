@@ -110,7 +110,11 @@ class HeadPort:
         if exposure_s:
             self.exposure_s = exposure_s
         link = _GatedLink(self.link, self) if self.step_gate is not None else self.link
-        self.client = HeadClient(link, timeout=1.0, retries=self.retries, clock=self.head_clock)   # set-up: patient
+        # first sequence number from the (recorded) clock, not a random draw: a new client
+        # still differs from the last one, and a replay sends the same bytes
+        first = (int(self.head_clock.now() * 1e6) & 0xFFFF) or 1
+        self.client = HeadClient(link, timeout=1.0, retries=self.retries, clock=self.head_clock,   # set-up: patient
+                                 first_seq=first)
         self.info = self.client.get_info()
         self.client.set_exposure(int(round(self.exposure_s * 1e6)))
         self.client.sync(8)
