@@ -36,6 +36,9 @@ class HeadConfig:
     retries: int = 2
     exposure_ms: float = 10.0
     gain: int = 1
+    # line-rate model of the link (gyrostar.transport.linkrate) for simulated links: a 100 Hz
+    # head moves 0.3-0.5 MB/s, within USB full speed (0.9 MB/s), beyond a 921.6 kBd UART
+    link: Literal["uart-921k", "uart-3m", "usb-fs"] = "usb-fs"
 
     def validate(self):
         if self.kind == "serial" and not self.url:
