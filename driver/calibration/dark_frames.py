@@ -152,15 +152,19 @@ def load_frames(path: Path) -> list[DarkStack]:
         files = sorted(path.glob("*.fits")) + sorted(path.glob("*.fit"))
         if not files:
             raise ConfigError(f"no FITS frames in {path}")
+        import warnings
+
         for f in files:
             try:
-                with fits.open(f) as hdul:
-                    head, data = hdul[0].header, hdul[0].data
-                    if "EXPTIME" not in head:
-                        raise ConfigError(f"INPUT {path}: {f.name} has no EXPTIME header")
-                    if data is None or np.asarray(data).ndim != 2:
-                        raise ConfigError(f"INPUT {path}: {f.name} holds no 2-D image in its primary HDU")
-                    groups.setdefault(float(head["EXPTIME"]), []).append(np.array(data))
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")     # a corrupt file is reported below, in one line
+                    with fits.open(f) as hdul:
+                        head, data = hdul[0].header, hdul[0].data
+                        if "EXPTIME" not in head:
+                            raise ConfigError(f"INPUT {path}: {f.name} has no EXPTIME header")
+                        if data is None or np.asarray(data).ndim != 2:
+                            raise ConfigError(f"INPUT {path}: {f.name} holds no 2-D image in its primary HDU")
+                        groups.setdefault(float(head["EXPTIME"]), []).append(np.array(data))
             except ConfigError:
                 raise
             except (OSError, ValueError, TypeError, IndexError) as exc:

@@ -51,9 +51,10 @@ def read_npz(path, needed: set[str] | tuple[str, ...], what: str = "INPUT") -> d
     if path.is_dir():
         raise ConfigError(f"{what} {path} is a folder, not an .npz file")
     try:
-        with np.load(path, allow_pickle=False) as z:
-            if not hasattr(z, "files"):
-                raise ConfigError(f"{what} {path} is a single .npy array, not an .npz archive of named arrays")
+        loaded = np.load(path, allow_pickle=False)
+        if not hasattr(loaded, "files"):
+            raise ConfigError(f"{what} {path} is a single .npy array, not an .npz archive of named arrays")
+        with loaded as z:
             arrays = {k: z[k] for k in z.files}
     except ConfigError:
         raise

@@ -75,6 +75,7 @@ class TrialConfig:
 
 
 def configure(parser) -> None:
+    from ..cli.argtypes import positive_float
     from ..cli.main import add_json
 
     d = TrialConfig()
@@ -121,6 +122,8 @@ def configure(parser) -> None:
     parser.add_argument("--seed", type=int, default=1, help="random seed (default %(default)s)")
     parser.add_argument("--scheduler", default=None, help="address of an existing Dask scheduler, e.g. tcp://host:8786 "
                              "(default: a LocalCluster on this machine)")
+    parser.add_argument("--scheduler-timeout", type=positive_float, default=5.0, metavar="S",
+                        help="seconds to wait for --scheduler to answer (default %(default)s)")
     parser.add_argument("--workers", type=int, default=2, help="LocalCluster worker processes (default %(default)s)")
     parser.add_argument("--sweep", choices=SWEEPS + ("all",), default=None,
                         help="reproduce a figure of paper 001 (trials per point = --trials; default: none)")
@@ -411,7 +414,7 @@ def summarize(chunks: list[dict]) -> dict:
 class Runner:
     """Submits trial chunks to a Dask cluster (local unless an address is given)."""
 
-    def __init__(self, scheduler: str | None, workers: int):
+    def __init__(self, scheduler: str | None, workers: int, connect_timeout_s: float = 5.0):
         try:
             from dask.distributed import Client, LocalCluster
         except ImportError as exc:
@@ -423,7 +426,13 @@ class Runner:
             logging.getLogger(name).setLevel(logging.ERROR)
         self.cluster = None
         if scheduler:
-            self.client = Client(scheduler)
+            try:
+                self.client = Client(scheduler, timeout=connect_timeout_s)
+            except (OSError, TimeoutError, ValueError) as exc:
+                from ..errors import DeviceError
+
+                raise DeviceError(f"--scheduler {scheduler}: no Dask scheduler answered within "
+                                  f"{connect_timeout_s:g} s ({type(exc).__name__})") from exc
         else:
             self.cluster = LocalCluster(n_workers=max(1, workers), threads_per_worker=1, processes=True,
                                         dashboard_address=None, silence_logs=logging.ERROR)
@@ -463,7 +472,7 @@ def run(args) -> int:
     cfg = config_from_args(args)
     if args.trials < 1:
         raise ConfigError(f"--trials must be ≥ 1, got {args.trials}")
-    runner = Runner(args.scheduler, args.workers)
+    runner = Runner(args.scheduler, args.workers, args.scheduler_timeout)
     try:
         if args.sweep:
             from .figures import run_sweeps
