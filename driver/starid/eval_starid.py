@@ -39,6 +39,7 @@ HELP = "star identification Monte Carlo (paper 001 Figs 10–16): pyramid, grid,
 METHODS = ("pyramid", "grid", "extended-grid", "extended-triangle")
 SWEEPS = ("fig10", "fig11", "fig12", "fig13", "fig14", "fig15", "fig16")
 DPH = math.pi / 180.0 / 3600.0
+FAST_PER_FIELD = 10  # navigation stars per field of Pyramid's first (thinned) tier
 
 
 @dataclasses.dataclass(frozen=True)
@@ -164,8 +165,11 @@ def setup(cfg: TrialConfig) -> dict:
     out = {"camera": cam, "sky": sky}
     if cfg.method == "pyramid":
         per_field = cfg.per_field if cfg.per_field >= 0 else (12 if cfg.catalog == "gaia" else 0)
-        index = load_index(cfg.catalog, cfg.mag_limit, round(diag + 0.01, 3), per_field)
-        out["ident"] = Pyramid(index, cam, sigma_px=sigma)
+        sep = round(diag + 0.01, 3)
+        index = load_index(cfg.catalog, cfg.mag_limit, sep, per_field)
+        # thinned first tier (the brightest stars per field) unless the index is thinned already
+        fast = load_index(cfg.catalog, cfg.mag_limit, sep, FAST_PER_FIELD) if per_field == 0 else None
+        out["ident"] = Pyramid(index, cam, sigma_px=sigma, fast_index=fast)
         if cfg.peer:
             out["peer"] = _cedar() if cfg.catalog == "hip2" else "the peer's ids are HIP numbers: hip2 runs only"
             if not isinstance(out["peer"], str) and not 10.0 <= cam.fov_x_deg <= 30.0:
