@@ -46,9 +46,10 @@ from .result import StarIdResult, to_body_vectors
 from .star_check import StarCheck
 from .verify import verify_matches
 
-ST_OK, ST_TOO_FEW, ST_NO_MATCH, ST_REJECTED, ST_STAR_CHECK = 0, 1, 2, 3, 4
+ST_OK, ST_TOO_FEW, ST_NO_MATCH, ST_REJECTED, ST_STAR_CHECK, ST_SPARSE = 0, 1, 2, 3, 4, 5
 STATUS_TEXT = {ST_OK: "ok", ST_TOO_FEW: "fewer than 3 stars", ST_NO_MATCH: "no unique pyramid",
-               ST_REJECTED: "rejected by verification", ST_STAR_CHECK: "fewer than 3 stars pass the per-star check"}
+               ST_REJECTED: "rejected by verification", ST_STAR_CHECK: "fewer than 3 stars pass the per-star check",
+               ST_SPARSE: "every spot fits one pyramid but too few stars for p_false_max"}
 _MAX_CAND = 256
 
 
@@ -244,9 +245,11 @@ def _triangle_candidates(b, i, j, k, vec, pt, pa, pb, kv, km, kq, eps, mark, nxt
 
 @njit(cache=True)
 def _search(b, vec, vmag, is_nav, pt, pa, pb, kv, km, kq, vstart, vstars, vvec, vh, vg, eps, label_tol, max_sep,
-            fov_radius, p_false_max, max_triangles, mark, nnav, max_spots, budgets, tried, status):
+            fov_radius, p_false_max, max_triangles, mark, nnav, nloc, nmin, lab_nloc, max_spots, budgets, tried,
+            status):
     """Pyramid search over one navigation-star tier (pair table ``pt/pa/pb`` with its k-vector,
-    ``is_nav``/``nnav`` its stars; only the brightest ``max_spots`` spots form pyramids);
+    ``is_nav``/``nnav`` its stars, ``nloc`` their local density as an all-sky count and ``nmin``
+    its least value; only the brightest ``max_spots`` spots form pyramids);
     ``tried``/``status`` carry over from earlier tiers.
     Returns ``(match (n,), q (4,), p_false, status, triangles_tried)``."""
     n = b.shape[0]
@@ -254,7 +257,8 @@ def _search(b, vec, vmag, is_nav, pt, pa, pb, kv, km, kq, vstart, vstars, vvec, 
     match = -np.ones(n, dtype=np.int64)
     q = np.array([0.0, 0.0, 0.0, 1.0])
     cand = np.empty((_MAX_CAND, 3), dtype=np.int64)
-    lab = nstar * label_tol * label_tol / 4.0  # chance of a random label (any indexed star)
+    last_sig = -1
+    lab_min = nstar * label_tol * label_tol / 4.0 * nmin / nnav  # least chance of a random label
     nxt = np.empty(256, dtype=np.int32)
     oth = np.empty(256, dtype=np.int32)
     prev = 0
@@ -278,13 +282,15 @@ def _search(b, vec, vmag, is_nav, pt, pa, pb, kv, km, kq, vstart, vstars, vvec, 
                             or tij < 2.0 * eps or tik < 2.0 * eps or tjk < 2.0 * eps):
                         continue
                     sin_k = max(_sin_vertex(b[k], b[i], b[j]), 0.05)
-                    e3v = (nnav * eps) ** 3 * np.sin(tij) / (np.pi * sin_k)
-                    # early rejection: even with the best-placed confirming star and every other
-                    # spot labelled, this triangle's pyramid could not pass the bound
+                    # E₃ with the local density ρ (an all-sky count) for the stars around x
+                    g3 = nnav * eps ** 3 * np.sin(tij) / (np.pi * sin_k)
+                    # early rejection: even in the sparsest sky, with the best-placed confirming star
+                    # and every other spot labelled, this triangle's pyramid could not pass the bound
                     if n == 3:
-                        best = e3v * (tried + 1)
+                        best = g3 * nmin * nmin * (tried + 1)
                     else:
-                        best = e3v * nnav * eps * eps / np.pi * (lab ** (n - 4) if lab < 1.0 else 1.0) * (tried + 1)
+                        best = (g3 * nmin ** 3 * eps * eps / np.pi * (lab_min ** (n - 4) if lab_min < 1.0 else 1.0)
+                                * (tried + 1))
                     if best > p_false_max:
                         continue
                     tried += 1
@@ -293,6 +299,8 @@ def _search(b, vec, vmag, is_nav, pt, pa, pb, kv, km, kq, vstart, vstars, vvec, 
                     if nc == 0 or nc > _MAX_CAND:
                         continue
                     if n == 3:
+                        rho = max(nloc[cand[0, 0]], nloc[cand[0, 1]], nloc[cand[0, 2]])
+                        e3v = g3 * rho * rho
                         if nc == 1 and e3v * tried <= p_false_max:
                             match[0] = cand[0, 0]
                             match[1] = cand[0, 1]
@@ -319,10 +327,12 @@ def _search(b, vec, vmag, is_nav, pt, pa, pb, kv, km, kq, vstart, vstars, vvec, 
                     if nconf != 1:
                         continue
                     sin_r = max(_sin_vertex(b[br], b[i], b[j]), 0.05)
-                    pf = e3v * nnav * eps * eps / (np.pi * sin_r) * tried
                     x = cand[best, 0]
                     y = cand[best, 1]
                     z = cand[best, 2]
+                    rho = max(nloc[x], nloc[y], nloc[z], nloc[bw])
+                    pf = g3 * rho ** 3 * eps * eps / (np.pi * sin_r) * tried
+                    lab = lab_nloc[x] * label_tol * label_tol / 4.0  # chance of a random label near x
                     # attitude from the pyramid, then label every spot
                     bb = np.empty((4, 3))
                     rr = np.empty((4, 3))
@@ -350,6 +360,14 @@ def _search(b, vec, vmag, is_nav, pt, pa, pb, kv, km, kq, vstart, vstars, vvec, 
                     if pf > p_false_max:
                         status = ST_REJECTED
                         match[:] = -1
+                        # the same labelling from a second pyramid (or every spot labelled) and still
+                        # the bound is not met: the field has too few stars for the confidence asked
+                        sig = 0
+                        for t in range(n):
+                            sig = sig * 1000003 + out[t] + 1
+                        if nok == n or sig == last_sig:
+                            return match, q, np.inf, ST_SPARSE, tried
+                        last_sig = sig
                         continue
                     return out, q, pf, ST_OK, tried
         prev = nb
@@ -357,19 +375,22 @@ def _search(b, vec, vmag, is_nav, pt, pa, pb, kv, km, kq, vstart, vstars, vvec, 
 
 
 @njit(cache=True)
-def pyramid_core(b, vec, vmag, tiers, vstart, vstars, vvec, vh, vg, eps, label_tol, max_sep, fov_radius, p_false_max,
-                 max_triangles, mark, budgets):
+def pyramid_core(b, vec, vmag, tiers, lab_nloc, vstart, vstars, vvec, vh, vg, eps, label_tol, max_sep, fov_radius,
+                 p_false_max, max_triangles, mark, budgets):
     """Numba core. ``b`` (n,3) body unit vectors, brightest first; ``mark`` int32 (N,) zeros (work, left zeroed).
 
     ``tiers``: tuple of navigation-star tiers, searched in order, each
-    ``(is_nav, pair_theta, pair_a, pair_b, kv, (kv_m, kv_q, n_nav, max_spots))`` over the same
-    star numbering (a thinned tier of the brightest stars per field, on the brightest few
+    ``(is_nav, pair_theta, pair_a, pair_b, kv, nloc, (kv_m, kv_q, n_nav, max_spots, nloc_min))``
+    over the same star numbering (a thinned tier of the brightest stars per field, on the brightest few
     spots, first; then all stars on all spots).
     Adaptive spot budget: triangles and confirming stars come from the brightest
     ``budgets[0]`` spots first; when no pyramid is accepted there, from the brightest
     ``budgets[1]`` (only triangles with a new spot), and so on, then from all. Labelling and
-    the false-match count use every spot. ``n_nav`` is the N of the triangle/pyramid
-    probabilities of that tier (candidates come only from its stars); ``max_triangles``
+    the false-match count use every spot. The false-match count takes the star density
+    around the candidate: ``nloc`` (per star) is the tier's navigation stars within the pair
+    radius scaled to an all-sky count (N where the sky is average; ``n_nav`` anchors,
+    ``nloc`` for the stars found near them), ``lab_nloc`` the same for every indexed star
+    (the labels); ``max_triangles``
     bounds the triangles tried over all tiers. The accepted ``p_false`` is the pyramid's
     expected false-match count times the number of triangles tried so far (a union bound
     over the search), and must be ≤ ``p_false_max``.
@@ -381,11 +402,12 @@ def pyramid_core(b, vec, vmag, tiers, vstart, vstars, vvec, vh, vg, eps, label_t
     tried = 0
     status = ST_NO_MATCH
     for tier in tiers:
-        is_nav, pt, pa, pb, kv, kmq = tier
+        is_nav, pt, pa, pb, kv, nloc, kmq = tier
         match, q, pf, status, tried = _search(b, vec, vmag, is_nav, pt, pa, pb, kv, kmq[0], kmq[1], vstart, vstars,
                                               vvec, vh, vg, eps, label_tol, max_sep, fov_radius, p_false_max,
-                                              max_triangles, mark, kmq[2], int(kmq[3]), budgets, tried, status)
-        if status == ST_OK or tried >= max_triangles:
+                                              max_triangles, mark, kmq[2], nloc, kmq[4], lab_nloc, int(kmq[3]),
+                                              budgets, tried, status)
+        if status == ST_OK or status == ST_SPARSE or tried >= max_triangles:
             return match, q, pf, status, tried
     return match, q, np.inf, status, tried
 
@@ -396,6 +418,8 @@ def label_rest(b, q, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, tol, m
 
     A label is given only when it is unambiguous both ways: exactly one catalog star within
     ``tol`` of the observed star, and no other observed star within ``tol`` of that one.
+    Then every label, the caller's included, moves to the observed star nearest its catalog
+    star (or is dropped when that one is named already).
     """
     a = quat_to_dcm(q)
     bore = a[2].copy()  # boresight in ICRS = A^T e_z
@@ -431,6 +455,30 @@ def label_rest(b, q, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, tol, m
         if hits == 1 and count_obs[bt] == 1 and not used[bt]:
             match[i] = near[bt]
             used[bt] = True
+    # every label (the caller's too) belongs to the spot nearest its star: a spurious spot
+    # close to a star must not keep the star's name while the star's own spot goes unnamed
+    for i in range(n):
+        s = match[i]
+        if s < 0:
+            continue
+        best = i
+        bd = obs_icrs[i, 0] * vec[s, 0] + obs_icrs[i, 1] * vec[s, 1] + obs_icrs[i, 2] * vec[s, 2]
+        for j in range(n):
+            d = obs_icrs[j, 0] * vec[s, 0] + obs_icrs[j, 1] * vec[s, 1] + obs_icrs[j, 2] * vec[s, 2]
+            if d > bd:
+                bd = d
+                best = j
+        if best != i:
+            match[i] = -1
+            if match[best] < 0 and bd >= cos_tol:
+                match[best] = s
+
+
+def local_density(index: StarIndex) -> np.ndarray:
+    """Per star: the navigation stars within the pair radius around it, scaled to an all-sky
+    count (the N a uniform sky of that density would have; at least one star per cap)."""
+    frac = (1.0 - math.cos(index.max_sep)) / 2.0
+    return np.maximum(np.diff(index.nb_start), 1).astype(np.float64) / frac
 
 
 @dataclasses.dataclass
@@ -485,9 +533,13 @@ class Pyramid:
                                                 and np.array_equal(self.fast_index.ids, self.index.ids)):
             raise ConfigError("pyramid fast_index must index the same stars as index (same catalog and limit)")
         caps = [float(self.fast_spots)] * (len(tiers) - 1) + [1e9]
-        self._tiers = tuple((t.is_nav, t.pair_theta, t.pair_a, t.pair_b, t.kv,
-                             (float(t.kv_m), float(t.kv_q), float(np.count_nonzero(t.is_nav)), cap))
-                            for t, cap in zip(tiers, caps))
+        dens = [local_density(t) for t in tiers]
+        self._tiers = tuple((t.is_nav, t.pair_theta, t.pair_a, t.pair_b, t.kv, d,
+                             (float(t.kv_m), float(t.kv_q), float(np.count_nonzero(t.is_nav)), cap,
+                              float(d[t.is_nav].min())))
+                            for t, cap, d in zip(tiers, caps, dens))
+        # every indexed star (labels): the full tier's navigation density scaled to all stars
+        self._lab_nloc = dens[-1] * (len(self.index) / np.count_nonzero(self.index.is_nav))
         if self.check is None:
             self.check = StarCheck(self.sigma_px, self.camera.focal_length_px, mag_limit=self.index.mag_limit,
                                    min_stars=3)
@@ -497,7 +549,7 @@ class Pyramid:
         ix = self.index
         b = np.ascontiguousarray(b, dtype=np.float64)
         full, q, pf, st, tried = pyramid_core(
-            b, ix.vectors, ix.vmag, self._tiers, ix.vox_start, ix.vox_stars, ix.vox_vec, ix.vox_h, ix.vox_g, self.eps,
+            b, ix.vectors, ix.vmag, self._tiers, self._lab_nloc, ix.vox_start, ix.vox_stars, ix.vox_vec, ix.vox_h, ix.vox_g, self.eps,
             self.label_tol, ix.max_sep, self.fov_radius, self.p_false_max, self.max_triangles, self._mark,
             self._budgets)
         if st == ST_OK:
