@@ -289,8 +289,8 @@ def _search(b, vec, vmag, is_nav, pt, pa, pb, kv, km, kq, vstart, vstars, vvec, 
                     if n == 3:
                         best = g3 * nmin * nmin * (tried + 1)
                     else:
-                        best = (g3 * nmin ** 3 * eps * eps / np.pi * (lab_min ** (n - 4) if lab_min < 1.0 else 1.0)
-                                * (tried + 1))
+                        best = (g3 * nmin ** 3 * eps * eps / np.pi * (nb - 3) * (lab_min ** (n - 4) if lab_min < 1.0
+                                                                                   else 1.0) * (tried + 1))
                     if best > p_false_max:
                         continue
                     tried += 1
@@ -331,7 +331,8 @@ def _search(b, vec, vmag, is_nav, pt, pa, pb, kv, km, kq, vstart, vstars, vvec, 
                     y = cand[best, 1]
                     z = cand[best, 2]
                     rho = max(nloc[x], nloc[y], nloc[z], nloc[bw])
-                    pf = g3 * rho ** 3 * eps * eps / (np.pi * sin_r) * tried
+                    # any of the nb − 3 other spots could have confirmed a false candidate
+                    pf = g3 * rho ** 3 * eps * eps / (np.pi * sin_r) * (nb - 3) * tried
                     lab = lab_nloc[x] * label_tol * label_tol / 4.0  # chance of a random label near x
                     # attitude from the pyramid, then label every spot
                     bb = np.empty((4, 3))
@@ -360,12 +361,13 @@ def _search(b, vec, vmag, is_nav, pt, pa, pb, kv, km, kq, vstart, vstars, vvec, 
                     if pf > p_false_max:
                         status = ST_REJECTED
                         match[:] = -1
-                        # the same labelling from a second pyramid (or every spot labelled) and still
-                        # the bound is not met: the field has too few stars for the confidence asked
+                        # every spot labelled, or the same labelling of most spots from a second
+                        # pyramid, and still the bound is not met: the field has too few stars for
+                        # the confidence asked (speed only: stopping never outputs anything)
                         sig = 0
                         for t in range(n):
                             sig = sig * 1000003 + out[t] + 1
-                        if nok == n or sig == last_sig:
+                        if nok == n or (sig == last_sig and 4 * nok >= 3 * n):
                             return match, q, np.inf, ST_SPARSE, tried
                         last_sig = sig
                         continue
@@ -418,8 +420,9 @@ def label_rest(b, q, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, tol, m
 
     A label is given only when it is unambiguous both ways: exactly one catalog star within
     ``tol`` of the observed star, and no other observed star within ``tol`` of that one.
-    Then every label, the caller's included, moves to the observed star nearest its catalog
-    star (or is dropped when that one is named already).
+    Then every label, the caller's included, is dropped when two observed stars lie within
+    ``tol`` of its catalog star, and moves to the observed star nearest its catalog star
+    (or is dropped when that one is named already).
     """
     a = quat_to_dcm(q)
     bore = a[2].copy()  # boresight in ICRS = A^T e_z
@@ -463,12 +466,17 @@ def label_rest(b, q, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, tol, m
             continue
         best = i
         bd = obs_icrs[i, 0] * vec[s, 0] + obs_icrs[i, 1] * vec[s, 1] + obs_icrs[i, 2] * vec[s, 2]
+        within = 0
         for j in range(n):
             d = obs_icrs[j, 0] * vec[s, 0] + obs_icrs[j, 1] * vec[s, 1] + obs_icrs[j, 2] * vec[s, 2]
+            if d >= cos_tol:
+                within += 1
             if d > bd:
                 bd = d
                 best = j
-        if best != i:
+        if within >= 2:
+            match[i] = -1  # two spots at the star: either could be it
+        elif best != i:
             match[i] = -1
             if match[best] < 0 and bd >= cos_tol:
                 match[best] = s
