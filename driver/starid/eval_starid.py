@@ -40,7 +40,6 @@ import time
 import numpy as np
 
 from ..errors import ConfigError, NotAvailableError
-
 from .peers import PEERS
 
 HELP = "star identification Monte Carlo (paper 001 Figs 10–16): pyramid, grid, extended grid/triangle"

@@ -6,27 +6,37 @@ analytic expected number of false matches is below ``p_false_max`` and the QUEST
 residuals of every identified star are within ``label_tol``.
 
 1. Triangles (i, j, k) of the observed stars in Mortari's smart order (index gaps
-   dj, dk grow slowly, so a spurious star spoils few consecutive triangles).
+   dj, dk grow slowly, so a spurious star spoils few consecutive triangles), first among
+   the brightest 8 spots, then 12, 16, 24 and all (adaptive spot budget; a wider budget
+   tries only the triangles with a new spot). With a thinned first tier (``fast_index``:
+   the brightest few navigation stars per field) the brightest spots are tried against
+   it before the full index.
 2. Each side θ looks up the catalog pairs within θ ± ε with the k-vector; candidate
    catalog triangles (x, y, z) need all three sides and the same handedness
    (mirror test: sign of b_i·(b_j×b_k) = sign of r_x·(r_y×r_z)).
 3. A fourth observed star r confirms a candidate when exactly one catalog star w has
-   all three angles to x, y, z within ε; a triangle is accepted when exactly one of its
-   candidates is confirmed.
-4. QUEST on the pyramid, then every other centroid is labelled with the nearest catalog
-   star within ``label_tol`` of its predicted direction; QUEST again over all and the
-   residual test of :mod:`gyrostar.starid.verify`.
+   all three angles to x, y, z within ε (w is looked up in the voxel grid around r's
+   direction predicted by the candidate's triad); a triangle is accepted when exactly
+   one of its candidates is confirmed.
+4. QUEST on the pyramid, then every other centroid (all of them, whatever the budget) is
+   labelled with the nearest catalog star within ``label_tol`` of its predicted direction;
+   QUEST again over all and the residual test of :mod:`gyrostar.starid.verify`.
 5. The per-star check (:class:`gyrostar.starid.star_check.StarCheck`, swappable): each
    label's own χ² (position, and magnitude when given) after QUEST; failures are
    unlabelled, the attitude re-solved over the rest, and fewer than three reject.
 
-Expected false matches for a uniform sky of N navigation stars and tolerance ε (rad):
-a triangle with side θ_ij and angle φ_k at vertex k:  E₃ = N³ ε³ sin θ_ij / (π sin φ_k)
-(N choices of x, N ε sin θ_ij stars in the band around x, N ε²/(π sin φ_k) stars in the
-intersection of the two other bands on the mirror-correct side); the confirming star
-multiplies by N ε²/(π sin φ_r); every further labelled star by N δ²/4 (δ = label_tol, a
-random star inside the cone; N there counts every indexed star, not only navigation
-stars). ``p_false`` reported is that product.
+Expected false matches for a sky of N navigation stars and tolerance ε (rad): a triangle
+with side θ_ij and angle φ_k at vertex k:  E₃ = N ρ² ε³ sin θ_ij / (π sin φ_k)
+(N choices of x, ρ ε sin θ_ij stars in the band around x, ρ ε²/(π sin φ_k) stars in the
+intersection of the two other bands on the mirror-correct side), where ρ is the star
+density around the candidate written as an all-sky count (N for an average sky; the
+galactic plane is up to 2–3 N, and a false match is most likely there); the confirming
+star multiplies by ρ ε²/(π sin φ_r) and by the n − 3 spots that could have confirmed;
+every further labelled star by ρ' δ²/4 (δ = label_tol, a random spot landing on a star;
+ρ' counts every indexed star, not only navigation stars). ``p_false`` reported is that
+product times the number of triangles tried (a union bound over the search); the search
+stops when no triangle could still pass even in the sparsest sky with every spot labelled.
+A 3-star field is accepted on a unique triangle when E₃ allows it.
 """
 
 from __future__ import annotations
@@ -557,14 +567,19 @@ class Pyramid:
         ix = self.index
         b = np.ascontiguousarray(b, dtype=np.float64)
         full, q, pf, st, tried = pyramid_core(
-            b, ix.vectors, ix.vmag, self._tiers, self._lab_nloc, ix.vox_start, ix.vox_stars, ix.vox_vec, ix.vox_h, ix.vox_g, self.eps,
-            self.label_tol, ix.max_sep, self.fov_radius, self.p_false_max, self.max_triangles, self._mark,
-            self._budgets)
+            b, ix.vectors, ix.vmag, self._tiers, self._lab_nloc, ix.vox_start, ix.vox_stars, ix.vox_vec, ix.vox_h,
+            ix.vox_g, self.eps, self.label_tol, ix.max_sep, self.fov_radius, self.p_false_max, self.max_triangles,
+            self._mark, self._budgets)
+        text = STATUS_TEXT[int(st)]
         if st == ST_OK:
             q, full, n_ok = self.check.apply(b, mag, ix.vectors, ix.vmag, full)
             if n_ok == 0:
                 st = ST_STAR_CHECK
-        return StarIdResult.make(ix, full, q, st == ST_OK, STATUS_TEXT[int(st)], pf, "pyramid")
+                text = STATUS_TEXT[ST_STAR_CHECK]
+            elif n_ok <= 4:
+                # a sparse field, accepted because the bound allowed it at p_false_max
+                text = f"ok: sparse field, {n_ok} stars (p_false {pf:.1e})"
+        return StarIdResult.make(ix, full, q, st == ST_OK, text, pf, "pyramid")
 
     def identify(self, uv: np.ndarray, mag=None) -> StarIdResult:
         """Identify centroids ``uv`` (n, 2) [col, row] px, brightest first; ``mag`` (n,)

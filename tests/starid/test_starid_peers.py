@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 import pytest
-from gyrostar.attitude import quat_from_boresight, quat_to_dcm, random_attitudes, rotvec_to_quat, quat_mult
+from gyrostar.attitude import quat_from_boresight, quat_mult, quat_to_dcm, random_attitudes, rotvec_to_quat
 from gyrostar.catalog import load_catalog
 from gyrostar.starid.peers import attitude_correct, load_peer
 from gyrostar.starid.synth import Sky, camera_for_fov
