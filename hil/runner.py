@@ -134,7 +134,7 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
         writer.flush()          # on disk before anything can fail: a failed run's log still says what it was
     try:
         return _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer, on_output, probe,
-                        fast)
+                        fast, keep_arrays)
     except BaseException as exc:
         if writer:
             try:
@@ -148,7 +148,8 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
             writer.close()
 
 
-def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer, on_output, probe, fast) -> dict:
+def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer, on_output, probe, fast,
+             keep_arrays=False) -> dict:
     """The body of :func:`run_flatsat` once its log holds the META record."""
     import sys
 
