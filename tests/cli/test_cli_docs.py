@@ -22,3 +22,4 @@ def test_flatsat_callback_example(tmp_path, monkeypatch, capsys):
     assert (folder / "summary.json").exists()
     assert summary["gyro_samples"] > 0 and abs(float((last["q"] ** 2).sum()) - 1.0) < 1e-9
     assert "frames; last output at" in capsys.readouterr().out
+
