@@ -127,10 +127,30 @@ class LoopConfig:
     coast_timeout_s: float = 5.0       # COAST longer than this → ACQUIRE (full frame)
     acquire_every_s: float = 0.5       # full-frame attempt period while ACQUIRE
     mag_limit: float = 6.5             # stars predicted into the field brighter than this are tracked
+    confirm_images: int = 20           # ACQUIRE: images that may fail to confirm an identification
+    wrong_id_rejects: int = 5          # filter-gate rejections in a row that drop a star
+    neighbour_sep_px: float = 12.0     # skip a catalog star closer than this (px, per axis) to a tracked one
+    reconnect_every_s: float = 0.25    # s between reconnection attempts while the head is away
+    head_timeouts_lost: int = 3        # head jobs in a row without an answer that mean the link is lost
+    # gyro angle random walk N (IEEE, deg/sqrt(s)) for the filter's process noise; a simulated
+    # flatsat uses its gyro model's (one-sided noise density / sqrt(2)); 0.0099 = BMI088 class
+    gyro_arw_deg_rts: float = 0.0099
+    # group delay of the gyro's low-pass filter (ms) for the loop to compensate (0: off). The
+    # xing2012/bmi088 models' is 4.78 ms, but carrying each output over it with the latest
+    # (noisy) rate sample costs more than the delay (fast demo: 4.44 -> 4.83 arcsec): off
+    gyro_delay_ms: float = 0.0
 
     def validate(self):
         from ..loop.record import MAX_STARS
 
+        for key in ("confirm_images", "wrong_id_rejects", "head_timeouts_lost"):
+            if getattr(self, key) < 1:
+                raise ValueError(f"loop.{key} must be at least 1")
+        if not 0.0 <= self.gyro_delay_ms < 100.0:
+            raise ValueError("loop.gyro_delay_ms must be in [0, 100)")
+        for key in ("neighbour_sep_px", "reconnect_every_s", "gyro_arw_deg_rts"):
+            if not getattr(self, key) > 0:
+                raise ValueError(f"loop.{key} must be positive")
         if self.frame_hz <= 0:
             raise ValueError(f"loop.frame_hz = {self.frame_hz} must be > 0 (images per second)")
         for key in ("coast_timeout_s", "acquire_every_s"):

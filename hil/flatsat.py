@@ -159,13 +159,29 @@ class ScenarioScene:
 
 
 # ---------------------------------------------------------------------------- driver
-def loop_params(cfg: hc.FlatsatConfig, e_per_dn: float | None = None):
+def loop_params(cfg: hc.FlatsatConfig, e_per_dn: float | None = None, scen: hc.Scenario | None = None):
+    """The loop's parameters from the config; a simulated flatsat's detector gain and gyro
+    angle random walk come from its simulator models (what a calibration would measure)."""
     from ..loop.coupled import LoopParams
 
     lc = cfg.loop
+    arw = lc.gyro_arw_deg_rts * DEG
+    delay = lc.gyro_delay_ms * 1e-3
+    if cfg.simulated:
+        from ..mocks.gyro_truth import gyro_params
+
+        gp = gyro_params((scen.gyro_errors if scen is not None else "") or cfg.sim.gyro_errors)
+        # white rate noise of one-sided density n → angle random walk N = n/√2; the per-sample
+        # white term (°/h per sample at the ODR) adds σ²/ODR to N²
+        n2 = (gp.noise_density_dps_rthz * DEG) ** 2 / 2.0 + (gp.white_sigma_dph * DEG / 3600.0) ** 2 / gp.odr_hz
+        if n2 > 0:
+            arw = math.sqrt(n2)
     p = LoopParams(frame_hz=lc.frame_hz, exposure_s=cfg.head.exposure_ms * 1e-3, window_k=lc.window_k,
                    max_stars=lc.max_stars, min_stars=lc.min_stars, coast_timeout_s=lc.coast_timeout_s,
-                   acquire_every_s=lc.acquire_every_s, mag_limit=lc.mag_limit)
+                   acquire_every_s=lc.acquire_every_s, mag_limit=lc.mag_limit, confirm_images=lc.confirm_images,
+                   wrong_id_rejects=lc.wrong_id_rejects, neighbour_sep_px=lc.neighbour_sep_px,
+                   reconnect_every_s=lc.reconnect_every_s, head_timeouts_lost=lc.head_timeouts_lost, gyro_arw=arw,
+                   gyro_delay_s=delay)
     if e_per_dn:
         p.e_per_dn = e_per_dn
     return p
@@ -201,14 +217,14 @@ def star_index(cfg: hc.FlatsatConfig, camera):
     return load_index(cfg.sim.catalog, cfg.loop.mag_limit, max_sep_deg=math.ceil(diag * 10 + 1) / 10)
 
 
-def make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock=None, e_per_dn=None, irq=None):
+def make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock=None, e_per_dn=None, irq=None, scen=None):
     from ..loop.coupled import CoupledLoop
     from ..starid.pyramid import Pyramid
 
     idx = star_index(cfg, camera)
     ident = Pyramid(idx, camera)
-    return CoupledLoop(loop_params(cfg, e_per_dn), clock, gyro, head, camera, idx, ident, sinks, lat_clock=lat_clock,
-                       irq=irq)
+    return CoupledLoop(loop_params(cfg, e_per_dn, scen), clock, gyro, head, camera, idx, ident, sinks,
+                       lat_clock=lat_clock, irq=irq)
 
 
 # ---------------------------------------------------------------------------- flatsat
@@ -233,7 +249,7 @@ class Flatsat:
 
     def make_loop(self, sinks):
         return make_loop(self.cfg, self.clock, self.gyro, self.head, self.camera, sinks, self.lat_clock,
-                         self.e_per_dn, self.irq)
+                         self.e_per_dn, self.irq, self.scen)
 
     def clock_now(self) -> float:
         return self.base_clock.now()
@@ -605,7 +621,7 @@ def replay_loop(meta: dict, records, sinks):
     gyro = make_gyro(cfg, regs, clock)
     head = make_head(cfg, link, clock, reconnect=None, head_clock=head_clock, replay_polls=polls,
                      replay_reconnects=reconnects)
-    loop = make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock, e_per_dn, irq)
+    loop = make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock, e_per_dn, irq, scen)
 
     def run_all():
         steps = 0

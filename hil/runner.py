@@ -240,12 +240,25 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
     if writer and truth is not None:
         writer.append(lf.TRUTH, truth.tobytes(), t_ns=0)
     res = summarize(out, truth, loop.gyro.odr_hz)
+    floor = loop.floor_summary()
+    if truth is not None and len(out):
+        from .analysis import mid_exposure_errors, nees_at_updates
+
+        res.update(nees_at_updates(out, truth))
+        res.update(mid_exposure_errors(out, fs.truth_rows))
     counters = loop.counters()
     res_top = {
         "scenario": scen.name,
         "flatsat": cfg.name,
         "duration_s": duration,
         "attitude_error_arcsec_1sigma": res.get("attitude_error_arcsec_1sigma"),
+        "floor_arcsec": floor.get("floor_arcsec"),
+        "measured_over_floor": (res["attitude_error_arcsec_1sigma"] / floor["floor_arcsec"]
+                                if res.get("attitude_error_arcsec_1sigma") and floor.get("floor_arcsec") else None),
+        "mid_exposure_error_arcsec_1sigma": res.get("mid_exposure_error_arcsec_1sigma"),
+        "floor_mid_exposure_arcsec": floor.get("floor_mid_exposure_arcsec"),
+        "nees_after_update": res.get("nees_after_update"),
+        "nees_before_update": res.get("nees_before_update"),
         "latency_p99_ms": res.get("latency_p99_ms"),
         # fast mode: loop CPU per second of flatsat time (the share of a core it needs in real time)
         "cpu_percent": (100.0 * cpu_loop / (duration if fast else wall)) if wall > 0 and cpu_loop is not None
@@ -255,8 +268,11 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
         "frames": counters["frames"],
         "gyro_samples": counters["gyro_samples"],
         "samples_lost": counters["samples_lost"],
+        "host_us_per_gyro_sample": loop.host_us_per_gyro_sample(),
     }
     res_top.update({k: v for k, v in res.items() if k not in res_top})
+    if floor.get("floor_inputs"):
+        res_top["floor_inputs"] = floor["floor_inputs"]
     res_top["step_wall_p99_ms"] = float(np.percentile(step_wall, 99)) * 1e3 if step_wall else None
     res_top["process_cpu_percent"] = 100.0 * cpu_proc / wall if wall > 0 else None
     res_top["wall_s"] = wall
@@ -351,6 +367,7 @@ def _run_lockstep(fs, loop, duration: float, period: float, step_wall: list, lin
     cpu = 0.0
     shown = time.perf_counter()
     while True:
+        lk.horizon = t_next
         while True:
             w = lk.wake_time
             if w is None or w > t_next:
@@ -407,7 +424,10 @@ def human_summary(r: dict) -> str:
         f"({r['wall_s']:.1f} s wall{', real time' if r['realtime'] else ''})",
         "  attitude error (cross-boresight, 1σ, TRACK): " + (
             f"{r['attitude_error_arcsec_1sigma']:.2f}″" if r.get("attitude_error_arcsec_1sigma") is not None
-            else "never in TRACK" if "track_fraction" in r else "n/a (no simulator truth)"),
+            else "never in TRACK" if "track_fraction" in r else "n/a (no simulator truth)")
+        + f" (floor {f(r.get('floor_arcsec'), '.2f')}″); mid-exposure "
+        f"{f(r.get('mid_exposure_error_arcsec_1sigma'), '.2f')}″ "
+        f"(floor {f(r.get('floor_mid_exposure_arcsec'), '.2f')}″)",
         f"  modes: {modes}",
         f"  frames {r['frames']}, gyro samples {r['gyro_samples']}, samples lost {r['samples_lost']}",
         f"  latency p99 {f(r['latency_p99_ms'], '.3f')} ms ({r['latency_clock']}), loop CPU "

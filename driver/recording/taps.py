@@ -187,10 +187,10 @@ class ReplayLink:
         if sent != data:
             raise ReplayDivergence(f"replay: driver sent {data[:24].hex()}... but the log has "
                                    f"{body[:24].hex()}... at t={rec.t_ns} ns")
-        if status == TX_FAILED:
-            from ..errors import DeviceError
+        if status == TX_FAILED:     # links raise only for a lost link
+            from ..errors import LinkLostError
 
-            raise DeviceError(body[len(data) + 1:].decode(errors="replace"))
+            raise LinkLostError(body[len(data) + 1:].decode(errors="replace"))
         return t
 
     def recv(self, timeout: float):
@@ -200,9 +200,9 @@ class ReplayLink:
         if status == RX_TIMEOUT:
             return None
         if status == RX_CLOSED:
-            from ..errors import DeviceError
+            from ..errors import LinkLostError
 
-            raise DeviceError(body.decode(errors="replace"))
+            raise LinkLostError(body.decode(errors="replace"))
         return t, body
 
     def drain(self) -> int:
