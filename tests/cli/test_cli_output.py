@@ -18,3 +18,26 @@ def test_run_summary_of_a_run_that_never_tracked():
     text = human_summary(r)
     assert "never in TRACK" in text and "nan" not in text.lower().replace("n/a", "")
     assert "1.2 s (interrupted) of 3.0 s" in text and "acceptance not applied: run interrupted" in text
+
+
+def _subparser(parser, *names):
+    import argparse
+
+    for name in names:
+        sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+        parser = sub.choices[name]
+    return parser
+
+
+def test_every_eval_starid_option_has_help_and_default():
+    import argparse
+
+    from gyrostar.cli.main import build_parser
+
+    p = _subparser(build_parser(), "eval", "starid")
+    for action in p._actions:
+        if isinstance(action, (argparse._HelpAction, argparse._StoreTrueAction)):
+            assert action.help, action.dest
+            continue
+        assert action.help, f"--{action.dest} has no help text"
+        assert "default" in action.help, f"--{action.dest} does not say its default: {action.help!r}"
