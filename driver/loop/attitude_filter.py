@@ -19,6 +19,8 @@ band-limited to the internal rate's Nyquist frequency).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..attitude import quat_conj, quat_mult, quat_normalize, quat_propagate, quat_to_dcm
@@ -31,7 +33,8 @@ GATE = 13.815510557964274  # χ² 2 dof, P = 0.001
 
 
 class AttitudeFilter:
-    def __init__(self, arw: float, sigma_bias_rw: float, bias_prior: float, period_s: float, delay_s: float = 0.0):
+    def __init__(self, arw: float, sigma_bias_rw: float, bias_prior: float, period_s: float, delay_s: float = 0.0,
+                 lowpass_hz: float = 0.0):
         self.q = np.array([0.0, 0.0, 0.0, 1.0])   # ACQUIRE: gyro-relative attitude from the start
         self.b = np.zeros(3)
         self.P = np.zeros((6, 6))
@@ -42,6 +45,9 @@ class AttitudeFilter:
         self.hist_q = np.zeros((HIST, 4))
         self.ih = np.array([HIST - 1, 0], np.int64)   # [ring head, output seq]
         self.prm = np.array([period_s, arw, sigma_bias_rw, (1e-4) ** 2, delay_s])
+        # the gyro's 2nd-order low-pass takes the rate noise above f_c out of every finite
+        # window: the angle walk over Δ is N²(Δ − κ), κ = 1/(2√2 π f_c) (Δ ≫ 1/f_c)
+        self.kappa = 1.0 / (2.0 * math.sqrt(2.0) * math.pi * lowpass_hz) if lowpass_hz > 0 else 0.0
         self.valid = False                            # q is an identified attitude
         self.mid = np.full(R.MID_N, np.nan)           # [t_mid, q_mid, cov_mid]: the newest frame's product
 
@@ -84,9 +90,10 @@ class AttitudeFilter:
         (rotation R from the attitude history) plus the gyro's random walk since then,
         Q_Δ = N² Δ I (Δ = now − t_mid), which the measurement knows nothing of. So the
         update runs on P − Q_Δ (the prior at ``t_mid`` seen from now) with the directions
-        rotated to now, and Q_Δ is added back after it: P⁺ = Φ P⁺_mid Φᵀ + Q_Δ (exact for
-        this linear structure; adding Q_Δ to the star noise instead would ignore that the
-        same random walk is in the state).
+        rotated to now, and the walk since ``t_mid`` is added back after it: P⁺ = Φ P⁺_mid Φᵀ
+        + N²(Δ − κ) I (exact for this linear structure; adding Q_Δ to the star noise instead
+        would ignore that the same random walk is in the state). κ: the gyro low-pass's
+        share of the walk over a finite window (``lowpass_hz``; 0: white rate noise).
 
         Also sets the mid-exposure product (:attr:`mid`): the updated attitude carried back
         to ``t_mid`` along R, with the attitude block of Φ P⁺_mid Φᵀ rotated back to the body
@@ -108,8 +115,10 @@ class AttitudeFilter:
             self.mid[0] = t_mid
             self.mid[1:5] = quat_mult(quat_conj(rq), self.q)
             self.mid[5:] = (rot.T @ P[:3, :3] @ rot).ravel()
+        # back to now: the walk since t_mid, less what the gyro's low-pass takes out of it
+        back = self.prm[1] ** 2 * max(lag - self.kappa, 0.0) if qd > 0 else 0.0
         for i in range(3):
-            P[i, i] += qd
+            P[i, i] += back
         return n
 
     def set_attitude(self, q_ident, t_mid: float, now: float, sigma_rad: float) -> None:
