@@ -191,6 +191,7 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
         "measured_over_floor": (res["attitude_error_arcsec_1sigma"] / floor["floor_arcsec"]
                                 if res.get("attitude_error_arcsec_1sigma") and floor.get("floor_arcsec") else None),
         "mid_exposure_error_arcsec_1sigma": res.get("mid_exposure_error_arcsec_1sigma"),
+        "mid_exposure_error_arcsec_1sigma_at_rest": res.get("mid_exposure_error_arcsec_1sigma_at_rest"),
         "floor_mid_exposure_arcsec": floor.get("floor_mid_exposure_arcsec"),
         "nees_after_update": res.get("nees_after_update"),
         "nees_before_update": res.get("nees_before_update"),
