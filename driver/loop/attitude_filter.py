@@ -50,6 +50,7 @@ class AttitudeFilter:
         self.kappa = 1.0 / (2.0 * math.sqrt(2.0) * math.pi * lowpass_hz) if lowpass_hz > 0 else 0.0
         self.valid = False                            # q is an identified attitude
         self.mid = np.full(R.MID_N, np.nan)           # [t_mid, q_mid, cov_mid]: the newest frame's product
+        self._state = (self.q, self.b, self.P, self.ts, self.hist_t, self.hist_q, self.ih, self.prm)
 
     @property
     def omega(self) -> np.ndarray:
@@ -65,9 +66,8 @@ class AttitudeFilter:
     def predict(self, smp, flags_first: int, flags_base: int, mode: int, refs, ids, cam, uv_last, out) -> int:
         """Predict every sample of a FIFO batch and write its output record (one numba call);
         returns the count of stuck-axis samples."""
-        return predict_batch(smp.t, smp.rate, smp.flags, smp.n, self.q, self.b, self.P, self.ts, self.hist_t,
-                             self.hist_q, self.ih, self.prm, flags_first, flags_base, mode, refs, ids, cam,
-                             uv_last, self.mid, out)
+        return predict_batch(smp.t, smp.rate, smp.flags, smp.n, *self._state, flags_first, flags_base, mode, refs,
+                             ids, cam, uv_last, self.mid, out)
 
     def q_at(self, t: float) -> np.ndarray:
         """Attitude estimate at host time ``t`` (s): the newest sample at or before it,

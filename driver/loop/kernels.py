@@ -58,6 +58,7 @@ def predict_batch(smp_t, smp_rate, smp_flags, n, q, b, P, ts, hist_t, hist_q, ih
     E = np.empty((3, 3))
     T = np.empty((3, 3))
     wt = np.empty(3)
+    vb = np.empty(3)
     for i in range(n):
         t = smp_t[i] - tau
         dt = period if ts[0] != ts[0] else t - ts[0]
@@ -110,7 +111,9 @@ def predict_batch(smp_t, smp_rate, smp_flags, n, q, b, P, ts, hist_t, hist_q, ih
         if k > 0:
             A = quat_to_dcm(qo)
             for s in range(k):
-                u, v, _ = project_point(cam, A @ refs[s])
+                for j in range(3):       # A @ refs[s] into scratch (no allocation per star)
+                    vb[j] = A[j, 0] * refs[s, 0] + A[j, 1] * refs[s, 1] + A[j, 2] * refs[s, 2]
+                u, v, _ = project_point(cam, vb)
                 r.star_id[s] = ids[s]
                 r.centroid_px[s, 0] = u
                 r.centroid_px[s, 1] = v
