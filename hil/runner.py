@@ -153,6 +153,7 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
         fs.start_faults(t_start_of(fs))
         period = 1.0 / loop.gyro.odr_hz
         if fs.lockstep is not None:
+            loop.image.threaded = False      # centroid in the step: same result, no hand-over per frame
             cpu_loop = _run_lockstep(fs, loop, duration, period, step_wall, line if status else None)
         else:
             sched = PeriodicScheduler(period)
