@@ -193,6 +193,7 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
                                 if res.get("attitude_error_arcsec_1sigma") and floor.get("floor_arcsec") else None),
         "mid_exposure_error_arcsec_1sigma": res.get("mid_exposure_error_arcsec_1sigma"),
         "mid_exposure_error_arcsec_1sigma_at_rest": res.get("mid_exposure_error_arcsec_1sigma_at_rest"),
+        "mid_exposure_smoothed_error_arcsec_1sigma": res.get("mid_exposure_smoothed_error_arcsec_1sigma"),
         "floor_mid_exposure_arcsec": floor.get("floor_mid_exposure_arcsec"),
         "nees_after_update": res.get("nees_after_update"),
         "nees_before_update": res.get("nees_before_update"),

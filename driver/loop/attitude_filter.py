@@ -23,7 +23,7 @@ import math
 
 import numpy as np
 
-from ..attitude import quat_conj, quat_mult, quat_normalize, quat_propagate, quat_to_dcm
+from ..attitude import quat_conj, quat_mult, quat_normalize, quat_propagate, quat_to_dcm, rotvec_to_quat
 from ..core.mekf import mekf_update
 from . import record as R
 from .kernels import predict_batch
@@ -50,6 +50,7 @@ class AttitudeFilter:
         self.kappa = 1.0 / (2.0 * math.sqrt(2.0) * math.pi * lowpass_hz) if lowpass_hz > 0 else 0.0
         self.valid = False                            # q is an identified attitude
         self.mid = np.full(R.MID_N, np.nan)           # [t_mid, q_mid, cov_mid]: the newest frame's product
+        self.smoothed = np.full(R.MID_N, np.nan)      # the frame before it, smoothed with the newest
         self._state = (self.q, self.b, self.P, self.ts, self.hist_t, self.hist_q, self.ih, self.prm)
 
     @property
@@ -67,7 +68,7 @@ class AttitudeFilter:
         """Predict every sample of a FIFO batch and write its output record (one numba call);
         returns the count of stuck-axis samples."""
         return predict_batch(smp.t, smp.rate, smp.flags, smp.n, *self._state, flags_first, flags_base, mode, refs,
-                             ids, cam, uv_last, self.mid, out)
+                             ids, cam, uv_last, self.mid, self.smoothed, out)
 
     def q_at(self, t: float) -> np.ndarray:
         """Attitude estimate at host time ``t`` (s): the newest sample at or before it,
@@ -98,7 +99,8 @@ class AttitudeFilter:
         Also sets the mid-exposure product (:attr:`mid`): the updated attitude carried back
         to ``t_mid`` along R, with the attitude block of Φ P⁺_mid Φᵀ rotated back to the body
         axes at ``t_mid``."""
-        rq = quat_mult(self.q, quat_conj(self.q_at(t_mid)))                # body(t_mid) → body(now)
+        q_prior_mid = self.q_at(t_mid)
+        rq = quat_mult(self.q, quat_conj(q_prior_mid))                    # body(t_mid) → body(now)
         rot = quat_to_dcm(rq)
         bvecs = np.ascontiguousarray(b_mid @ rot.T)
         lag = max((self.t_last if self.t_last is not None else t_mid) - t_mid, 0.0)
@@ -109,17 +111,44 @@ class AttitudeFilter:
                 P[i, i] -= qd
         else:
             qd = 0.0
+        p_prior_mid = rot.T @ P[:3, :3] @ rot
         n = int(mekf_update(self.q, self.b, P, bvecs, np.ascontiguousarray(refs),
                             np.ascontiguousarray(sigmas), GATE, accepted))
         if n:
+            q_mid = quat_mult(quat_conj(rq), self.q)
+            p_mid = rot.T @ P[:3, :3] @ rot
+            self._smooth_previous(q_prior_mid, p_prior_mid, q_mid, p_mid)
             self.mid[0] = t_mid
-            self.mid[1:5] = quat_mult(quat_conj(rq), self.q)
-            self.mid[5:] = (rot.T @ P[:3, :3] @ rot).ravel()
+            self.mid[1:5] = q_mid
+            self.mid[5:] = p_mid.ravel()
         # back to now: the walk since t_mid, less what the gyro's low-pass takes out of it
         back = self.prm[1] ** 2 * max(lag - self.kappa, 0.0) if qd > 0 else 0.0
         for i in range(3):
             P[i, i] += back
         return n
+
+    def _smooth_previous(self, q_prior, p_prior, q_post, p_post) -> None:
+        """The previous frame's mid-exposure attitude smoothed with this frame (one-lag
+        Rauch–Tung–Striebel on the attitude error): this frame's correction δ (its filtered
+        attitude against its prior, both at its mid-exposure) is carried back through the
+        gyro rotation R between the two mid-exposures with the gain C = P_k Rᵀ (P⁻_k+1)⁻¹:
+        q_s = δq(C δ) ⊗ q_k, P_s = P_k + C (P_k+1 − P⁻_k+1) Cᵀ. Sets :attr:`smoothed`."""
+        prev = self.mid
+        if not np.isfinite(prev[0]):
+            return
+        q_k = prev[1:5]
+        p_k = prev[5:].reshape(3, 3)
+        r = quat_to_dcm(quat_mult(q_prior, quat_conj(q_k)))       # body(mid_k) → body(mid_k+1), the gyro's
+        d = quat_mult(q_post, quat_conj(q_prior))
+        delta = 2.0 * d[:3] * (1.0 if d[3] >= 0 else -1.0)      # correction at mid_k+1 (rad, its body axes)
+        try:
+            c = p_k @ r.T @ np.linalg.inv(p_prior)
+        except np.linalg.LinAlgError:
+            return
+        self.smoothed[0] = prev[0]
+        self.smoothed[1:5] = quat_normalize(quat_mult(rotvec_to_quat(c @ delta), q_k))
+        ps = p_k + c @ (p_post - p_prior) @ c.T
+        self.smoothed[5:] = (0.5 * (ps + ps.T)).ravel()
 
     def set_attitude(self, q_ident, t_mid: float, now: float, sigma_rad: float) -> None:
         """A lost-in-space attitude ``q_ident`` measured at ``t_mid``: carried to now along

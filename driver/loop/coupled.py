@@ -488,7 +488,7 @@ def warmup() -> dict:
     calls = [
         (kernels.predict_batch, (np.zeros(4), np.zeros((4, 3)), np.zeros(4, np.uint8), 1, af.q, af.b, af.P, af.ts,
                                  af.hist_t, af.hist_q, af.ih, af.prm, 0, 0, 0, ref, ref[:, 0].astype(np.int32), cam,
-                                 np.zeros((2, 2)), af.mid, R.empty(4))),
+                                 np.zeros((2, 2)), af.mid, af.smoothed, R.empty(4))),
         (mekf_update, (q, b, P, ref, ref, np.array([1e-5, 1e-5]), GATE, np.zeros(2, np.uint8))),
         (kernels.project_refs, (cam, q, ref)),
         (quat_propagate, (q, w, 0.001)),

@@ -29,7 +29,7 @@ def project_refs(params, q, refs):
 
 @njit(cache=True)
 def predict_batch(smp_t, smp_rate, smp_flags, n, q, b, P, ts, hist_t, hist_q, ih, prm, flags_first, flags_base,
-                  mode, refs, ids, cam, uv_last, mid, out):
+                  mode, refs, ids, cam, uv_last, mid, smoothed, out):
     """One FIFO batch through the 400 Hz path: for every sample predict the attitude MEKF
     (:func:`gyrostar.core.mekf.mekf_predict_blocks`), keep the attitude history, project the
     tracked stars and write the output record — no Python object per sample.
@@ -45,7 +45,8 @@ def predict_batch(smp_t, smp_rate, smp_flags, n, q, b, P, ts, hist_t, hist_q, ih
     refs (k, 3), ids (k,): tracked stars' catalog vectors and ids (k = 0 when the attitude is
     not valid); cam: camera array. uv_last (k, 2):
     their centroids at the last sample (px). mid (14,): the mid-exposure product
-    [t_mid, q_mid, cov_mid] copied to every record. out: OUTPUT_DTYPE records, first ``n`` written
+    [t_mid, q_mid, cov_mid] copied to every record; smoothed (14,): the frame before,
+    smoothed with it (``*_mid_s`` fields). out: OUTPUT_DTYPE records, first ``n`` written
     (every field but ``latency_us``).
     Returns the count of samples with a stuck gyro axis.
     """
@@ -128,7 +129,11 @@ def predict_batch(smp_t, smp_rate, smp_flags, n, q, b, P, ts, hist_t, hist_q, ih
         r.t_mid = mid[0]
         for j in range(4):
             r.q_mid[j] = mid[1 + j]
+        r.t_mid_s = smoothed[0]
+        for j in range(4):
+            r.q_mid_s[j] = smoothed[1 + j]
         for a in range(3):
             for c in range(3):
                 r.cov_mid[a, c] = mid[5 + 3 * a + c]
+                r.cov_mid_s[a, c] = smoothed[5 + 3 * a + c]
     return stuck
