@@ -139,6 +139,9 @@ class LoopConfig:
     # xing2012/bmi088 models' is 4.78 ms, but carrying each output over it with the latest
     # (noisy) rate sample costs more than the delay (fast demo: 4.44 -> 4.83 arcsec): off
     gyro_delay_ms: float = 0.0
+    # cut-off of the gyro's 2nd-order low-pass (Hz; 0: none): it takes the rate noise above
+    # it out of short windows (BMI088 at 400 Hz ODR: 47 Hz); the simulated flatsat uses its model's
+    gyro_lowpass_hz: float = 47.0
 
     def validate(self):
         from ..loop.record import MAX_STARS
@@ -146,6 +149,8 @@ class LoopConfig:
         for key in ("confirm_images", "wrong_id_rejects", "head_timeouts_lost"):
             if getattr(self, key) < 1:
                 raise ValueError(f"loop.{key} must be at least 1")
+        if not 0.0 <= self.gyro_lowpass_hz < 10000.0:
+            raise ValueError("loop.gyro_lowpass_hz must be in [0, 10000)")
         if not 0.0 <= self.gyro_delay_ms < 100.0:
             raise ValueError("loop.gyro_delay_ms must be in [0, 100)")
         for key in ("neighbour_sep_px", "reconnect_every_s", "gyro_arw_deg_rts"):

@@ -161,13 +161,15 @@ class ScenarioScene:
 
 # ---------------------------------------------------------------------------- driver
 def loop_params(cfg: hc.FlatsatConfig, e_per_dn: float | None = None, scen: hc.Scenario | None = None):
-    """The loop's parameters from the config; a simulated flatsat's detector gain and gyro
-    angle random walk come from its simulator models (what a calibration would measure)."""
+    """The loop's parameters from the config; a simulated flatsat's detector gain, gyro
+    angle random walk and gyro low-pass cut-off come from its simulator models (what a
+    calibration or the datasheet would give)."""
     from ..loop.coupled import LoopParams
 
     lc = cfg.loop
     arw = lc.gyro_arw_deg_rts * DEG
     delay = lc.gyro_delay_ms * 1e-3
+    lowpass = lc.gyro_lowpass_hz
     if cfg.simulated:
         from ..mocks.gyro_truth import gyro_params
 
@@ -177,12 +179,13 @@ def loop_params(cfg: hc.FlatsatConfig, e_per_dn: float | None = None, scen: hc.S
         n2 = (gp.noise_density_dps_rthz * DEG) ** 2 / 2.0 + (gp.white_sigma_dph * DEG / 3600.0) ** 2 / gp.odr_hz
         if n2 > 0:
             arw = math.sqrt(n2)
+        lowpass = gp.filter_hz
     p = LoopParams(frame_hz=lc.frame_hz, exposure_s=cfg.head.exposure_ms * 1e-3, window_k=lc.window_k,
                    max_stars=lc.max_stars, min_stars=lc.min_stars, coast_timeout_s=lc.coast_timeout_s,
                    acquire_every_s=lc.acquire_every_s, mag_limit=lc.mag_limit, confirm_images=lc.confirm_images,
                    wrong_id_rejects=lc.wrong_id_rejects, neighbour_sep_px=lc.neighbour_sep_px,
                    reconnect_every_s=lc.reconnect_every_s, head_timeouts_lost=lc.head_timeouts_lost, gyro_arw=arw,
-                   gyro_delay_s=delay)
+                   gyro_delay_s=delay, gyro_lowpass_hz=lowpass)
     if e_per_dn:
         p.e_per_dn = e_per_dn
     return p
