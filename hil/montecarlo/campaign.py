@@ -64,7 +64,7 @@ class Cluster:
         for name in ("distributed", "distributed.scheduler", "distributed.nanny", "distributed.core",
                      "distributed.worker", "distributed.http.proxy", "distributed.comm"):
             logging.getLogger(name).setLevel(logging.CRITICAL)
-        from .worker import Preload
+        from .worker import preload_plugin
 
         self.cluster = None
         if scheduler:
@@ -90,7 +90,7 @@ class Cluster:
             self.cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                         dashboard_address=None, silence_logs=logging.CRITICAL)
             self.client = Client(self.cluster)
-        self.client.register_plugin(Preload(config_path))
+        self.client.register_plugin(preload_plugin(config_path))
         self.config_path = config_path
 
     @property

@@ -26,8 +26,12 @@ PROFILE_P = (0.25, 0.40, 0.15, 0.20)
 # BMI088 gyro die, datasheet ranges (BST-BMI088-DS001): noise density 0.014 °/s/√Hz typical;
 # bias instability ~2 °/h class; the zero-rate offset (±1 °/s), sensitivity tolerance (±1 %)
 # and cross-axis sensitivity (±1 %) are drawn by the simulator from the run seed
-# (gyrostar.mocks.gyro_truth "bmi088" set).
+# (gyrostar.mocks.gyro_truth "bmi088" set), the offset at its calibrated residual (below).
 ARW_RANGE_DPS_RTHZ = (0.010, 0.018)
+# the ±1 °/s zero-rate offset is removed by the start-up calibration (gyrostar calibrate
+# gyro-static); what is left (calibration error + drift with temperature, 0.015 °/s/K in the
+# datasheet, over a few K) is drawn per run by the simulator with this σ per axis
+RESIDUAL_BIAS_SIGMA_DPS = 0.01
 BIAS_INSTABILITY_RANGE_DPH = (1.0, 4.0)
 
 # camera errors left after calibration (the issue-16 acceptance tolerances): focal length
@@ -111,7 +115,8 @@ def draw_case(seed: int, duration_s: float, width_px: int = 1024, height_px: int
         segs.append((d, tuple(peak * _unit(rng)), None))
         start = rng.uniform(5.0, max(5.5, d - 8.0))
         eclipse.append((start, start + rng.uniform(1.0, min(5.0, d - start - 1.0))))
-    gyro = {"noise_density_dps_rthz": float(rng.uniform(*ARW_RANGE_DPS_RTHZ)),
+    gyro = {"bias_sigma_dps": RESIDUAL_BIAS_SIGMA_DPS,
+            "noise_density_dps_rthz": float(rng.uniform(*ARW_RANGE_DPS_RTHZ)),
             "bias_instability_dph": float(rng.uniform(*BIAS_INSTABILITY_RANGE_DPH))}
     camera = {"focal_rel": float(rng.uniform(-FOCAL_TOL_REL, FOCAL_TOL_REL)),
               "cx_px": float(rng.uniform(-PRINCIPAL_TOL_PX, PRINCIPAL_TOL_PX)),

@@ -109,7 +109,7 @@ def _wrong_labels(out: np.ndarray, truth: np.ndarray, camera, star_vec: dict) ->
             wrong += int(keep.sum()) - len(vec)     # a label that is not a catalog star
             continue
         body = vec @ quat_to_dcm(truth["q"][i]).T
-        u, v = camera.project(body)
-        d = np.hypot(u - out["centroid_px"][i, :n][keep, 0], v - out["centroid_px"][i, :n][keep, 1])
+        uv, _ = camera.project(body)
+        d = np.hypot(uv[:, 0] - out["centroid_px"][i, :n][keep, 0], uv[:, 1] - out["centroid_px"][i, :n][keep, 1])
         wrong += int(np.count_nonzero(~(d <= LABEL_TOL_PX)))
     return wrong

@@ -6,7 +6,7 @@ run's row (plain Python and numpy values, see :func:`gyrostar.hil.montecarlo.met
 A run that raises is returned as a row with ``failed=True`` and the one-line reason,
 so one bad case never stops a campaign.
 
-:class:`Preload` is a Dask worker plugin: each worker process loads the numba caches
+:func:`preload_plugin` is a Dask worker plugin: each worker process loads the numba caches
 (the loop's warm-up) and the catalog and star index once, when it starts, not per run.
 """
 
@@ -44,20 +44,18 @@ def preload(config_path: str | None = None) -> dict:
     return _PROCESS["info"]
 
 
-class Preload:
-    """Dask ``WorkerPlugin``: :func:`preload` when the worker starts (idempotent)."""
+def preload_plugin(config_path: str | None = None):
+    """A Dask ``WorkerPlugin`` that runs :func:`preload` when each worker starts."""
+    from distributed.diagnostics.plugin import WorkerPlugin
 
-    idempotent = True
-    name = "gyrostar-montecarlo-preload"
+    class Preload(WorkerPlugin):
+        idempotent = True
+        name = "gyrostar-montecarlo-preload"
 
-    def __init__(self, config_path: str | None = None):
-        self.config_path = config_path
+        def setup(self, worker=None):
+            preload(config_path)
 
-    def setup(self, worker=None):
-        preload(self.config_path)
-
-    def teardown(self, worker=None):
-        pass
+    return Preload()
 
 
 def run_case(seed: int, duration_s: float, config_path: str | None = None) -> dict:
