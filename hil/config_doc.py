@@ -76,27 +76,33 @@ MEANING = {
 
 
 def _comments(cls) -> dict[str, str]:
-    """field name → the ``#`` comment on its line (and continuation comment lines)."""
+    """field name → its ``#`` comment: on its line (with continuation lines aligned under it),
+    else the comment lines just above it."""
     src = inspect.getsource(cls)
-    out: dict[str, str] = {}
-    last = None
     toks = list(tokenize.generate_tokens(io.StringIO(src).readline))
     line_field: dict[int, str] = {}
     for i, tok in enumerate(toks):
         if (tok.type == tokenize.NAME and i + 1 < len(toks) and toks[i + 1].string == ":"
                 and tok.start[1] == 4):
             line_field[tok.start[0]] = tok.string
-    for tok in toks:
-        if tok.type != tokenize.COMMENT:
-            continue
-        text = tok.string.lstrip("#").strip()
-        name = line_field.get(tok.start[0])
-        if name is not None:
-            out[name] = text
-            last = name
-        elif last is not None and tok.start[1] > 20:     # a continuation aligned under the first
+    comments = {tok.start[0]: (tok.start[1], tok.string.lstrip("#").strip())
+                for tok in toks if tok.type == tokenize.COMMENT}
+    out: dict[str, str] = {}
+    last = None
+    above: list[str] = []
+    for line in sorted(set(line_field) | set(comments)):
+        col, text = comments.get(line, (None, None))
+        if line in line_field:
+            name = line_field[line]
+            out[name] = text if text is not None else " ".join(above)
+            last = name if text is not None else None
+            above = []
+        elif col is not None and col > 20 and last is not None:     # continuation aligned under it
             out[last] = f"{out[last]} {text}"
-    return out
+        elif col is not None:
+            above.append(text)
+            last = None
+    return {k: v for k, v in out.items() if v}
 
 
 def _type_name(tp) -> str:

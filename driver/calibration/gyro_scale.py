@@ -125,11 +125,8 @@ def run(args) -> int:
             t, rate, truth = gyro_sim.measure_profile(profile, length, p, args.seed)
             run_id = run_ids(t - truth["delay_s"], len(table), args.run_seconds)
         else:
-            with np.load(args.input) as z:
-                missing = {"t", "rate", "run", "table_rate"} - set(z.files)
-                if missing:
-                    raise ConfigError(f"{args.input} lacks arrays {sorted(missing)}")
-                t, rate, run_id, table = z["t"], z["rate"], z["run"], z["table_rate"]
+            z = report.read_npz(args.input, ("t", "rate", "run", "table_rate"))
+            t, rate, run_id, table = z["t"], z["rate"], z["run"], z["table_rate"]
         fit = _from_rate_table(t, rate, run_id, table, args.trim)
     else:
         if source == "simulate":

@@ -38,6 +38,13 @@ COLUMNS: tuple[Column, ...] = tuple([
     *_vec("sigma_theta", "xyz", "f8", "rad", "1-sigma attitude error about the body axis"),
     *_vec("sigma_bias", "xyz", "f8", "rad/s", "1-sigma gyro bias error"),
     Column("latency_us", "f4", "us", "host time from the gyro FIFO read to this output"),
+    Column("t_mid_monotonic_s", "f8", "s", "mid-exposure host time of the newest frame applied (nan: none)"),
+    Column("tai_mid_s", "f8", "s", "the same instant in TAI seconds since 1958-01-01"),
+    *_vec("q_mid", "xyzw", "f8", "1", "attitude at t_mid filtered with that frame, ICRS → body"),
+    *_vec("sigma_theta_mid", "xyz", "f8", "rad", "1-sigma error of q_mid about the body axis"),
+    Column("t_mid_s_monotonic_s", "f8", "s", "mid-exposure host time of the frame before (nan: none)"),
+    *_vec("q_mid_s", "xyzw", "f8", "1", "attitude at t_mid_s smoothed with the newest frame, ICRS → body"),
+    *_vec("sigma_theta_mid_s", "xyz", "f8", "rad", "1-sigma error of q_mid_s about the body axis"),
 ])
 NAMES = tuple(c.name for c in COLUMNS)
 
@@ -56,4 +63,17 @@ def table(records: np.ndarray, timemap=None) -> dict[str, np.ndarray]:
         out[f"sigma_theta_{a}"] = d[:, i]
         out[f"sigma_bias_{a}"] = d[:, 3 + i]
     out["latency_us"] = records["latency_us"]
+    if "t_mid" in (records.dtype.names or ()):
+        out["t_mid_monotonic_s"] = records["t_mid"]
+        out["tai_mid_s"] = timemap.tai(records["t_mid"]) if timemap is not None else np.full(len(t), np.nan)
+        out["t_mid_s_monotonic_s"] = records["t_mid_s"]
+        for key, q, cov in (("", "q_mid", "cov_mid"), ("_s", "q_mid_s", "cov_mid_s")):
+            dm = np.sqrt(np.maximum(np.diagonal(records[cov], axis1=1, axis2=2), 0.0))
+            for i, a in enumerate("xyzw"):
+                out[f"q_mid{key}_{a}"] = records[q][:, i]
+            for i, a in enumerate("xyz"):
+                out[f"sigma_theta_mid{key}_{a}"] = dm[:, i]
+    else:                                   # logs recorded before the mid-exposure products
+        for c in COLUMNS:
+            out.setdefault(c.name, np.full(len(t), np.nan))
     return {c.name: np.asarray(out[c.name]).astype(c.dtype) for c in COLUMNS}
