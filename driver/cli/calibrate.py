@@ -2,13 +2,7 @@
 
 from . import group
 
-TARGETS = {
-    "gyro-static": "gyrostar.calibration.gyro_static",
-    "gyro-scale": "gyrostar.calibration.gyro_scale",
-    "dark": "gyrostar.calibration.dark",
-    "camera": "gyrostar.calibration.camera",
-    "alignment": "gyrostar.calibration.alignment",
-}
+TARGETS = group.registered_targets("calibrate")   # ground front ends (gyrostar.hil.calibrate), by entry point
 
 
 def configure(parser) -> None:

@@ -4,11 +4,8 @@ from . import group
 
 # target -> module exposing HELP, configure(parser), run(args)
 TARGETS = {
-    "starcount": "gyrostar.mocks.starcount",
-    "centroid": "gyrostar.core.eval_centroid",
     "starid": "gyrostar.starid.eval_starid",
-    "loop": "gyrostar.hil.eval_loop",
-}
+} | group.registered_targets("eval")   # simulator-based ones (starcount, centroid) by entry point
 
 
 def configure(parser) -> None:

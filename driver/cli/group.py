@@ -16,6 +16,32 @@ from ..errors import NotAvailableError
 log = logging.getLogger(__name__)
 
 
+def registered_targets(command: str) -> dict[str, str]:
+    """Targets of ``command`` that the distribution registers as entry points (group
+    ``gyrostar.targets``, name ``COMMAND.TARGET``, value the module): how the flight CLI
+    reaches ground code (simulator, evaluations, calibration front ends) without importing it."""
+    from importlib.metadata import entry_points
+
+    return {ep.name.split(".", 1)[1]: ep.value for ep in sorted(entry_points(group="gyrostar.targets"))
+            if ep.name.startswith(command + ".")}
+
+
+def run_registered(command: str, args) -> int:
+    """Run ``command`` through the module registered for it (entry-point group
+    ``gyrostar.commands``); exit 4 when this build has none."""
+    from importlib.metadata import entry_points
+
+    found = [ep.value for ep in entry_points(group="gyrostar.commands") if ep.name == command]
+    if not found:
+        raise NotAvailableError(f"'{command}' is not available in this build (no gyrostar.commands entry point: "
+                                "reinstall with pip install -e .)")
+    try:
+        module = importlib.import_module(found[0])
+    except ImportError as exc:
+        raise NotAvailableError(f"'{command}' is not available in this build ({found[0]}: {exc})") from exc
+    return module.run(args)
+
+
 def add_targets(parser, targets: dict[str, str], dest: str) -> None:
     """Register one sub-parser per target module (name -> dotted module path)."""
     sub = parser.add_subparsers(dest=dest, metavar="TARGET", required=True)

@@ -2,12 +2,8 @@
 
 from __future__ import annotations
 
-import importlib
-
-from ..errors import NotAvailableError
+from . import group
 from .main import add_json
-
-REPLAYER = "gyrostar.hil.replay"
 
 
 def configure(parser) -> None:
@@ -23,8 +19,4 @@ def configure(parser) -> None:
 
 
 def run(args) -> int:
-    try:
-        replayer = importlib.import_module(REPLAYER)
-    except ImportError as exc:
-        raise NotAvailableError(f"replay is not available in this build ({exc})") from exc
-    return replayer.run(args)
+    return group.run_registered("replay", args)   # gyrostar.hil.replay (ground code), by entry point

@@ -5,12 +5,9 @@ The loop itself lives in :mod:`gyrostar.hil.runner`; this module only parses arg
 
 from __future__ import annotations
 
-import importlib
-
+from . import group
 from .argtypes import positive_float
 from .main import add_json
-
-RUNNER = "gyrostar.hil.runner"
 
 
 def configure(parser) -> None:
@@ -34,4 +31,4 @@ def configure(parser) -> None:
 
 
 def run(args) -> int:
-    return importlib.import_module(RUNNER).run(args)
+    return group.run_registered("run", args)      # gyrostar.hil.runner (ground code), by entry point

@@ -2,9 +2,7 @@
 
 from . import group
 
-TARGETS = {
-    "frame": "gyrostar.mocks.frame_cli",
-}
+TARGETS = group.registered_targets("sim")   # the simulator (gyrostar.mocks), by entry point
 
 
 def configure(parser) -> None:
