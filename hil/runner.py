@@ -127,7 +127,7 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
     from . import flatsat
 
     calib = flatsat.load_calibration(cfg)
-    log.warning("calibration: %s", calib.describe())
+    log.info("calibration: %s", calib.describe())
     # fast mode: the simulated clock's start (flatsat.FAST_T0) is mapped to this instant
     timemap = timescale.from_pair(flatsat.FAST_T0, time.time()) if fast else timescale.capture()
     folder = Path(folder)
