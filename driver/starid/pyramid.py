@@ -48,18 +48,20 @@ import numpy as np
 from numba import njit
 
 from ..attitude import quat_to_dcm
+from ..camera import unproject_many
 from ..core.quest import quest
 from ..errors import ConfigError
 from .index import StarIndex, cone_query
 from .kvector import query
 from .result import StarIdResult, to_body_vectors
-from .star_check import StarCheck
+from .star_check import StarCheck, check_stars
 from .verify import verify_matches
 
-ST_OK, ST_TOO_FEW, ST_NO_MATCH, ST_REJECTED, ST_STAR_CHECK, ST_SPARSE = 0, 1, 2, 3, 4, 5
+ST_OK, ST_TOO_FEW, ST_NO_MATCH, ST_REJECTED, ST_STAR_CHECK, ST_SPARSE, ST_BAD = 0, 1, 2, 3, 4, 5, 6
 STATUS_TEXT = {ST_OK: "ok", ST_TOO_FEW: "fewer than 3 stars", ST_NO_MATCH: "no unique pyramid",
                ST_REJECTED: "rejected by verification", ST_STAR_CHECK: "fewer than 3 stars pass the per-star check",
-               ST_SPARSE: "every spot fits one pyramid but too few stars for p_false_max"}
+               ST_SPARSE: "every spot fits one pyramid but too few stars for p_false_max",
+               ST_BAD: "centroids must be finite pixel coordinates"}
 _MAX_CAND = 256
 
 
@@ -491,6 +493,43 @@ def label_rest(b, q, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, tol, m
                 match[best] = s
 
 
+@njit(cache=True)
+def pyramid_identify_uv(uv, cam, tiers, lab_nloc, vec, vmag, ids, vstart, vstars, vvec, vh, vg, eps, label_tol, max_sep,
+                        fov_radius, p_false_max, max_triangles, mark, budgets, mag, check):
+    """One compiled call: centroids ``uv`` (n, 2) px → body vectors → :func:`pyramid_core` →
+    the per-star check :func:`gyrostar.starid.star_check.check_stars` (scalars ``check`` from
+    ``StarCheck.settings()``; empty: no check here). ``mag`` (n,) measured V or empty.
+    Returns ``(match, catalog ids, q, status, p_false, n_ok)``; status ``ST_BAD`` for a
+    non-finite centroid."""
+    n = uv.shape[0]
+    for i in range(n):
+        if not (np.isfinite(uv[i, 0]) and np.isfinite(uv[i, 1])):
+            none = -np.ones(n, dtype=np.int64)
+            return none, none.copy(), np.array([0.0, 0.0, 0.0, 1.0]), ST_BAD, np.inf, 0
+    b = unproject_many(cam, uv)
+    match, q, pf, st, _ = pyramid_core(b, vec, vmag, tiers, lab_nloc, vstart, vstars, vvec, vh, vg, eps, label_tol,
+                                       max_sep, fov_radius, p_false_max, max_triangles, mark, budgets)
+    n_ok = 0
+    for i in range(n):
+        if match[i] >= 0:
+            n_ok += 1
+    if st == ST_OK and check.shape[0] > 0:
+        m = mag if mag.shape[0] == n else np.full(n, np.nan)
+        qc, n_ok = check_stars(b, m, vec, vmag, match, check[0], check[1], check[2], check[3], check[4],
+                               int(check[5]), int(check[6]))
+        if n_ok == 0:
+            st = ST_STAR_CHECK
+        else:
+            q = qc
+    if st != ST_OK:
+        match[:] = -1
+    out_ids = -np.ones(n, dtype=np.int64)
+    for i in range(n):
+        if match[i] >= 0:
+            out_ids[i] = ids[match[i]]
+    return match, out_ids, q, st, pf, n_ok
+
+
 def local_density(index: StarIndex) -> np.ndarray:
     """Per star: the navigation stars within the pair radius around it, scaled to an all-sky
     count (the N a uniform sky of that density would have; at least one star per cap)."""
@@ -557,6 +596,9 @@ class Pyramid:
                             for t, cap, d in zip(tiers, caps, dens))
         # every indexed star (labels): the full tier's navigation density scaled to all stars
         self._lab_nloc = dens[-1] * (len(self.index) / np.count_nonzero(self.index.is_nav))
+        # a StarCheck runs inside the compiled call; another stage runs after it
+        self._fused = self.check.settings() if isinstance(self.check, StarCheck) else np.empty(0)
+        self._no_mag = np.empty(0)
         if self.check is None:
             self.check = StarCheck(self.sigma_px, self.camera.focal_length_px, mag_limit=self.index.mag_limit,
                                    min_stars=3)
@@ -569,18 +611,41 @@ class Pyramid:
             b, ix.vectors, ix.vmag, self._tiers, self._lab_nloc, ix.vox_start, ix.vox_stars, ix.vox_vec, ix.vox_h,
             ix.vox_g, self.eps, self.label_tol, ix.max_sep, self.fov_radius, self.p_false_max, self.max_triangles,
             self._mark, self._budgets)
-        text = STATUS_TEXT[int(st)]
+        n_ok = 0
         if st == ST_OK:
             q, full, n_ok = self.check.apply(b, mag, ix.vectors, ix.vmag, full)
             if n_ok == 0:
                 st = ST_STAR_CHECK
-                text = STATUS_TEXT[ST_STAR_CHECK]
-            elif n_ok <= 4:
-                # a sparse field, accepted because the bound allowed it at p_false_max
-                text = f"ok: sparse field, {n_ok} stars (p_false {pf:.1e})"
-        return StarIdResult.make(ix, full, q, st == ST_OK, text, pf, "pyramid")
+        return StarIdResult.make(ix, full, q, st == ST_OK, self._status(st, n_ok, pf), pf, "pyramid")
 
     def identify(self, uv: np.ndarray, mag=None) -> StarIdResult:
         """Identify centroids ``uv`` (n, 2) [col, row] px, brightest first; ``mag`` (n,)
-        their calibrated measured V (None: position-only per-star check)."""
-        return self.identify_vectors(to_body_vectors(self._params, uv), mag)
+        their calibrated measured V (None: position-only per-star check). One compiled call
+        when the check is a :class:`StarCheck`."""
+        if self._fused.shape[0] == 0:
+            return self.identify_vectors(to_body_vectors(self._params, uv), mag)
+        pts = uv
+        if not (isinstance(pts, np.ndarray) and pts.dtype == np.float64 and pts.ndim == 2 and pts.shape[1] == 2
+                and pts.flags.c_contiguous):
+            pts = np.asarray(uv, dtype=np.float64)
+            pts = np.ascontiguousarray(pts.reshape(-1, 2) if pts.size else np.empty((0, 2)))
+        m = self._no_mag
+        if mag is not None:
+            m = np.ascontiguousarray(mag, dtype=np.float64).reshape(-1)
+            if m.shape[0] != pts.shape[0]:
+                raise ConfigError(f"{m.shape[0]} magnitudes for {pts.shape[0]} centroids")
+        ix = self.index
+        match, ids, q, st, pf, n_ok = pyramid_identify_uv(
+            pts, self._params, self._tiers, self._lab_nloc, ix.vectors, ix.vmag, ix.ids, ix.vox_start, ix.vox_stars,
+            ix.vox_vec, ix.vox_h, ix.vox_g, self.eps, self.label_tol, ix.max_sep, self.fov_radius, self.p_false_max,
+            self.max_triangles, self._mark, self._budgets, m, self._fused)
+        if st == ST_BAD:
+            raise ConfigError(STATUS_TEXT[ST_BAD])
+        return StarIdResult(match, ids, q, st == ST_OK, self._status(st, n_ok, pf), float(pf), "pyramid")
+
+    @staticmethod
+    def _status(st, n_ok, pf) -> str:
+        if st == ST_OK and n_ok <= 4:
+            # a sparse field, accepted because the bound allowed it at p_false_max
+            return f"ok: sparse field, {n_ok} stars (p_false {pf:.1e})"
+        return STATUS_TEXT[int(st)]
