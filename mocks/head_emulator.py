@@ -13,13 +13,23 @@ be measured against (:meth:`mcu_offset_us_at`).
 with ``serial.serial_for_url(emulator.path)`` or :class:`gyrostar.transport.SerialLink`.
 Replies pass through an optional :class:`~gyrostar.mocks.faults.ByteFaults` (corrupt, drop,
 delay/jitter; ``disconnect()`` closes the pty master).
+
+Streaming (START_STREAM) follows the firmware's engine (``firmware/core/gs_stream.c``): the
+exposures free-run on the emulated MCU clock, frame k is rendered over its own
+[t_start, t_end] and pushed at its end as FRAME messages while frame k+1 integrates; window
+sets wait (at most ``stream_pending_sets``) for the frame they name, a late one applies at
+the next readout and is counted; a frame is dropped when more than
+``stream_tx_backlog_max`` bytes still wait in the pty (a paced link relay reads them only at
+the line rate, :mod:`gyrostar.mocks.paced_relay`).
 """
 
 from __future__ import annotations
 
+import fcntl
 import os
 import select
 import struct
+import termios
 import threading
 import time
 import tty
@@ -33,6 +43,7 @@ from gyrostar.protocol.defs import (
     MAX_PAYLOAD,
     PING_MAX,
     REPLY_FLAG,
+    REPLY_LAYOUT,
     REQUEST_LAYOUT,
     VERSION,
     ErrorCode,
@@ -77,7 +88,10 @@ class ConstantRateScene:
 
 class HeadEmulator:
     def __init__(self, sky, scene, mcu_offset_us: int = 123_456_789, drift_ppm: float = 0.0, faults=None,
-                 noise: bool = True):
+                 noise: bool = True, clock=None):
+        from gyrostar.clock import MONOTONIC
+
+        self.clock = MONOTONIC if clock is None else clock   # host time: exposures take their time on it
         self.sky = sky
         self.scene = scene
         self.width = sky.camera.width_px
@@ -87,18 +101,19 @@ class HeadEmulator:
         self.faults = faults
         self.noise = noise
         self._skies = {}
-        self._t_boot = time.monotonic()
+        self._t_boot = self.clock.now()
         self.master = self.slave = None
         self.path = None
         self._thread = None
         self._stop = threading.Event()
         self.rendered_pixels = 0   # pixels rendered for window captures (only the windows)
         self.full_renders = 0
+        self.frame_no = 0          # last stream frame number handed out (never reused)
         self._reset_state()
 
     # --- clocks -------------------------------------------------------------------------------
     def mcu_us(self, t_host: float | None = None) -> int:
-        t = time.monotonic() if t_host is None else t_host
+        t = self.clock.now() if t_host is None else t_host
         return self.mcu_offset_us + int(round(t * 1e6 * (1 + self.drift_ppm * 1e-6)))
 
     def mcu_offset_us_at(self, t_host: float) -> float:
@@ -118,8 +133,20 @@ class HeadEmulator:
         self.sums = []
         self.sensor_frame = 0
         self._full = None
+        self.stream = None         # _Stream while streaming
+        self.last_stream = None
         self.cnt = dict(rx_frames=0, crc_errors=0, framing_errors=0, overruns=0, rejected=0, last_error=0)
         self._boot_us = self.mcu_us()
+
+    def eclipse(self, on: bool) -> None:
+        """No starlight reaches the sensor while ``on`` (stars' signal 0; background and noise stay)."""
+        sky = self._sky_for(self.exposure_us)
+        if on and getattr(self, "_eclipsed", None) is None:
+            self._eclipsed = sky.electrons.copy()
+            sky.electrons[:] = 0.0
+        elif not on and getattr(self, "_eclipsed", None) is not None:
+            sky.electrons[:] = self._eclipsed
+            self._eclipsed = None
 
     def _sky_for(self, exposure_us: int):
         sky = self._skies.get(exposure_us)
@@ -151,7 +178,7 @@ class HeadEmulator:
         if fr.version != VERSION:
             return self._reject(fr.type, fr.seq, ErrorCode.BAD_VERSION, fr.version)
         try:
-            payload = self._dispatch(fr.type, fr.payload, rx_us)
+            payload = self._dispatch(fr.type, fr.payload, rx_us, fr.seq)
         except _Reject as r:
             return self._reject(fr.type, fr.seq, r.code, r.detail)
         out = encode_frame(fr.type | REPLY_FLAG, fr.seq, payload)
@@ -174,7 +201,7 @@ class HeadEmulator:
         fmt, names = REQUEST_LAYOUT[typ]
         return dict(zip(names, struct.unpack_from("<" + fmt, q)))
 
-    def _dispatch(self, typ: int, q: bytes, rx_us: int) -> bytes:
+    def _dispatch(self, typ: int, q: bytes, rx_us: int, seq: int = 0) -> bytes:
         n = len(q)
         if typ == MsgType.PING:
             if n > PING_MAX:
@@ -192,6 +219,7 @@ class HeadEmulator:
                                 gain_min_x16=LIMITS["gain_min_x16"], gain_max_x16=LIMITS["gain_max_x16"], planes=1)
         if typ == MsgType.SET_EXPOSURE:
             self._need(typ, n)
+            self._not_streaming()
             us = self._fields(typ, q)["exposure_us"]
             if not LIMITS["exposure_min_us"] <= us <= LIMITS["exposure_max_us"]:
                 raise _Reject(ErrorCode.EXPOSURE_RANGE, us)
@@ -208,6 +236,7 @@ class HeadEmulator:
             return self._set_windows(q)
         if typ in (MsgType.CAPTURE, MsgType.DARK):
             self._need(typ, n)
+            self._not_streaming()
             if not self.window_ids:
                 raise _Reject(ErrorCode.NO_WINDOWS)
             if typ == MsgType.DARK:
@@ -231,20 +260,41 @@ class HeadEmulator:
         if typ == MsgType.RESET:
             self._need(typ, n)
             return b""
+        if typ == MsgType.START_STREAM:
+            return self._start_stream(q, seq, rx_us)
+        if typ == MsgType.STOP_STREAM:
+            self._need(typ, n)
+            return self._stop_stream()
         raise _Reject(ErrorCode.UNKNOWN_TYPE)
+
+    def _not_streaming(self) -> None:
+        if self.stream is not None:
+            raise _Reject(ErrorCode.STREAMING)
 
     def _set_windows(self, q: bytes) -> bytes:
         n = len(q)
-        if n < 4:
+        if n < 8:
             raise _Reject(ErrorCode.PAYLOAD_LENGTH, n)
-        count, reserved = struct.unpack_from("<HH", q)
+        count, reserved, named = struct.unpack_from("<HHI", q)
         if reserved:
             raise _Reject(ErrorCode.RESERVED_NONZERO, reserved)
         if count > LIMITS["max_spans"]:
             raise _Reject(ErrorCode.SPAN_COUNT, count)
-        if n != 4 + 8 * count:
+        if n != 8 + 8 * count:
             raise _Reject(ErrorCode.SPANS_LENGTH, count)
-        spans = np.frombuffer(q[4:], "<u2").reshape(-1, 4).astype(np.int32)
+        spans = np.frombuffer(q[8:], "<u2").reshape(-1, 4).astype(np.int32)
+        wset = self._validate_spans(spans)
+        applies = 0
+        if self.stream is not None:
+            applies = self.stream.queue(wset, named)
+        else:
+            self.spans, self.window_ids, self.window_slices = wset[:3]
+            self.has_capture = False
+        return encode_reply(MsgType.SET_WINDOWS, n_windows=len(wset[1]), n_spans=count, n_pixels=wset[3],
+                            frame=applies)
+
+    def _validate_spans(self, spans: np.ndarray) -> tuple:
+        """(spans, window ids, pixel slices per window, pixels) of a valid set, else _Reject."""
         ids, slices, total, in_win, start = [], [], 0, 0, 0
         for i, (wid, row, c0, c1) in enumerate(spans.tolist()):
             if row >= self.height or c1 > self.width:
@@ -268,12 +318,10 @@ class HeadEmulator:
                 raise _Reject(ErrorCode.PIXEL_BUDGET, i)
         if ids:
             slices.append(slice(start, total))
-        self.spans, self.window_ids, self.window_slices = spans, ids, slices
-        self.has_capture = False
-        return encode_reply(MsgType.SET_WINDOWS, n_windows=len(ids), n_spans=count, n_pixels=total)
+        return spans, ids, slices, total
 
     def _capture(self) -> bytes:
-        t0_host = time.monotonic()
+        t0_host = self.clock.now()
         t0 = self.mcu_us(t0_host)
         q_start, omega = self.scene.at(t0_host)
         sky = self._sky_for(self.exposure_us)
@@ -281,10 +329,10 @@ class HeadEmulator:
         pixels, _ = sky.render_windows(self.spans, q_start, omega, frame=self.sensor_frame, noise=self.noise)
         self.rendered_pixels += len(pixels)
         # the exposure takes its time: the reply leaves after the exposure end
-        remaining = t0_host + self.exposure_us * 1e-6 - time.monotonic()
+        remaining = t0_host + self.exposure_us * 1e-6 - self.clock.now()
         if remaining > 0:
-            time.sleep(remaining)
-        t1_host = time.monotonic()
+            self.clock.sleep(remaining)
+        t1_host = self.clock.now()
         t1 = self.mcu_us(t1_host)
         self.last_exposure_host = (t0_host, t1_host)  # truth for tests: exposure start/end, host s
         self.pixels = np.minimum(pixels, 0x3FF).astype(np.uint16)
@@ -323,6 +371,7 @@ class HeadEmulator:
 
     def _full_frame(self, q: bytes) -> bytes:
         self._need(MsgType.FULL_FRAME, len(q))
+        self._not_streaming()
         f = self._fields(MsgType.FULL_FRAME, q)
         fmt, plane, count, off = f["pixel_format"], f["plane"], f["count"], f["offset"]
         if fmt > PixelFormat.PACKED10:
@@ -336,7 +385,7 @@ class HeadEmulator:
         if off + count > self.width * self.height:
             raise _Reject(ErrorCode.FRAME_RANGE, off)
         if self._full is None or self._full[0] != self.sensor_frame:
-            q_start, omega = self.scene.at(time.monotonic())
+            q_start, omega = self.scene.at(self.clock.now())
             img, _ = self._sky_for(self.exposure_us).render_frame(q_start, omega, frame=self.sensor_frame,
                                                                  noise=self.noise)
             self.full_renders += 1
@@ -344,6 +393,116 @@ class HeadEmulator:
         px = self._full[1][off:off + count]
         return encode_reply(MsgType.FULL_FRAME, sensor_frame=self.sensor_frame, offset=off, count=count,
                             pixel_format=fmt, plane=plane) + encode_pixels(px, fmt)
+
+    # --- streaming ------------------------------------------------------------------------------
+    def _start_stream(self, q: bytes, seq: int, rx_us: int) -> bytes:
+        self._need(MsgType.START_STREAM, len(q))
+        f = self._fields(MsgType.START_STREAM, q)
+        reserved = f["reserved"] | f["reserved2"]
+        if reserved:
+            raise _Reject(ErrorCode.RESERVED_NONZERO, reserved & 0xFFFF)
+        period, expo, fmt = f["period_us"], f["exposure_us"], f["pixel_format"]
+        if not LIMITS["exposure_min_us"] <= expo <= LIMITS["exposure_max_us"]:
+            raise _Reject(ErrorCode.EXPOSURE_RANGE, expo)
+        if not LIMITS["stream_period_min_us"] <= period <= LIMITS["stream_period_max_us"] or period < expo:
+            raise _Reject(ErrorCode.STREAM_PERIOD, period)
+        if fmt > PixelFormat.PACKED10:
+            raise _Reject(ErrorCode.PIXEL_FORMAT, fmt)
+        self.exposure_us = expo
+        self.frame_no += 1
+        t0 = self._host_of_mcu(rx_us)
+        self.stream = _Stream(seq, period, expo, fmt, self.frame_no, t0,
+                              (self.spans, self.window_ids, self.window_slices))
+        return encode_reply(MsgType.START_STREAM, first_frame=self.frame_no, t_first_us=rx_us, period_us=period,
+                            exposure_us=expo)
+
+    def _stop_stream(self) -> bytes:
+        s = self.stream or self.last_stream
+        self.last_stream, self.stream = s, None
+        if s is None:
+            return encode_reply(MsgType.STOP_STREAM, frames=0, last_frame=0, dropped=0, late_sets=0, backpressure=0)
+        s.pending.clear()
+        return encode_reply(MsgType.STOP_STREAM, frames=s.frames, last_frame=s.last_frame, dropped=s.dropped,
+                            late_sets=s.late_sets, backpressure=s.backpressure)
+
+    def _host_of_mcu(self, mcu_us: int) -> float:
+        return (mcu_us - self.mcu_offset_us) * 1e-6 / (1 + self.drift_ppm * 1e-6)
+
+    def tx_backlog(self) -> int:
+        """Bytes written to the pty that the other end has not read yet."""
+        if self.slave is None:
+            return 0
+        buf = bytearray(4)
+        try:
+            fcntl.ioctl(self.slave, termios.FIONREAD, buf)
+        except OSError:
+            return 0
+        return int.from_bytes(buf, "little")
+
+    def poll_stream(self, now: float | None = None) -> list[bytes]:
+        """The FRAME messages due by host time ``now``; also moves the stream on. Returns the
+        encoded messages (to write in order); ``next_due`` then says when to call again."""
+        s = self.stream
+        if s is None:
+            return []
+        now = time.monotonic() if now is None else now
+        t_end = s.t_start + s.exposure_us * 1e-6
+        if now < t_end:
+            return []
+        out = self._read_stream_frame(s, t_end)
+        s.next_frame(self)
+        now = time.monotonic()
+        while s.t_start + (s.exposure_us + s.period_us) * 1e-6 <= now:
+            s.dropped += 1        # more than a period overdue (the emulator was held up): never read
+            s.next_frame(self)
+        return out
+
+    @property
+    def next_due(self) -> float | None:
+        s = self.stream
+        return None if s is None else s.t_start + s.exposure_us * 1e-6
+
+    def _read_stream_frame(self, s, t_end: float) -> list[bytes]:
+        s.install_due()
+        if self.tx_backlog() > LIMITS["stream_tx_backlog_max"]:
+            s.dropped += 1
+            s.backpressure += 1
+            return []
+        spans, ids, slices = s.active[:3]
+        self.has_capture = False
+        if ids:
+            q_start, omega = self.scene.at(s.t_start)
+            self.sensor_frame += 1
+            pixels, _ = self._sky_for(s.exposure_us).render_windows(spans, q_start, omega, frame=self.sensor_frame,
+                                                                    noise=self.noise)
+            self.rendered_pixels += len(pixels)
+            pixels = np.minimum(pixels, 0x3FF).astype(np.uint16)
+        else:
+            pixels = np.zeros(0, np.uint16)
+        self.last_exposure_host = (s.t_start, t_end)
+        wins = [WindowPixels(wid, int(pixels[sl].sum()), pixels[sl]) for wid, sl in zip(ids, slices)]
+        t0_us, t1_us = self.mcu_us(s.t_start), self.mcu_us(t_end)
+        out, start = [], 0
+        fixed = struct.calcsize("<" + REPLY_LAYOUT[MsgType.FRAME][0])
+        while True:
+            size, part = fixed, []
+            for w in wins[start:]:
+                need = _WIN_HEADER + pixel_bytes(len(w.pixels), s.fmt)
+                if size + need > MAX_PAYLOAD:
+                    break
+                part.append(w)
+                size += need
+            head = encode_reply(MsgType.FRAME, frame=s.frame, set_frame=s.set_frame, t_start_us=t0_us,
+                                t_end_us=t1_us, exposure_us=s.exposure_us, late_sets=s.late_sets, dropped=s.dropped,
+                                backpressure=s.backpressure, n_pixels=len(pixels), start=start, count=len(part),
+                                total=len(wins), pixel_format=s.fmt)
+            out.append(encode_frame(MsgType.FRAME | REPLY_FLAG, s.seq, head + encode_windows_tail(part, s.fmt)))
+            start += len(part)
+            if start >= len(wins):
+                break
+        s.frames += 1
+        s.last_frame = s.frame
+        return out
 
     # --- pty service --------------------------------------------------------------------------
     def start(self) -> str:
@@ -369,12 +528,22 @@ class HeadEmulator:
                 continue
             view = view[k:]
 
+    def _emit(self, data: bytes) -> None:
+        if self.faults is not None:
+            self.faults.write_through(self._write, data)
+        else:
+            self._write(data)
+
     def _serve(self) -> None:
         buf = bytearray()
         fd = self.master
         while not self._stop.is_set():
             try:
-                r, _, _ = select.select([fd], [], [], 0.05)
+                for msg in self.poll_stream():
+                    self._emit(msg)
+                due = self.next_due
+                wait = 0.05 if due is None else min(0.05, max(0.0, due - time.monotonic()))
+                r, _, _ = select.select([fd], [], [], wait)
                 if not r or self._stop.is_set():
                     continue
                 data = os.read(fd, 65536)
@@ -400,10 +569,7 @@ class HeadEmulator:
                     reply = None
                 if reply is not None:
                     try:
-                        if self.faults is not None:
-                            self.faults.write_through(self._write, reply)
-                        else:
-                            self._write(reply)
+                        self._emit(reply)
                     except OSError:
                         return
 
@@ -429,3 +595,37 @@ class HeadEmulator:
 
     def __exit__(self, *exc):
         self.stop()
+
+
+class _Stream:
+    """The emulator's stream: timing grid (host s), counters, window sets waiting for frames."""
+
+    def __init__(self, seq, period_us, exposure_us, fmt, frame, t_start, active):
+        self.seq, self.period_us, self.exposure_us, self.fmt = seq, period_us, exposure_us, fmt
+        self.frame, self.t_start = frame, t_start
+        self.active = active            # (spans, ids, slices) in use
+        self.set_frame = 0
+        self.pending: list = []         # [first frame, named frame, (spans, ids, slices, total)]
+        self.frames = self.late_sets = self.dropped = self.backpressure = self.last_frame = 0
+
+    def queue(self, wset, named: int) -> int:
+        late = named != 0 and named < self.frame
+        first = self.frame if named == 0 or late else named
+        keep = [p for p in self.pending if p[0] < first]
+        if len(keep) >= LIMITS["stream_pending_sets"]:
+            keep = keep[:LIMITS["stream_pending_sets"] - 1]
+        self.pending = keep + [[first, named or first, wset]]
+        if late:
+            self.late_sets += 1
+        return first
+
+    def install_due(self) -> None:
+        while self.pending and self.pending[0][0] <= self.frame:
+            _, named, wset = self.pending.pop(0)
+            self.active = wset[:3]
+            self.set_frame = named
+
+    def next_frame(self, emu) -> None:
+        emu.frame_no += 1
+        self.frame = emu.frame_no
+        self.t_start += self.period_us * 1e-6

@@ -70,12 +70,19 @@ def _info_fields() -> dict:
                 gain_max_x16=L["gain_max_x16"], planes=2)
 
 
-def _spans_req(seq: int, spans, n_spans: int | None = None, extra: bytes = b"", reserved: int = 0) -> bytes:
-    body = payloads.encode_spans(spans) + extra
+def _spans_req(seq: int, spans, n_spans: int | None = None, extra: bytes = b"", reserved: int = 0,
+               frame: int = 0) -> bytes:
+    body = payloads.encode_spans(spans, frame=frame) + extra
     if n_spans is not None or reserved:
         n = len(spans) if n_spans is None else n_spans
-        body = struct.pack("<HH", n, reserved) + body[4:]
+        body = struct.pack("<HHI", n, reserved, frame) + body[8:]
     return encode_frame(MsgType.SET_WINDOWS, seq, body)
+
+
+def _stream_req(seq: int, period_us: int, exposure_us: int, pixel_format: int = PixelFormat.PACKED10,
+                reserved: int = 0) -> bytes:
+    return encode_frame(MsgType.START_STREAM, seq, struct.pack("<IIBBH", period_us, exposure_us, pixel_format,
+                                                               reserved, 0))
 
 
 def _exchanges() -> list[dict]:
@@ -99,9 +106,18 @@ def _exchanges() -> list[dict]:
     add("set_gain", encode_frame(MsgType.SET_GAIN, 5, struct.pack("<H", 32)),
         _reply(MsgType.SET_GAIN, 5, gain_x16=32), {"gain_x16": 32})
     spans = [[3, 10, 20, 26], [3, 11, 20, 27], [7, 500, 1018, 1024]]
-    add("set_windows", _spans_req(6, spans), _reply(MsgType.SET_WINDOWS, 6, n_windows=2, n_spans=3, n_pixels=19),
+    add("set_windows", _spans_req(6, spans),
+        _reply(MsgType.SET_WINDOWS, 6, n_windows=2, n_spans=3, n_pixels=19, frame=0),
         {"n_windows": 2, "n_spans": 3, "n_pixels": 19})
-    add("set_windows_clear", _spans_req(7, []), _reply(MsgType.SET_WINDOWS, 7, n_windows=0, n_spans=0, n_pixels=0))
+    add("set_windows_clear", _spans_req(7, []),
+        _reply(MsgType.SET_WINDOWS, 7, n_windows=0, n_spans=0, n_pixels=0, frame=0))
+    # outside a stream the named frame is ignored: the set applies at once (reply frame 0)
+    add("set_windows_frame_idle", _spans_req(10, spans, frame=77),
+        _reply(MsgType.SET_WINDOWS, 10, n_windows=2, n_spans=3, n_pixels=19, frame=0),
+        {"n_windows": 2, "n_spans": 3, "n_pixels": 19, "frame": 0})
+    add("stop_stream_idle", encode_frame(MsgType.STOP_STREAM, 11),
+        _reply(MsgType.STOP_STREAM, 11, frames=0, last_frame=0, dropped=0, late_sets=0, backpressure=0),
+        {"frames": 0, "last_frame": 0, "dropped": 0, "late_sets": 0, "backpressure": 0})
     add("reset", encode_frame(MsgType.RESET, 8), _reply(MsgType.RESET, 8))
     ping_max = b"\xa5" * defs.PING_MAX
     add("ping_max", encode_frame(MsgType.PING, 9, ping_max), _reply(MsgType.PING, 9, ping_max))
@@ -122,7 +138,8 @@ def _exchanges() -> list[dict]:
                                   (MsgType.CAPTURE, b"\x01"), (MsgType.WINDOW_DATA, b"\x00\x00"),
                                   (MsgType.FULL_FRAME, b"\x00" * 7), (MsgType.DARK, b"\x00"),
                                   (MsgType.TIME_SYNC, b"\x00" * 4), (MsgType.TELEMETRY, b"\x00"),
-                                  (MsgType.RESET, b"\x00")]):
+                                  (MsgType.RESET, b"\x00"), (MsgType.START_STREAM, b"\x00" * 11),
+                                  (MsgType.STOP_STREAM, b"\x00")]):
         reject(f"payload_length_{mt.name.lower()}", encode_frame(mt, 30 + i, pl), 30 + i,
                ErrorCode.PAYLOAD_LENGTH, mt, len(pl))
     reject("exposure_low", encode_frame(MsgType.SET_EXPOSURE, 50, struct.pack("<I", L["exposure_min_us"] - 1)),
@@ -134,7 +151,7 @@ def _exchanges() -> list[dict]:
     reject("gain_high", encode_frame(MsgType.SET_GAIN, 53, struct.pack("<H", L["gain_max_x16"] + 1)),
            53, ErrorCode.GAIN_RANGE, MsgType.SET_GAIN, L["gain_max_x16"] + 1)
     n_over = L["max_spans"] + 1
-    reject("span_count", encode_frame(MsgType.SET_WINDOWS, 54, struct.pack("<HH", n_over, 0)), 54,
+    reject("span_count", encode_frame(MsgType.SET_WINDOWS, 54, struct.pack("<HHI", n_over, 0, 0)), 54,
            ErrorCode.SPAN_COUNT, MsgType.SET_WINDOWS, n_over)
     reject("spans_length_short", _spans_req(55, spans, n_spans=4), 55, ErrorCode.SPANS_LENGTH,
            MsgType.SET_WINDOWS, 4)
@@ -177,6 +194,19 @@ def _exchanges() -> list[dict]:
            ErrorCode.PIXEL_FORMAT, MsgType.FULL_FRAME, 7)
     reject("frame_plane", encode_frame(MsgType.FULL_FRAME, 75, ff.pack(0, 16, 0, 2)), 75,
            ErrorCode.BAD_PLANE, MsgType.FULL_FRAME, 2)
+    # streaming: START_STREAM checks in order reserved, exposure, period, pixel format
+    reject("stream_reserved", _stream_req(80, 10000, 10000, reserved=1), 80, ErrorCode.RESERVED_NONZERO,
+           MsgType.START_STREAM, 1)
+    reject("stream_exposure_low", _stream_req(81, 10000, L["exposure_min_us"] - 1), 81, ErrorCode.EXPOSURE_RANGE,
+           MsgType.START_STREAM, L["exposure_min_us"] - 1)
+    reject("stream_period_short", _stream_req(82, L["stream_period_min_us"] - 1, 500), 82,
+           ErrorCode.STREAM_PERIOD, MsgType.START_STREAM, L["stream_period_min_us"] - 1)
+    reject("stream_period_long", _stream_req(83, L["stream_period_max_us"] + 1, 10000), 83,
+           ErrorCode.STREAM_PERIOD, MsgType.START_STREAM, L["stream_period_max_us"] + 1)
+    reject("stream_period_below_exposure", _stream_req(84, 9999, 10000), 84, ErrorCode.STREAM_PERIOD,
+           MsgType.START_STREAM, 9999)
+    reject("stream_pixel_format", _stream_req(85, 10000, 10000, pixel_format=2), 85, ErrorCode.PIXEL_FORMAT,
+           MsgType.START_STREAM, 2)
     return ex
 
 
@@ -216,6 +246,26 @@ def build() -> dict:
             rx_frames=10, crc_errors=1, framing_errors=2, overruns=0, rejected=4),
             {"uptime_us": 5_000_000, "temperature_cdeg": -1234, "last_error": 9, "captures": 3,
              "rx_frames": 10, "crc_errors": 1, "framing_errors": 2, "overruns": 0, "rejected": 4}),
+        _frame_entry("set_windows_req_frame", MsgType.SET_WINDOWS, 11, payloads.encode_spans(
+            [[4, 7, 8, 14]], frame=123456), {"n_spans": 1, "frame": 123456}),
+        _frame_entry("start_stream_req", MsgType.START_STREAM, 12, payloads.encode_request(
+            MsgType.START_STREAM, period_us=10000, exposure_us=10000, pixel_format=PixelFormat.PACKED10),
+            {"period_us": 10000, "exposure_us": 10000, "pixel_format": 1}),
+        _frame_entry("start_stream_rep", MsgType.START_STREAM | defs.REPLY_FLAG, 12, payloads.encode_reply(
+            MsgType.START_STREAM, first_frame=5, t_first_us=2_000_000, period_us=10000, exposure_us=10000),
+            {"first_frame": 5, "t_first_us": 2_000_000, "period_us": 10000, "exposure_us": 10000}),
+        _frame_entry("frame_push_packed10", MsgType.FRAME | defs.REPLY_FLAG, 12,
+                     payloads.encode_reply(MsgType.FRAME, payloads.encode_windows_tail(
+                         [payloads.WindowPixels(2, 1023 + 1 + 512, [1023, 1, 512]),
+                          payloads.WindowPixels(9, 7, [7])], 1),
+                         frame=7, set_frame=6, t_start_us=2_020_000, t_end_us=2_030_000, exposure_us=10000,
+                         late_sets=1, dropped=2, backpressure=1, n_pixels=4, start=0, count=2, total=2,
+                         pixel_format=1),
+                     {"frame": 7, "set_frame": 6, "t_start_us": 2_020_000, "t_end_us": 2_030_000,
+                      "exposure_us": 10000, "late_sets": 1, "dropped": 2, "backpressure": 1, "n_pixels": 4,
+                      "start": 0, "count": 2, "total": 2, "pixel_format": 1,
+                      "windows": [{"window_id": 2, "sum": 1536, "pixels": [1023, 1, 512]},
+                                  {"window_id": 9, "sum": 7, "pixels": [7]}]}),
         _frame_entry("error_rep", MsgType.ERROR, 10, payloads.encode_reply(
             MsgType.ERROR, code=ErrorCode.SPAN_OUTSIDE, request_type=MsgType.SET_WINDOWS, detail=4),
             {"code": 9, "request_type": 5, "detail": 4}),
@@ -231,7 +281,8 @@ def build() -> dict:
         {"name": "short", "frame": _raw_frame(b"\x01\x01\x00").hex(), "reason": "short"},
         {"name": "length_field", "frame": _raw_frame(_with_crc(_HDR.pack(1, 1, 5, 9) + b"abc")).hex(),
          "reason": "length"},
-        {"name": "version", "frame": encode_frame(MsgType.PING, 5, b"", version=2).hex(), "reason": "version"},
+        {"name": "version", "frame": encode_frame(MsgType.PING, 5, b"", version=defs.VERSION + 1).hex(),
+         "reason": "version"},
         {"name": "payload_byte_lost", "frame": _raw_frame(good_raw[:-6] + good_raw[-4:]).hex(), "reason": "crc"},
     ]
     f1 = encode_frame(MsgType.PING, 100, b"one")

@@ -13,24 +13,38 @@ the replies matched by sequence number, so the link is never idle between chunks
 Window pixels default to U16 on the wire: 1.6× the bytes of PACKED10, but decoding a
 10-window reply is ~10× cheaper (``bench/bench_driver.py``), and the link has room.
 
-Times: captures report MCU microseconds; the client keeps a :class:`~.timesync.ClockSync`
+Times: every reading of the host clock goes through the injected ``clock`` (``now()`` s;
+default the monotonic clock), so a simulated or recorded clock drives timeouts and sync.
+Captures report MCU microseconds; the client keeps a :class:`~.timesync.ClockSync`
 fed by TIME_SYNC exchanges (``sync()``, and automatically every ``sync_every_s``), and
 gives each capture's exposure mid-time in host monotonic seconds.
+
+A link may still carry late replies meant for an earlier client (another process, or this
+one before a restart). So the first sequence number is random (``first_seq``, else from
+the OS's random source), and TIME_SYNC sends the host time (µs) of the request and accepts
+only a reply echoing it: a stale TIME_SYNC reply can never enter the clock model.
+
+Streaming (:meth:`start_stream`): the head free-runs exposures and pushes FRAME messages;
+:meth:`next_frame` gives them as :class:`~.stream.StreamFrame` (parts assembled, mid-exposure
+in host time). :meth:`send_windows` queues a window set for a named frame without waiting
+for its reply (the reply, giving the frame it applies to, is taken in by later reads).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import time
+import secrets
 
 import numpy as np
 
+from ..clock import MONOTONIC
 from ..errors import DeviceError
 from ..protocol import MsgType, PixelFormat, Plane
 from ..protocol.defs import LIMITS, REPLY_FLAG
 from ..protocol.errors import FrameError
 from ..protocol.framing import decode_frame, encode_frame
 from ..protocol.payloads import decode_reply, encode_request, encode_spans
+from .stream import FrameAssembler, FrameQueue, StreamFrame
 from .timesync import ClockSync
 
 
@@ -57,17 +71,28 @@ class Capture:
 
 class HeadClient:
     def __init__(self, link, timeout: float = 0.5, retries: int = 2, sync: ClockSync | None = None,
-                 sync_every_s: float = 1.0, depth: int = 4):
+                 sync_every_s: float = 1.0, depth: int = 4, first_seq: int | None = None, clock=None):
         self.link = link
+        self.clock = MONOTONIC if clock is None else clock
         self.timeout = timeout
         self.retries = retries
         self.sync_state = sync or ClockSync()
         self.sync_every_s = sync_every_s
         self.depth = depth
-        self._seq = 0
+        # not 1 after every start: replies to an earlier client must not match ours. A replay
+        # link knows the sequence the recorded client drew (recorded_first_seq)
+        if first_seq is None:
+            first_seq = getattr(link, "recorded_first_seq", lambda: None)()
+        self._seq = (secrets.randbits(16) if first_seq is None else int(first_seq) - 1) & 0xFFFF
         self._last_sync = -1e300
         self.info: dict | None = None
-        self.stats = {"requests": 0, "retries": 0, "corrupt": 0, "stale": 0, "pipeline_fallbacks": 0}
+        self.stats = {"requests": 0, "retries": 0, "corrupt": 0, "stale": 0, "pipeline_fallbacks": 0,
+                      "sync_echo_mismatch": 0, "tx_bytes": 0, "rx_bytes": 0, "window_sets_rejected": 0}
+        self._stream_seq: int | None = None
+        self._assembler = FrameAssembler()
+        self._frames = FrameQueue()
+        self._async: dict[int, int] = {}          # seq -> type of requests sent without waiting
+        self.window_set_replies: list = []         # (seq, fields or exception) of send_windows
 
     # --- plumbing ---------------------------------------------------------------------------
     def _next_seq(self) -> int:
@@ -76,24 +101,61 @@ class HeadClient:
 
     def _send(self, msg_type: int, payload: bytes) -> tuple[int, float]:
         seq = self._next_seq()
-        t = self.link.send(encode_frame(msg_type, seq, payload))
+        data = encode_frame(msg_type, seq, payload)
+        t = self.link.send(data)
         self.stats["requests"] += 1
+        self.stats["tx_bytes"] += len(data)
         return seq, t
+
+    def _take_unasked(self, frame, t_rx: float, n_bytes: int) -> bool:
+        """A pushed FRAME part of our stream or the reply to a request sent without waiting:
+        taken in here (True), else False."""
+        if frame.type == (MsgType.FRAME | REPLY_FLAG) and frame.seq == self._stream_seq:
+            try:
+                f = decode_reply(frame, expect=MsgType.FRAME)
+            except DeviceError:
+                self.stats["corrupt"] += 1
+                return True
+            done = self._assembler.add(f, t_rx, n_bytes, self._to_host)
+            if done is not None:
+                self._frames.put(done)
+            return True
+        want = self._async.pop(frame.seq, None)
+        if want is None:
+            return False
+        if frame.type not in (want | REPLY_FLAG, MsgType.ERROR):
+            self._async[frame.seq] = want
+            return False
+        try:
+            self.window_set_replies.append((frame.seq, decode_reply(frame, expect=want)))
+        except DeviceError as exc:
+            self.stats["window_sets_rejected"] += 1
+            self.window_set_replies.append((frame.seq, exc))
+        del self.window_set_replies[:-16]
+        return True
+
+    def _to_host(self, mcu_us: float) -> float:
+        return self.sync_state.mcu_to_host(mcu_us) if self.sync_state.ready else float("nan")
 
     def _await(self, pending: dict, deadline: float):
         """Next reply matching one of ``pending`` {seq: type} before ``deadline``: (frame, t_rx) or None."""
         while True:
-            left = deadline - time.monotonic()
+            left = deadline - self.clock.now()
             if left <= 0:
                 return None
             got = self.link.recv(left)
             if got is None:
                 return None
             t_rx, packet = got
+            self.stats["rx_bytes"] += len(packet) + 1
             try:
                 frame = decode_frame(packet)
             except FrameError:
                 self.stats["corrupt"] += 1
+                continue
+            if self._take_unasked(frame, t_rx, len(packet) + 1):
+                if not pending and len(self._frames):
+                    return None           # next_frame: a streamed frame is complete
                 continue
             want = pending.get(frame.seq)
             if want is None or frame.type not in (want | REPLY_FLAG, MsgType.ERROR):
@@ -110,7 +172,7 @@ class HeadClient:
             if attempt:
                 self.stats["retries"] += 1
             seq, t_send = self._send(msg_type, payload)
-            got = self._await({seq: int(msg_type)}, time.monotonic() + timeout)
+            got = self._await({seq: int(msg_type)}, self.clock.now() + timeout)
             if got is not None:
                 frame, t_rx = got
                 return decode_reply(frame, expect=msg_type), t_send, t_rx
@@ -140,9 +202,59 @@ class HeadClient:
     def set_gain(self, gain_x16: int) -> int:
         return self.request(MsgType.SET_GAIN, encode_request(MsgType.SET_GAIN, gain_x16=gain_x16))[0]["gain_x16"]
 
-    def set_windows(self, spans) -> dict:
-        """Replace the window set with row spans (N×4 ``[window_id, row, col_start, col_stop)``)."""
-        return self.request(MsgType.SET_WINDOWS, encode_spans(spans))[0]
+    def set_windows(self, spans, frame: int = 0) -> dict:
+        """Replace the window set with row spans (N×4 ``[window_id, row, col_start, col_stop)``);
+        while streaming, from stream frame ``frame`` on (reply ``frame``: the first frame using it)."""
+        return self.request(MsgType.SET_WINDOWS, encode_spans(spans, frame=frame))[0]
+
+    # --- streaming ------------------------------------------------------------------------------
+    def start_stream(self, period_us: int, exposure_us: int, pixel_format: int = PixelFormat.PACKED10) -> dict:
+        """Free-running exposures every ``period_us`` (µs) of ``exposure_us``; frames come from
+        :meth:`next_frame`. Returns the reply (``first_frame``, ``t_first_us``, …)."""
+        self.maybe_sync()
+        payload = encode_request(MsgType.START_STREAM, period_us=period_us, exposure_us=exposure_us,
+                                 pixel_format=pixel_format)
+        for _ in range(self.retries + 1):
+            seq, _ = self._send(MsgType.START_STREAM, payload)
+            self._stream_seq = seq            # its pushed frames may come before the reply
+            self._assembler = FrameAssembler()
+            got = self._await({seq: int(MsgType.START_STREAM)}, self.clock.now() + self.timeout)
+            if got is not None:
+                f = decode_reply(got[0], expect=MsgType.START_STREAM)
+                self._exposure_s = f["exposure_us"] * 1e-6
+                return f
+            self.stats["retries"] += 1
+        self._stream_seq = None
+        raise HeadTimeoutError(f"head on {getattr(self.link, 'url', '?')}: START_STREAM unanswered")
+
+    def stop_stream(self) -> dict:
+        """End the stream; returns its counters (frames, last_frame, dropped, late_sets, backpressure)."""
+        f = self.request(MsgType.STOP_STREAM)[0]
+        self._stream_seq = None
+        return f
+
+    def send_windows(self, spans, frame: int) -> int:
+        """SET_WINDOWS for stream frame ``frame`` without waiting for the reply; returns its seq.
+        Replies (or the firmware error of a rejected set) land in ``window_set_replies``."""
+        seq, _ = self._send(MsgType.SET_WINDOWS, encode_spans(spans, frame=frame))
+        self._async[seq] = int(MsgType.SET_WINDOWS)
+        if len(self._async) > 64:                 # replies lost on the link: forget the oldest
+            del self._async[next(iter(self._async))]
+        return seq
+
+    def next_frame(self, timeout: float) -> StreamFrame | None:
+        """The next complete streamed frame, or None after ``timeout`` s without one."""
+        fr = self._frames.get()
+        if fr is not None:
+            return fr
+        self._await({}, self.clock.now() + timeout)   # takes in pushed parts and async replies
+        return self._frames.get()
+
+    @property
+    def stream_stats(self) -> dict:
+        """Client-side stream counters: frames given up (parts lost), bad parts, queue overflow."""
+        a = self._assembler
+        return {"given_up": a.given_up, "bad_parts": a.bad_parts, "queue_overflow": self._frames.overflow}
 
     def sync(self, n: int = 8) -> ClockSync:
         """``n`` TIME_SYNC exchanges into the clock model."""
@@ -151,17 +263,25 @@ class HeadClient:
         return self.sync_state
 
     def _sync_once(self) -> None:
-        seq, t1 = self._send(MsgType.TIME_SYNC, encode_request(MsgType.TIME_SYNC, host_us=0))
-        got = self._await({seq: int(MsgType.TIME_SYNC)}, time.monotonic() + self.timeout)
-        if got is None:
-            return  # a lost exchange is just not used
-        frame, t4 = got
-        f = decode_reply(frame, expect=MsgType.TIME_SYNC)
+        host_us = int(self.clock.now() * 1e6) & 0xFFFFFFFFFFFFFFFF
+        seq, t1 = self._send(MsgType.TIME_SYNC, encode_request(MsgType.TIME_SYNC, host_us=host_us))
+        deadline = self.clock.now() + self.timeout
+        while True:
+            got = self._await({seq: int(MsgType.TIME_SYNC)}, deadline)
+            if got is None:
+                return  # a lost exchange is just not used
+            frame, t4 = got
+            f = decode_reply(frame, expect=MsgType.TIME_SYNC)
+            if f["host_us"] == host_us:
+                break
+            # the seq matched but the echo is another request's: a late reply to someone else
+            self.stats["sync_echo_mismatch"] += 1
+            self.stats["stale"] += 1
         self.sync_state.add(t1, f["mcu_rx_us"], f["mcu_tx_us"], t4)
-        self._last_sync = time.monotonic()
+        self._last_sync = self.clock.now()
 
     def maybe_sync(self, n: int = 2) -> None:
-        if time.monotonic() - self._last_sync >= self.sync_every_s:
+        if self.clock.now() - self._last_sync >= self.sync_every_s:
             self.sync(n)
 
     def capture(self, fetch: bool = True, pixel_format: int = PixelFormat.U16, dark: bool = False) -> Capture:
@@ -188,7 +308,7 @@ class HeadClient:
             seqs[self._send(msg, payload)[0]] = int(msg)
         pending = dict(seqs)
         replies = {}
-        deadline = time.monotonic() + self.timeout + self._exposure_s
+        deadline = self.clock.now() + self.timeout + self._exposure_s
         while pending:
             got = self._await(pending, deadline)
             if got is None:
@@ -267,7 +387,7 @@ class HeadClient:
                                          plane=plane)
                 seq, _ = self._send(MsgType.FULL_FRAME, payload)
                 inflight[seq] = off
-            got = self._await(dict.fromkeys(inflight, int(MsgType.FULL_FRAME)), time.monotonic() + self.timeout)
+            got = self._await(dict.fromkeys(inflight, int(MsgType.FULL_FRAME)), self.clock.now() + self.timeout)
             if got is None:  # every chunk still in flight is re-requested (bounded)
                 for off in inflight.values():
                     attempts[off] += 1

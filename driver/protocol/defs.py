@@ -3,7 +3,7 @@ by ``python -m gyrostar.fwtools.protogen --write``. Do not edit."""
 
 from enum import IntEnum
 
-VERSION = 1
+VERSION = 2
 HEADER_SIZE = 6
 CRC_SIZE = 4
 REPLY_FLAG = 128
@@ -23,6 +23,10 @@ LIMITS = {
     'gain_min_x16': 16,
     'gain_max_x16': 128,
     'gain_default_x16': 16,
+    'stream_period_min_us': 1000,
+    'stream_period_max_us': 1000000,
+    'stream_pending_sets': 2,
+    'stream_tx_backlog_max': 256,
 }
 
 
@@ -55,6 +59,9 @@ class MsgType(IntEnum):
     TIME_SYNC = 0x0A
     TELEMETRY = 0x0B
     RESET = 0x0C
+    START_STREAM = 0x0D
+    STOP_STREAM = 0x0E
+    FRAME = 0x0F
     ERROR = 0xFF
 
 
@@ -86,6 +93,8 @@ class ErrorCode(IntEnum):
     SENSOR_IO = 23
     SENSOR_BUSY = 24
     RESERVED_NONZERO = 25
+    STREAM_PERIOD = 26
+    STREAMING = 27
 
 
 ERROR_TEXT = {
@@ -114,6 +123,8 @@ ERROR_TEXT = {
     ErrorCode.SENSOR_IO: 'the sensor array could not be read',
     ErrorCode.SENSOR_BUSY: 'no stable sensor frame (the frame kept changing during readout)',
     ErrorCode.RESERVED_NONZERO: 'a reserved field is not zero',
+    ErrorCode.STREAM_PERIOD: 'stream period outside the limits or shorter than the exposure',
+    ErrorCode.STREAMING: 'not available while the head streams (STOP_STREAM first)',
 }
 
 # (struct format without byte-order prefix, field names) of each payload's fixed part.
@@ -128,8 +139,8 @@ REQUEST_LAYOUT = {
     MsgType.SET_GAIN: ('H', (
         'gain_x16',
     )),
-    MsgType.SET_WINDOWS: ('HH', (
-        'n_spans', 'reserved',
+    MsgType.SET_WINDOWS: ('HHI', (
+        'n_spans', 'reserved', 'frame',
     )),
     MsgType.CAPTURE: ('', (
     )),
@@ -148,6 +159,11 @@ REQUEST_LAYOUT = {
     )),
     MsgType.RESET: ('', (
     )),
+    MsgType.START_STREAM: ('IIBBH', (
+        'period_us', 'exposure_us', 'pixel_format', 'reserved', 'reserved2',
+    )),
+    MsgType.STOP_STREAM: ('', (
+    )),
 }
 REPLY_LAYOUT = {
     MsgType.PING: ('', (
@@ -164,8 +180,8 @@ REPLY_LAYOUT = {
     MsgType.SET_GAIN: ('H', (
         'gain_x16',
     )),
-    MsgType.SET_WINDOWS: ('HHI', (
-        'n_windows', 'n_spans', 'n_pixels',
+    MsgType.SET_WINDOWS: ('HHII', (
+        'n_windows', 'n_spans', 'n_pixels', 'frame',
     )),
     MsgType.CAPTURE: ('IIQQIHHIBBH', (
         'capture_no', 'sensor_frame', 't_start_us', 't_end_us', 'exposure_us', 'gain_x16',
@@ -190,6 +206,16 @@ REPLY_LAYOUT = {
     )),
     MsgType.RESET: ('', (
     )),
+    MsgType.START_STREAM: ('IQII', (
+        'first_frame', 't_first_us', 'period_us', 'exposure_us',
+    )),
+    MsgType.STOP_STREAM: ('IIIII', (
+        'frames', 'last_frame', 'dropped', 'late_sets', 'backpressure',
+    )),
+    MsgType.FRAME: ('IIQQIIIIIHHHBB', (
+        'frame', 'set_frame', 't_start_us', 't_end_us', 'exposure_us', 'late_sets', 'dropped',
+        'backpressure', 'n_pixels', 'start', 'count', 'total', 'pixel_format', 'reserved',
+    )),
     MsgType.ERROR: ('HBBI', (
         'code', 'request_type', 'reserved', 'detail',
     )),
@@ -199,4 +225,5 @@ TAIL = {
     MsgType.SET_WINDOWS: 'spans',
     MsgType.WINDOW_DATA: 'windows',
     MsgType.FULL_FRAME: 'pixels',
+    MsgType.FRAME: 'windows',
 }

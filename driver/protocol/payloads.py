@@ -2,7 +2,7 @@
 
 Fixed parts follow ``defs.REQUEST_LAYOUT`` / ``defs.REPLY_LAYOUT`` (little-endian);
 variable tails: PING ``echo`` bytes, SET_WINDOWS ``spans`` (N×4 int array of
-``[window_id, row, col_start, col_stop)``), WINDOW_DATA ``windows`` (list of
+``[window_id, row, col_start, col_stop)``), WINDOW_DATA and FRAME ``windows`` (list of
 :class:`WindowPixels`), FULL_FRAME ``pixels`` (uint16 array).
 """
 
@@ -55,12 +55,13 @@ def encode_request(msg_type: int, tail: bytes = b"", **fields) -> bytes:
         raise ProtocolUsageError(f"{msg_type.name}: a field does not fit its type ({exc})") from None
 
 
-def encode_spans(spans) -> bytes:
-    """SET_WINDOWS payload for an N×4 array of ``[window_id, row, col_start, col_stop)`` rows."""
+def encode_spans(spans, frame: int = 0) -> bytes:
+    """SET_WINDOWS payload for an N×4 array of ``[window_id, row, col_start, col_stop)`` rows,
+    first used for stream frame ``frame`` (0: the next readout / at once outside a stream)."""
     arr = np.asarray(spans, dtype=np.int64).reshape(-1, 4)
     if arr.size and (arr.min() < 0 or arr.max() > 0xFFFF):
         raise ProtocolUsageError("span values must fit uint16 (0..65535)")
-    head = encode_request(MsgType.SET_WINDOWS, n_spans=len(arr))
+    head = encode_request(MsgType.SET_WINDOWS, n_spans=len(arr), frame=frame)
     return head + arr.astype("<u2").tobytes()
 
 
@@ -136,17 +137,17 @@ def _decode_windows(fields: dict, tail: bytes) -> list[WindowPixels]:
     fmt = fields["pixel_format"]
     for _ in range(fields["count"]):
         if off + _WIN_HEADER.size > len(tail):
-            raise PayloadError("WINDOW_DATA ends inside a window header")
+            raise PayloadError("window data ends inside a window header")
         wid, n, total = _WIN_HEADER.unpack_from(tail, off)
         off += _WIN_HEADER.size
         nbytes = pixel_bytes(n, fmt)
         if off + nbytes > len(tail):
-            raise PayloadError(f"WINDOW_DATA window {wid}: {n} pixels need {nbytes} bytes, "
+            raise PayloadError(f"window {wid}: {n} pixels need {nbytes} bytes, "
                                f"{len(tail) - off} left")
         out.append(WindowPixels(wid, total, decode_pixels(tail[off:off + nbytes], n, fmt)))
         off += nbytes
     if off != len(tail):
-        raise PayloadError(f"WINDOW_DATA has {len(tail) - off} bytes after its last window")
+        raise PayloadError(f"window data has {len(tail) - off} bytes after its last window")
     return out
 
 
@@ -179,7 +180,7 @@ def decode_reply(frame: Frame, expect: int | None = None) -> dict:
     tail = frame.payload[st.size:]
     if msg_type == MsgType.PING:
         fields["echo"] = bytes(tail)
-    elif msg_type == MsgType.WINDOW_DATA:
+    elif msg_type in (MsgType.WINDOW_DATA, MsgType.FRAME):
         fields["windows"] = _decode_windows(fields, tail)
     elif msg_type == MsgType.FULL_FRAME:
         n, fmt_px = fields["count"], fields["pixel_format"]

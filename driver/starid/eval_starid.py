@@ -84,40 +84,61 @@ class TrialConfig:
 
 
 def configure(parser) -> None:
+    from ..cli.argtypes import positive_float
     from ..cli.main import add_json
 
     d = TrialConfig()
-    parser.add_argument("--method", choices=METHODS, default=d.method)
-    parser.add_argument("--preset", default=d.preset, help="camera preset (qian2015, xing2012)")
+    parser.add_argument("--method", choices=METHODS, default=d.method,
+                        help="identifier under test (default %(default)s)")
+    parser.add_argument("--preset", default=d.preset, help="camera preset: qian2015, xing2012 (default %(default)s)")
     parser.add_argument("--fov-deg", type=float, default=0.0,
-                        help="square camera of this full field instead of the preset (with --pixels)")
-    parser.add_argument("--pixels", type=int, default=d.pixels, help="pixels across, with --fov-deg")
-    parser.add_argument("--catalog", choices=("hip2", "gaia"), default=d.catalog)
-    parser.add_argument("--mag-limit", type=float, default=d.mag_limit, help="sensor limiting V")
+                        help="square camera of this full field, deg, instead of the preset (with --pixels; "
+                             "default 0: the preset's)")
+    parser.add_argument("--pixels", type=int, default=d.pixels,
+                        help="pixels across, with --fov-deg (default %(default)s)")
+    parser.add_argument("--catalog", choices=("hip2", "gaia"), default=d.catalog,
+                        help="star catalog (default %(default)s)")
+    parser.add_argument("--mag-limit", type=float, default=d.mag_limit,
+                        help="sensor limiting V magnitude (default %(default)s)")
     parser.add_argument("--per-field", type=int, default=-1,
-                        help="navigation stars per field for Pyramid (-1: 12 for gaia, all for hip2)")
-    parser.add_argument("--position-noise-px", type=float, default=d.pos_noise_px)
-    parser.add_argument("--mag-noise", type=float, default=d.mag_noise)
-    parser.add_argument("--catalog-position-noise-px", type=float, default=d.cat_pos_noise_px)
-    parser.add_argument("--catalog-mag-noise", type=float, default=d.cat_mag_noise)
-    parser.add_argument("--false-stars", type=int, default=0)
-    parser.add_argument("--update-period-s", type=float, default=d.update_period_s)
-    parser.add_argument("--rate-dps", type=float, default=d.rate_dps, help="largest body rate (°/s)")
-    parser.add_argument("--gyro-bias-dph", type=float, default=d.bias_dph)
-    parser.add_argument("--gyro-random-dph", type=float, default=d.random_dph)
+                        help="navigation stars per field for Pyramid (default -1: 12 for gaia, all for hip2)")
+    parser.add_argument("--position-noise-px", type=float, default=d.pos_noise_px,
+                        help="Gaussian centroid noise per axis, px (default %(default)s)")
+    parser.add_argument("--mag-noise", type=float, default=d.mag_noise,
+                        help="Gaussian noise on measured magnitudes, mag (default %(default)s)")
+    parser.add_argument("--catalog-position-noise-px", type=float, default=d.cat_pos_noise_px,
+                        help="Gaussian noise on catalog positions, px equivalent (default %(default)s)")
+    parser.add_argument("--catalog-mag-noise", type=float, default=d.cat_mag_noise,
+                        help="Gaussian noise on catalog magnitudes, mag (default %(default)s)")
+    parser.add_argument("--false-stars", type=int, default=0,
+                        help="spurious spots added per field (default %(default)s)")
+    parser.add_argument("--update-period-s", type=float, default=d.update_period_s,
+                        help="tracking: time between identifications, s (default %(default)s)")
+    parser.add_argument("--rate-dps", type=float, default=d.rate_dps,
+                        help="largest body rate, °/s (default %(default)s)")
+    parser.add_argument("--gyro-bias-dph", type=float, default=d.bias_dph,
+                        help="tracking: gyro constant drift, °/h (default %(default)s)")
+    parser.add_argument("--gyro-random-dph", type=float, default=d.random_dph,
+                        help="tracking: gyro random drift, °/h (default %(default)s)")
     parser.add_argument("--orientations", type=int, default=d.orientations,
-                        help="extended grid: catalog pattern orientations per candidate (1 = plain rule)")
-    parser.add_argument("--xi", type=int, default=d.xi, help="grid: minimum shared cells")
+                        help="extended grid: catalog pattern orientations per candidate (1 = plain rule; "
+                             "default %(default)s)")
+    parser.add_argument("--xi", type=int, default=d.xi, help="grid: minimum shared cells ξ (default %(default)s)")
     parser.add_argument("--peer", nargs="?", const="tetra3rs", default="", choices=PEERS,
                         help="pyramid: also solve every field with this peer (default tetra3rs; or cedar-solve) "
                              "in the same worker, after ours")
-    parser.add_argument("--trials", type=int, default=1000)
-    parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--scheduler", default=None, help="address of an existing Dask scheduler")
-    parser.add_argument("--workers", type=int, default=2, help="LocalCluster worker processes")
+    parser.add_argument("--trials", type=int, default=1000,
+                        help="Monte Carlo trials (per sweep point with --sweep; default %(default)s)")
+    parser.add_argument("--seed", type=int, default=1, help="random seed (default %(default)s)")
+    parser.add_argument("--scheduler", default=None, help="address of an existing Dask scheduler, e.g. tcp://host:8786 "
+                             "(default: a LocalCluster on this machine)")
+    parser.add_argument("--scheduler-timeout", type=positive_float, default=5.0, metavar="S",
+                        help="seconds to wait for --scheduler to answer (default %(default)s)")
+    parser.add_argument("--workers", type=int, default=2, help="LocalCluster worker processes (default %(default)s)")
     parser.add_argument("--sweep", choices=SWEEPS + ("all",), default=None,
-                        help="reproduce a figure of paper 001 (trials per point = --trials)")
-    parser.add_argument("--plot", default=None, help="write the sweep's figure(s) as PNG (file or folder)")
+                        help="reproduce a figure of paper 001 (trials per point = --trials; default: none)")
+    parser.add_argument("--plot", default=None,
+                        help="write the sweep's figure(s) as PNG (file or folder; default: none)")
     add_json(parser)
 
 
@@ -377,7 +398,7 @@ def summarize(chunks: list[dict]) -> dict:
 class Runner:
     """Submits trial chunks to a Dask cluster (local unless an address is given)."""
 
-    def __init__(self, scheduler: str | None, workers: int):
+    def __init__(self, scheduler: str | None, workers: int, connect_timeout_s: float = 5.0):
         try:
             from dask.distributed import Client, LocalCluster
         except ImportError as exc:
@@ -389,7 +410,13 @@ class Runner:
             logging.getLogger(name).setLevel(logging.ERROR)
         self.cluster = None
         if scheduler:
-            self.client = Client(scheduler)
+            try:
+                self.client = Client(scheduler, timeout=connect_timeout_s)
+            except (OSError, TimeoutError, ValueError) as exc:
+                from ..errors import DeviceError
+
+                raise DeviceError(f"--scheduler {scheduler}: no Dask scheduler answered within "
+                                  f"{connect_timeout_s:g} s ({type(exc).__name__})") from exc
         else:
             self.cluster = LocalCluster(n_workers=max(1, workers), threads_per_worker=1, processes=True,
                                         dashboard_address=None, silence_logs=logging.ERROR)
@@ -429,7 +456,7 @@ def run(args) -> int:
     cfg = config_from_args(args)
     if args.trials < 1:
         raise ConfigError(f"--trials must be ≥ 1, got {args.trials}")
-    runner = Runner(args.scheduler, args.workers)
+    runner = Runner(args.scheduler, args.workers, args.scheduler_timeout)
     try:
         if args.sweep:
             from .figures import run_sweeps

@@ -66,3 +66,27 @@ def preset(name: str) -> LinkPreset:
         return PRESETS[name]
     except KeyError:
         raise KeyError(f"unknown link preset {name!r}; known: {', '.join(PRESETS)}") from None
+
+
+class Wire:
+    """One direction of a link on the preset's timeline (times in s on any clock).
+
+    ``transmit(n, t)``: ``n`` bytes handed to the transmitter at ``t`` go on the wire when it
+    is free, at the sustained rate, and the receiver has the last of them ``latency_s``
+    after their wire time ends; returns that delivery time. ``busy_until`` is when the
+    transmitter is free again; ``queued_bytes(t)`` is what it still holds at ``t``.
+    """
+
+    def __init__(self, link: LinkPreset):
+        self.link = link
+        self.busy_until = float("-inf")
+        self.bytes_sent = 0
+
+    def transmit(self, n_bytes: int, t: float) -> float:
+        start = max(t, self.busy_until)
+        self.busy_until = start + n_bytes / self.link.bytes_per_s
+        self.bytes_sent += n_bytes
+        return self.busy_until + self.link.latency_s
+
+    def queued_bytes(self, t: float) -> float:
+        return max(0.0, (self.busy_until - t) * self.link.bytes_per_s)

@@ -7,6 +7,7 @@
 
 #include "gs_bytes.h"
 #include "gs_pixels.h"
+#include "gs_stream.h"
 
 #define PAYLOAD(h) ((h)->tx_raw + GS_PROTO_HEADER_SIZE)
 #define WIN_HEADER_SIZE 8u
@@ -20,6 +21,7 @@ static void reset_state(gs_head *h)
     h->capture_no = 0;
     memset(&h->cnt, 0, sizeof h->cnt);
     gs_windows_clear(&h->ws);
+    memset(&h->stream, 0, sizeof h->stream); /* frame_no goes on: frame numbers are never reused */
     gs_rx_reset(&h->rx);
     h->boot_us = h->hal->time_us(h->hal->ctx);
     if (h->hal->sensor_configure)
@@ -29,6 +31,7 @@ static void reset_state(gs_head *h)
 void gs_head_init(gs_head *h, const gs_hal *hal, uint16_t *line_buf)
 {
     h->hal = hal;
+    h->frame_no = 0;
     h->line = line_buf;
     hal->sensor_geometry(hal->ctx, &h->geom);
     if (h->geom.planes < 1u)
@@ -44,6 +47,12 @@ static void send(gs_head *h, uint8_t type, uint16_t seq, size_t len)
     if (n)
         h->hal->uart_write(h->hal->ctx, h->tx, n);
 }
+
+uint8_t *gs_head_payload(gs_head *h) { return PAYLOAD(h); }
+
+void gs_head_send(gs_head *h, uint8_t type, uint16_t seq, size_t len) { send(h, type, seq, len); }
+
+uint64_t gs_head_poll(gs_head *h) { return gs_stream_poll(h); }
 
 static void reject(gs_head *h, uint8_t req_type, uint16_t seq, uint16_t code, uint32_t detail)
 {
@@ -98,6 +107,8 @@ static int32_t cmd_set_exposure(gs_head *h, gs_fail *f, const uint8_t *q, size_t
 {
     if (n != GS_SET_EXPOSURE_REQ_SIZE)
         return FAIL(f, GS_ERR_PAYLOAD_LENGTH, n);
+    if (h->stream.on)
+        return FAIL(f, GS_ERR_STREAMING, 0);
     uint32_t us = gs_get_u32(q + GS_SET_EXPOSURE_REQ_EXPOSURE_US);
     if (us < GS_LIM_EXPOSURE_MIN_US || us > GS_LIM_EXPOSURE_MAX_US)
         return FAIL(f, GS_ERR_EXPOSURE_RANGE, us);
@@ -134,16 +145,25 @@ static int32_t cmd_set_windows(gs_head *h, gs_fail *f, const uint8_t *q, size_t 
         return FAIL(f, GS_ERR_SPAN_COUNT, count);
     if (n != GS_SET_WINDOWS_REQ_SIZE + 8u * (size_t)count)
         return FAIL(f, GS_ERR_SPANS_LENGTH, count);
-    uint32_t detail = 0;
-    uint16_t code = gs_windows_set(&h->ws, q + GS_SET_WINDOWS_REQ_SIZE, count, h->geom.width, h->geom.height,
-                                   &detail);
+    uint32_t detail = 0, applies = 0;
+    const gs_window_set *set = &h->ws;
+    uint16_t code;
+    if (h->stream.on) {
+        code = gs_stream_set_windows(h, q + GS_SET_WINDOWS_REQ_SIZE, count,
+                                     gs_get_u32(q + GS_SET_WINDOWS_REQ_FRAME), &applies, &detail);
+        set = &h->stream.pending[h->stream.n_pending ? h->stream.n_pending - 1u : 0u];
+    } else {
+        code = gs_windows_set(&h->ws, q + GS_SET_WINDOWS_REQ_SIZE, count, h->geom.width, h->geom.height, &detail);
+        if (!code)
+            h->has_capture = 0; /* the store's layout belonged to the old windows */
+    }
     if (code)
         return FAIL(f, code, detail);
-    h->has_capture = 0; /* the store's layout belonged to the old windows */
     uint8_t *p = PAYLOAD(h);
-    gs_put_u16(p + GS_SET_WINDOWS_REP_N_WINDOWS, h->ws.n_windows);
-    gs_put_u16(p + GS_SET_WINDOWS_REP_N_SPANS, h->ws.n_spans);
-    gs_put_u32(p + GS_SET_WINDOWS_REP_N_PIXELS, h->ws.n_pixels);
+    gs_put_u16(p + GS_SET_WINDOWS_REP_N_WINDOWS, set->n_windows);
+    gs_put_u16(p + GS_SET_WINDOWS_REP_N_SPANS, set->n_spans);
+    gs_put_u32(p + GS_SET_WINDOWS_REP_N_PIXELS, set->n_pixels);
+    gs_put_u32(p + GS_SET_WINDOWS_REP_FRAME, applies);
     return OK(GS_SET_WINDOWS_REP_SIZE);
 }
 
@@ -180,6 +200,11 @@ static gs_sensor_status locked_read(gs_head *h, uint8_t plane, uint32_t offset, 
     return st;
 }
 
+gs_sensor_status gs_head_read_windows(gs_head *h, uint8_t plane, uint32_t *frame_out)
+{
+    return locked_read(h, plane, 0, 0, frame_out);
+}
+
 static int32_t sensor_fail(gs_fail *f, gs_sensor_status st)
 {
     return st == GS_SENSOR_BUSY ? FAIL(f, GS_ERR_SENSOR_BUSY, 0) : FAIL(f, GS_ERR_SENSOR_IO, st);
@@ -189,6 +214,8 @@ static int32_t cmd_capture(gs_head *h, gs_fail *f, size_t n, uint8_t plane)
 {
     if (n != GS_CAPTURE_REQ_SIZE)
         return FAIL(f, GS_ERR_PAYLOAD_LENGTH, n);
+    if (h->stream.on)
+        return FAIL(f, GS_ERR_STREAMING, 0);
     if (h->ws.n_windows == 0)
         return FAIL(f, GS_ERR_NO_WINDOWS, 0);
     if (plane == GS_PLANE_DARK && h->geom.planes < 2u)
@@ -263,6 +290,8 @@ static int32_t cmd_full_frame(gs_head *h, gs_fail *f, const uint8_t *q, size_t n
 {
     if (n != GS_FULL_FRAME_REQ_SIZE)
         return FAIL(f, GS_ERR_PAYLOAD_LENGTH, n);
+    if (h->stream.on)
+        return FAIL(f, GS_ERR_STREAMING, 0);
     uint32_t offset = gs_get_u32(q + GS_FULL_FRAME_REQ_OFFSET);
     uint16_t count = gs_get_u16(q + GS_FULL_FRAME_REQ_COUNT);
     uint8_t fmt = q[GS_FULL_FRAME_REQ_PIXEL_FORMAT];
@@ -324,7 +353,8 @@ static int32_t cmd_telemetry(gs_head *h, gs_fail *f, size_t n)
     return OK(GS_TELEMETRY_REP_SIZE);
 }
 
-static int32_t dispatch(gs_head *h, gs_fail *f, uint8_t type, const uint8_t *q, size_t n, uint64_t rx_us)
+static int32_t dispatch(gs_head *h, gs_fail *f, uint8_t type, uint16_t seq, const uint8_t *q, size_t n,
+                        uint64_t rx_us)
 {
     switch (type) {
     case GS_MSG_PING:
@@ -354,6 +384,13 @@ static int32_t dispatch(gs_head *h, gs_fail *f, uint8_t type, const uint8_t *q, 
         return cmd_telemetry(h, f, n);
     case GS_MSG_RESET:
         return n == GS_RESET_REQ_SIZE ? OK(0) : FAIL(f, GS_ERR_PAYLOAD_LENGTH, n);
+    case GS_MSG_START_STREAM: {
+        size_t len = 0;
+        uint16_t code = gs_stream_start(h, q, n, seq, rx_us, &len, &f->detail);
+        return code ? FAIL(f, code, f->detail) : OK(len);
+    }
+    case GS_MSG_STOP_STREAM:
+        return n == GS_STOP_STREAM_REQ_SIZE ? OK(gs_stream_stop(h)) : FAIL(f, GS_ERR_PAYLOAD_LENGTH, n);
     default:
         return FAIL(f, GS_ERR_UNKNOWN_TYPE, 0);
     }
@@ -383,7 +420,7 @@ void gs_head_frame(gs_head *h, const uint8_t *enc, size_t n, uint64_t rx_us)
         return;
     }
     gs_fail f = {0, 0};
-    int32_t len = dispatch(h, &f, fr.type, fr.payload, fr.payload_len, rx_us);
+    int32_t len = dispatch(h, &f, fr.type, fr.seq, fr.payload, fr.payload_len, rx_us);
     if (len < 0) {
         reject(h, fr.type, fr.seq, f.code, f.detail);
         return;

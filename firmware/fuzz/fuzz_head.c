@@ -4,7 +4,8 @@
  *   mode even: the rest is raw link bytes fed to the receive stream (COBS, CRC, resync);
  *   mode odd:  the rest is a script of requests [type u8][len u16 LE][payload], each sent
  *              as a valid frame (so the dispatcher sees arbitrary payloads past the CRC);
- *              bit 1 of the mode byte flips one byte of every 7th frame; at most 64 requests.
+ *              bit 1 of the mode byte flips one byte of every 7th frame; at most 64 requests;
+ *              between requests the stream timer runs (type & 3) exposure ends.
  * Invariants checked after every input: every byte the head sent decodes as a valid frame
  * with the current protocol version, and the window table respects its limits.
  */
@@ -36,7 +37,9 @@ static void check_output(void)
         start = i + 1;
     }
     if (head.ws.n_pixels > GS_LIM_PIXEL_BUDGET || head.ws.n_windows > GS_LIM_MAX_WINDOWS ||
-        head.ws.n_spans > GS_LIM_MAX_SPANS)
+        head.ws.n_spans > GS_LIM_MAX_SPANS || head.stream.n_pending > GS_LIM_STREAM_PENDING_SETS)
+        abort();
+    if (head.stream.on && (head.stream.period_us < head.stream.exposure_us || head.stream.frame == 0))
         abort();
 }
 
@@ -76,6 +79,18 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             if (n && (mode & 2) && (k + 1u) % 7u == 0)
                 enc[n / 2] ^= 0x5A;
             gs_head_rx(&head, enc, n);
+            /* the stream's timer between requests: the low 2 bits of the type byte pick how
+             * many exposure ends pass (so START_STREAM, SET_WINDOWS for frames and FRAME
+             * pushes interleave); bit 2 of the mode byte raises the UART backlog */
+            f.tx_backlog = (mode & 4) ? GS_LIM_STREAM_TX_BACKLOG_MAX + (size_t)(type & 1u) : 0u;
+            for (unsigned t = 0; t < (type & 3u) && f.out_len < FAKE_OUT_CAP / 2u; t++) {
+                uint64_t due = gs_head_poll(&head);
+                if (due == UINT64_MAX)
+                    break;
+                if (f.now < due)
+                    f.now = due;
+                gs_head_poll(&head);
+            }
             k++;
         }
     }

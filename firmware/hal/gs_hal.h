@@ -33,6 +33,9 @@ typedef struct {
 
     /* UART: send all n bytes (the port may drop them if the link is stalled and count it). */
     void (*uart_write)(void *ctx, const uint8_t *data, size_t n);
+    /* Bytes written but not yet on the wire (the transmitter's queue); a stream drops a
+     * frame rather than queue it behind more than stream_tx_backlog_max. May be NULL (0). */
+    size_t (*uart_tx_backlog)(void *ctx);
 
     /* Sensor. A readout is bracketed by begin/end (a sequence lock): begin returns the
      * frame counter of a complete frame; end returns GS_SENSOR_OK if that frame was not

@@ -35,6 +35,8 @@ static void uart_write(void *ctx, const uint8_t *d, size_t n)
     f->out_len += n;
 }
 
+static size_t tx_backlog(void *ctx) { return ((fake_hal *)ctx)->tx_backlog; }
+
 static void geometry(void *ctx, gs_sensor_geometry *g) { *g = ((fake_hal *)ctx)->geom; }
 
 static gs_sensor_status begin(void *ctx, uint32_t *frame)
@@ -104,6 +106,7 @@ void fake_hal_init(fake_hal *f, gs_hal *hal, uint16_t width, uint16_t height, ui
     hal->time_us = time_us;
     hal->sleep_until_us = sleep_until_us;
     hal->uart_write = uart_write;
+    hal->uart_tx_backlog = tx_backlog;
     hal->sensor_geometry = geometry;
     hal->sensor_begin = begin;
     hal->sensor_read = read_px;

@@ -24,6 +24,7 @@ typedef struct {
     int exposes;              /* sensor_expose calls, with the last one's arguments */
     uint64_t expose_t_us;
     uint32_t expose_us;
+    size_t tx_backlog;        /* what uart_tx_backlog reports */
     uint8_t out[FAKE_OUT_CAP];
     size_t out_len;
 } fake_hal;

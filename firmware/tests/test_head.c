@@ -231,8 +231,8 @@ static void set_windows_rejections_change_nothing(void **state)
         big[i][1] = (uint16_t)(i % 40);
         big[i][3] = 1;
     }
-    uint8_t hdr[4] = {(uint8_t)(GS_LIM_MAX_SPANS + 1), (uint8_t)((GS_LIM_MAX_SPANS + 1) >> 8), 0, 0};
-    assert_int_equal(rig_reject(r, GS_MSG_SET_WINDOWS, hdr, 4, &d), GS_ERR_SPAN_COUNT);
+    uint8_t hdr[8] = {(uint8_t)(GS_LIM_MAX_SPANS + 1), (uint8_t)((GS_LIM_MAX_SPANS + 1) >> 8), 0, 0, 0, 0, 0, 0};
+    assert_int_equal(rig_reject(r, GS_MSG_SET_WINDOWS, hdr, 8, &d), GS_ERR_SPAN_COUNT);
     size_t len = spans_payload(q, two_windows, 5);
     assert_int_equal(rig_reject(r, GS_MSG_SET_WINDOWS, q, len - 1, &d), GS_ERR_SPANS_LENGTH);
     assert_int_equal(rig_reject(r, GS_MSG_SET_WINDOWS, q, 3, &d), GS_ERR_PAYLOAD_LENGTH);

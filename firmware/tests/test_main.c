@@ -57,17 +57,24 @@ uint16_t rig_reject(rig *r, uint8_t type, const uint8_t *payload, size_t n, uint
     return code;
 }
 
-size_t spans_payload(uint8_t *out, const uint16_t (*spans)[4], uint16_t n)
+size_t spans_payload_frame(uint8_t *out, const uint16_t (*spans)[4], uint16_t n, uint32_t frame)
 {
     out[0] = (uint8_t)n;
     out[1] = (uint8_t)(n >> 8);
     out[2] = out[3] = 0;
+    for (int k = 0; k < 4; k++)
+        out[4 + k] = (uint8_t)(frame >> (8 * k));
     for (uint16_t i = 0; i < n; i++)
         for (int k = 0; k < 4; k++) {
-            out[4 + 8 * i + 2 * k] = (uint8_t)spans[i][k];
-            out[4 + 8 * i + 2 * k + 1] = (uint8_t)(spans[i][k] >> 8);
+            out[8 + 8 * i + 2 * k] = (uint8_t)spans[i][k];
+            out[8 + 8 * i + 2 * k + 1] = (uint8_t)(spans[i][k] >> 8);
         }
-    return 4u + 8u * n;
+    return 8u + 8u * n;
+}
+
+size_t spans_payload(uint8_t *out, const uint16_t (*spans)[4], uint16_t n)
+{
+    return spans_payload_frame(out, spans, n, 0);
 }
 
 int main(int argc, char **argv)
@@ -75,6 +82,7 @@ int main(int argc, char **argv)
     const char *vectors = argc > 1 ? argv[1] : "../../proto/vectors.json";
     int failed = 0;
     failed += run_codec_tests();
+    failed += run_stream_tests(); /* before head: its last test checks every error code was seen */
     failed += run_head_tests();
     failed += run_vector_tests(vectors);
     failed += run_posix_tests();

@@ -33,10 +33,13 @@ uint16_t rig_reject(rig *r, uint8_t type, const uint8_t *payload, size_t n, uint
 int rig_feed(rig *r, const uint8_t *bytes, size_t n);
 /* Build a span table payload for SET_WINDOWS from n rows of {id,row,c0,c1}. */
 size_t spans_payload(uint8_t *out, const uint16_t (*spans)[4], uint16_t n);
+/* The same, naming the stream frame the set is for. */
+size_t spans_payload_frame(uint8_t *out, const uint16_t (*spans)[4], uint16_t n, uint32_t frame);
 
 int run_codec_tests(void);
 int run_head_tests(void);
 int run_vector_tests(const char *path);
 int run_posix_tests(void);
+int run_stream_tests(void);
 
 #endif

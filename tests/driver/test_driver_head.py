@@ -14,7 +14,7 @@ from gyrostar.attitude import quat_from_boresight
 from gyrostar.head import HeadClient
 from gyrostar.protocol import MsgType, PixelFormat, crc32c, encode_frame
 from gyrostar.protocol import errors as perr
-from gyrostar.protocol.defs import LIMITS, PING_MAX
+from gyrostar.protocol.defs import LIMITS, PING_MAX, VERSION
 from gyrostar.protocol.payloads import encode_request, encode_spans
 from gyrostar.transport import SerialLink
 
@@ -118,7 +118,7 @@ def test_ping_echo_and_limits(head):
 def test_get_info_matches_sensor(head, leg):
     info = head.get_info()
     assert (info["width"], info["height"]) == leg.image.shape[::-1]
-    assert info["proto_version"] == 1 and info["bits"] == 10 and info["planes"] == 1
+    assert info["proto_version"] == VERSION and info["bits"] == 10 and info["planes"] == 1
     for key in ("max_windows", "max_spans", "max_window_pixels", "pixel_budget", "frame_chunk_max"):
         assert info[key] == LIMITS[key]
 
@@ -137,7 +137,8 @@ def test_exposure_and_gain(head):
 def test_windows_capture_pixels_and_times(head, leg):
     spans = spans_grid()
     rep = head.set_windows(spans)
-    assert rep == {"n_windows": 10, "n_spans": len(spans), "n_pixels": int((spans[:, 3] - spans[:, 2]).sum())}
+    assert rep == {"n_windows": 10, "n_spans": len(spans), "n_pixels": int((spans[:, 3] - spans[:, 2]).sum()),
+                   "frame": 0}
     head.set_exposure(20_000)
     head.sync(16)
     for fmt in (PixelFormat.PACKED10, PixelFormat.U16):
@@ -196,7 +197,7 @@ def test_request_rejections(head):
     with pytest.raises(perr.DarkUnavailableError):
         head.capture(dark=True)
     with pytest.raises(perr.SpanCountError):
-        head.request(MsgType.SET_WINDOWS, encode_request(MsgType.SET_WINDOWS, n_spans=LIMITS["max_spans"] + 1))
+        head.request(MsgType.SET_WINDOWS, encode_request(MsgType.SET_WINDOWS, n_spans=LIMITS["max_spans"] + 1, frame=0))
     with pytest.raises(perr.SpansLengthError):
         head.request(MsgType.SET_WINDOWS, encode_spans(spans_grid(1, 2))[:-8])
     with pytest.raises(perr.PayloadLengthError):
@@ -233,9 +234,9 @@ def _reply_to(head, data, seq):
 def test_link_level_rejections_and_corrupt_frames(head):
     from gyrostar.protocol.payloads import decode_reply
 
-    for data, error in ((_raw_frame(2, MsgType.PING, 900, 0, b""), perr.BadVersionError),
-                        (_raw_frame(1, MsgType.PING, 900, 5, b"ab"), perr.FrameLengthError),
-                        (_raw_frame(1, 0x42, 900, 0, b""), perr.UnknownTypeError)):
+    for data, error in ((_raw_frame(VERSION + 1, MsgType.PING, 900, 0, b""), perr.BadVersionError),
+                        (_raw_frame(VERSION, MsgType.PING, 900, 5, b"ab"), perr.FrameLengthError),
+                        (_raw_frame(VERSION, 0x42, 900, 0, b""), perr.UnknownTypeError)):
         frame = _reply_to(head, data, 900)
         with pytest.raises(error):
             decode_reply(frame)
@@ -338,3 +339,115 @@ def test_pipelined_capture_under_request_corruption_never_returns_the_old_window
         assert faults.injected["corrupt"] > 0 and head.stats["pipeline_fallbacks"] > 0
     finally:
         link.close()
+
+
+# --- streaming -------------------------------------------------------------------------------
+def _window_truth(image, spans, w):
+    rows = spans[spans[:, 0] == w.window_id]
+    return np.concatenate([image[r, c0:c1] for _, r, c0, c1 in rows])
+
+
+def test_stream_frames_follow_the_timer_back_to_back(head, leg):
+    """Frames come unasked, numbered in sequence, one exposure every period with no gap
+    (frame k+1 integrates while k is read), pixels equal to the sensor's."""
+    spans = spans_grid(n_windows=6, rows=8, width=10)
+    head.set_windows(spans)
+    head.sync(8)
+    rep = head.start_stream(10_000, 10_000, PixelFormat.PACKED10)
+    got = []
+    try:
+        while len(got) < 40:
+            fr = head.next_frame(0.5)
+            assert fr is not None, f"no frame after {len(got)}"
+            got.append(fr)
+        with pytest.raises(perr.StreamingError):
+            head.capture()
+    finally:
+        stop = head.stop_stream()
+    ks = np.array([f.frame for f in got])
+    # in sequence; a frame the head could not serve in time (this machine is shared) is a
+    # gap that its dropped counter accounts for, never a silent one
+    assert ks[0] - rep["first_frame"] == got[0].dropped and np.all(np.diff(ks) >= 1)
+    assert got[-1].dropped == (ks[-1] - ks[0] + 1 - len(ks)) + got[0].dropped
+    assert got[-1].dropped <= 2 and got[-1].backpressure == 0
+    starts = np.array([f.t_start_us for f in got])
+    assert np.all(np.abs(np.diff(starts) - 10_000 * np.diff(ks)) <= 1)      # on the head's timer grid
+    assert all(f.t_end_us - f.t_start_us == pytest.approx(10_000, abs=1) for f in got)
+    assert stop["frames"] >= 40 and stop["dropped"] >= got[-1].dropped
+    image = leg.expected(10_000)
+    for f in got[::7]:
+        assert [w.window_id for w in f.windows] == list(range(6))
+        for w in f.windows:
+            assert np.array_equal(w.pixels, _window_truth(image, spans, w))
+    # frames arrive after their exposure ends, soon (unpaced pty): mid-exposure in host time
+    lag = np.array([f.t_rx - f.t_mid_host for f in got])
+    assert np.all(lag > 0.005) and np.median(lag) < 0.05
+    assert head.next_frame(0.05) is None or head.next_frame(0.05) is None   # the stream has stopped
+
+
+def test_stream_window_sets_for_named_frames_and_late_ones(head, leg):
+    a = spans_grid(n_windows=2, rows=4, width=8, row0=100)
+    b = spans_grid(n_windows=3, rows=4, width=8, row0=400)
+    c = spans_grid(n_windows=4, rows=4, width=8, row0=700)
+    head.set_windows(a)
+    rep = head.start_stream(10_000, 10_000, PixelFormat.U16)
+    try:
+        k = rep["first_frame"]
+        head.send_windows(b, k + 5)                  # well ahead: used from frame k+5 exactly
+        frames = [head.next_frame(0.5) for _ in range(8)]
+        head.send_windows(c, frames[-1].frame)        # a frame already read: late
+        more = [head.next_frame(0.5) for _ in range(4)]
+    finally:
+        head.stop_stream()
+    by_k = {f.frame: f for f in frames + more}
+    assert len(by_k[k + 4].windows) == 2 and by_k[k + 4].set_frame == 0
+    assert len(by_k[k + 5].windows) == 3 and by_k[k + 5].set_frame == k + 5
+    late = [f for f in more if len(f.windows) == 4]
+    assert late and late[0].set_frame == frames[-1].frame and late[0].late_sets == 1
+    assert more[0].late_sets in (0, 1)
+    replies = [r for _, r in head.window_set_replies]
+    assert replies[-2]["frame"] == k + 5
+    assert replies[-1]["frame"] == late[0].frame     # the head said where the late set went
+
+
+def test_stream_start_rejections(head):
+    with pytest.raises(perr.StreamPeriodError) as exc:
+        head.start_stream(9_000, 10_000)
+    assert exc.value.detail == 9_000
+    with pytest.raises(perr.ExposureRangeError):
+        head.start_stream(10_000, 5)
+    assert head.stop_stream()["frames"] >= 0          # idle STOP_STREAM is fine
+
+
+def test_new_client_ignores_late_replies_meant_for_an_earlier_one(leg):
+    """The defect: an earlier client's TIME_SYNC replies still on the link matched a new
+    client's first sequence numbers (both started at 1, host_us always 0), and the clock
+    offset came out by the replies' age (251 ms in the report). The new client must only
+    accept a TIME_SYNC reply echoing its own request's host time."""
+    import os
+    import tty
+
+    old = os.open(leg.path, os.O_RDWR | os.O_NOCTTY)   # an old client that goes away
+    try:
+        tty.setraw(old)
+        os.write(old, encode_frame(MsgType.SET_WINDOWS, 100, encode_spans(spans_grid(1, 2))))
+        os.write(old, encode_frame(MsgType.SET_EXPOSURE, 101, encode_request(MsgType.SET_EXPOSURE,
+                                                                             exposure_us=250_000)))
+        os.write(old, encode_frame(MsgType.CAPTURE, 102))   # the head is busy for 250 ms
+        for seq in range(1, 9):   # then answers these, late: seq from 1, host_us = 0
+            os.write(old, encode_frame(MsgType.TIME_SYNC, seq, encode_request(MsgType.TIME_SYNC, host_us=0)))
+    finally:
+        os.close(old)
+    link = SerialLink(leg.path)   # a new client, while the old replies are still to come
+    try:
+        client = HeadClient(link, timeout=1.0, first_seq=1)   # the worst case: the same seqs
+        client.sync(8)
+        client.set_exposure(10_000)
+        err = client.sync_state.offset_at(time.monotonic()) - leg.true_offset_us(time.monotonic())
+        assert abs(err) < 1000.0, f"clock offset {err / 1e3:.1f} ms wrong"
+        assert client.stats["sync_echo_mismatch"] + client.stats["stale"] >= 1, (client.stats, err)
+    finally:
+        link.close()
+    # without first_seq the first sequence number is random, not 1
+    firsts = {HeadClient(link, first_seq=None)._seq for _ in range(8)}
+    assert len(firsts) > 1

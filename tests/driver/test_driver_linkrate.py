@@ -1,7 +1,6 @@
 """Line-rate model against hand-computed wire times (8N1 = 10 bits per byte)."""
 
 import pytest
-
 from gyrostar.transport.linkrate import PRESETS, preset
 
 

@@ -123,7 +123,7 @@ def test_every_error_code_has_a_class_and_vector():
         assert issubclass(cls, DeviceError) and cls.code == code
     # codes not reachable by one request on a fresh head are covered by the C tests
     stateful = {"SPAN_OUTSIDE", "NO_CAPTURE", "WINDOW_INDEX", "PIXEL_FORMAT", "DARK_UNAVAILABLE",
-                "SENSOR_IO", "SENSOR_BUSY"}
+                "SENSOR_IO", "SENSOR_BUSY", "STREAMING"}
     assert {c.name for c in ErrorCode} - stateful <= names
 
 
@@ -159,7 +159,9 @@ def test_pack10_bit_layout_by_hand():
 
 def test_spans_roundtrip_and_bad_input():
     spans = np.array([[0, 10, 5, 11], [0, 11, 6, 12], [4, 3, 0, 6]], dtype=np.int32)
-    assert (payloads.decode_spans(payloads.encode_spans(spans)[4:]) == spans).all()
+    assert (payloads.decode_spans(payloads.encode_spans(spans, frame=9)[8:]) == spans).all()
+    assert payloads.decode_request(decode_frame(encode_frame(MsgType.SET_WINDOWS, 1, payloads.encode_spans(
+        spans, frame=9))[:-1]))["frame"] == 9
     with pytest.raises(errors.ProtocolUsageError):
         payloads.encode_spans([[0, 0, 0, 70000]])
     with pytest.raises(errors.ProtocolUsageError):

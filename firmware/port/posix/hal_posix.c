@@ -8,6 +8,7 @@
 #include <pty.h>
 #include <stdio.h>
 #include <string.h>
+#include <sys/ioctl.h>
 #include <sys/mman.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
@@ -52,6 +53,17 @@ static void uart_write(void *ctx, const uint8_t *data, size_t n)
         p->tx_dropped += (uint32_t)(n - done); /* nobody is reading: drop, do not hang */
         return;
     }
+}
+
+/* Bytes written to the pty but not yet read by the other end (a paced link relay reads
+ * them only as fast as the line carries them): the UART's transmit queue. */
+static size_t uart_tx_backlog(void *ctx)
+{
+    gs_posix *p = ctx;
+    int n = 0;
+    if (ioctl(p->slave, FIONREAD, &n) != 0 || n < 0)
+        return 0;
+    return (size_t)n;
 }
 
 static uint32_t load_u32(const uint8_t *map, size_t off)
@@ -312,6 +324,7 @@ void gs_posix_hal(gs_posix *p, gs_hal *hal)
     hal->time_us = gs_posix_time_us;
     hal->sleep_until_us = sleep_until_us;
     hal->uart_write = uart_write;
+    hal->uart_tx_backlog = uart_tx_backlog;
     hal->sensor_geometry = geometry;
     hal->sensor_begin = sensor_begin;
     hal->sensor_read = sensor_read;

@@ -18,6 +18,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 #include <unistd.h>
 
 #include "gs_head.h"
@@ -124,7 +125,12 @@ int main(int argc, char **argv)
     uint32_t dropped = 0;
     while (!g_stop) {
         struct pollfd pfd = {g_port.master, POLLIN, 0};
-        int r = poll(&pfd, 1, 500);
+        uint64_t due = gs_head_poll(&g_head); /* stream timer work; next due time */
+        uint64_t wait_us = 500000u, now = gs_posix_time_us(&g_port);
+        if (due != UINT64_MAX)
+            wait_us = due > now ? (due - now < wait_us ? due - now : wait_us) : 0u;
+        struct timespec ts = {(time_t)(wait_us / 1000000u), (long)(wait_us % 1000000u) * 1000L};
+        int r = ppoll(&pfd, 1, &ts, NULL);
         if (r < 0 && errno != EINTR)
             break;
         if (r == 0 && watch_parent > 0 && getppid() != watch_parent)
