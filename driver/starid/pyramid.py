@@ -35,7 +35,8 @@ star multiplies by ρ ε²/(π sin φ_r) and by the n − 3 spots that could hav
 every further labelled star by ρ' δ²/4 (δ = label_tol, a random spot landing on a star;
 ρ' counts every indexed star, not only navigation stars). ``p_false`` reported is that
 product times the number of triangles tried (a union bound over the search); the search
-stops when no triangle could still pass even in the sparsest sky with every spot labelled.
+skips a triangle that could not pass even in a sparse sky (the 5th percentile of the star
+density) with every spot labelled: that costs success only, never safety.
 A 3-star field is accepted on a unique triangle when E₃ allows it.
 """
 
@@ -261,7 +262,7 @@ def _search(b, vec, vmag, is_nav, pt, pa, pb, kv, km, kq, vstart, vstars, vvec, 
             status):
     """Pyramid search over one navigation-star tier (pair table ``pt/pa/pb`` with its k-vector,
     ``is_nav``/``nnav`` its stars, ``nloc`` their local density as an all-sky count and ``nmin``
-    its least value; only the brightest ``max_spots`` spots form pyramids);
+    its 5th percentile (early rejection only); only the brightest ``max_spots`` spots form pyramids);
     ``tried``/``status`` carry over from earlier tiers.
     Returns ``(match (n,), q (4,), p_false, status, triangles_tried)``."""
     n = b.shape[0]
@@ -297,7 +298,7 @@ def _search(b, vec, vmag, is_nav, pt, pa, pb, kv, km, kq, vstart, vstars, vvec, 
                     sin_k = max(_sin_vertex(b[k], b[i], b[j]), 0.05)
                     # E₃ with the local density ρ (an all-sky count) for the stars around x
                     g3 = nnav * eps ** 3 * np.sin(tij) / (np.pi * sin_k)
-                    # early rejection: even in the sparsest sky, with the best-placed confirming star
+                    # early rejection: even in a sparse sky (5th percentile), with the best-placed confirming star
                     # and every other spot labelled, this triangle's pyramid could not pass the bound
                     if n == 3:
                         best = g3 * nmin * nmin * (tried + 1)
@@ -393,7 +394,7 @@ def pyramid_core(b, vec, vmag, tiers, lab_nloc, vstart, vstars, vvec, vh, vg, ep
     """Numba core. ``b`` (n,3) body unit vectors, brightest first; ``mark`` int32 (N,) zeros (work, left zeroed).
 
     ``tiers``: tuple of navigation-star tiers, searched in order, each
-    ``(is_nav, pair_theta, pair_a, pair_b, kv, nloc, (kv_m, kv_q, n_nav, max_spots, nloc_min))``
+    ``(is_nav, pair_theta, pair_a, pair_b, kv, nloc, (kv_m, kv_q, n_nav, max_spots, nloc_p5))``
     over the same star numbering (a thinned tier of the brightest stars per field, on the brightest few
     spots, first; then all stars on all spots).
     Adaptive spot budget: triangles and confirming stars come from the brightest
@@ -592,7 +593,7 @@ class Pyramid:
         dens = [local_density(t) for t in tiers]
         self._tiers = tuple((t.is_nav, t.pair_theta, t.pair_a, t.pair_b, t.kv, d,
                              (float(t.kv_m), float(t.kv_q), float(np.count_nonzero(t.is_nav)), cap,
-                              float(d[t.is_nav].min())))
+                              float(np.percentile(d[t.is_nav], 5))))
                             for t, cap, d in zip(tiers, caps, dens))
         # every indexed star (labels): the full tier's navigation density scaled to all stars
         self._lab_nloc = dens[-1] * (len(self.index) / np.count_nonzero(self.index.is_nav))
