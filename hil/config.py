@@ -45,6 +45,9 @@ class HeadConfig:
             raise ValueError("head.kind = 'serial' needs head.url (e.g. /dev/ttyACM0)")
         if not 0 < self.exposure_ms <= 100:
             raise ValueError(f"head.exposure_ms {self.exposure_ms} outside (0, 100]")
+        if self.baudrate <= 0 or self.timeout_s <= 0 or self.retries < 0:
+            raise ValueError(f"head.baudrate ({self.baudrate}) and head.timeout_s ({self.timeout_s}) must be > 0, "
+                             f"head.retries ({self.retries}) ≥ 0")
 
 
 @dataclass
@@ -61,10 +64,50 @@ class GyroConfig:
     fifo_watermark: int = 1
 
     def validate(self):
-        if self.odr_hz not in (100, 200, 400, 800, 1000, 2000):
-            raise ValueError(f"gyro.odr_hz {self.odr_hz} is not an ODR the drivers support")
+        """Every value the chosen part accepts, from its driver's own tables."""
+        part = gyro_part(self.model)
+        if self.odr_hz not in part.odrs_hz:
+            raise ValueError(f"gyro.odr_hz = {self.odr_hz}: the {part.name} supports {list(part.odrs_hz)} Hz")
+        if self.range_dps not in part.ranges_dps:
+            raise ValueError(f"gyro.range_dps = {self.range_dps}: the {part.name} supports "
+                             f"±{list(part.ranges_dps)} °/s")
+        if not 1 <= self.fifo_watermark <= part.max_watermark:
+            raise ValueError(f"gyro.fifo_watermark = {self.fifo_watermark}: the {part.name} FIFO takes "
+                             f"1..{part.max_watermark} frames")
+        if self.kind == "i2c" and self.i2c_address not in part.i2c_addresses:
+            raise ValueError(f"gyro.i2c_address = 0x{self.i2c_address:02x}: the {part.name} answers at "
+                             f"{', '.join(f'0x{a:02x}' for a in part.i2c_addresses)}")
         if not 0x03 <= self.i2c_address <= 0x77:
             raise ValueError(f"gyro.i2c_address 0x{self.i2c_address:x} outside 0x03..0x77")
+        if self.spi_hz <= 0:
+            raise ValueError(f"gyro.spi_hz = {self.spi_hz} must be > 0")
+
+
+@dataclass(frozen=True)
+class GyroPart:
+    """The settings a gyro part accepts, as its driver declares them."""
+
+    name: str
+    odrs_hz: tuple[int, ...]
+    ranges_dps: tuple[int, ...]
+    max_watermark: int
+    i2c_addresses: tuple[int, ...]
+
+
+def gyro_part(model: str) -> GyroPart:
+    """The legal ODRs, ranges, FIFO watermarks and I2C addresses of ``model``, read from the
+    driver module's tables (:mod:`gyrostar.gyro.bmi088`, :mod:`gyrostar.gyro.l3gd20h`)."""
+    if model == "bmi088":
+        from ..gyro import bmi088 as m
+
+        return GyroPart("BMI088", tuple(sorted({odr for odr, _ in m.BANDWIDTHS.values()})),
+                        tuple(sorted(m.RANGES_DPS)), m.FIFO_CAPACITY - 1, tuple(m.I2C_ADDRESSES))
+    if model == "l3gd20h":
+        from ..gyro import l3gd20h as m
+
+        return GyroPart("L3GD20H", tuple(sorted(m.ODR_BITS)), tuple(sorted(m.FULL_SCALE)), m.FIFO_LEVELS - 1,
+                        tuple(m.I2C_ADDRESSES))
+    raise ValueError(f"gyro.model {model!r} has no driver")
 
 
 @dataclass
@@ -113,6 +156,13 @@ class LoopConfig:
         for key in ("neighbour_sep_px", "reconnect_every_s", "gyro_arw_deg_rts"):
             if not getattr(self, key) > 0:
                 raise ValueError(f"loop.{key} must be positive")
+        if self.frame_hz <= 0:
+            raise ValueError(f"loop.frame_hz = {self.frame_hz} must be > 0 (images per second)")
+        for key in ("coast_timeout_s", "acquire_every_s"):
+            if getattr(self, key) <= 0:
+                raise ValueError(f"loop.{key} = {getattr(self, key)} must be > 0")
+        if not 1 <= self.min_stars <= self.max_stars:
+            raise ValueError(f"loop.min_stars = {self.min_stars} outside 1..loop.max_stars ({self.max_stars})")
 
         if not 1 <= self.max_stars <= MAX_STARS:
             raise ValueError(f"loop.max_stars {self.max_stars} outside 1..{MAX_STARS}")
@@ -144,6 +194,15 @@ class FlatsatConfig:
     outputs: OutputsConfig = field(default_factory=OutputsConfig)
     realtime: RealtimeConfig = field(default_factory=RealtimeConfig)
     calibration: str = ""
+
+    def validate(self):
+        if self.loop.frame_hz > self.gyro.odr_hz:
+            raise ValueError(f"loop.frame_hz = {self.loop.frame_hz:g} exceeds gyro.odr_hz = {self.gyro.odr_hz} "
+                             "(the loop steps once per gyro period)")
+        period_ms = 1000.0 / self.loop.frame_hz
+        if self.head.exposure_ms > period_ms + 1e-9:
+            raise ValueError(f"head.exposure_ms = {self.head.exposure_ms:g} is longer than the frame period of "
+                             f"loop.frame_hz = {self.loop.frame_hz:g} ({period_ms:g} ms)")
 
     @property
     def simulated(self) -> bool:
