@@ -80,8 +80,23 @@ def report_dir(args, name: str) -> Path:
     else:
         stamp = _dt.datetime.now(_dt.UTC).strftime("%Y%m%dT%H%M%S")
         path = runs_dir() / "calibrate" / f"{name}-{stamp}"
+    new = [p for p in (path, *path.parents) if not p.exists()]
+    CREATED.extend(reversed(new))          # outermost first: removed deepest first
     path.mkdir(parents=True, exist_ok=True)
     return path
+
+
+CREATED: list[Path] = []     # report folders made by this process (removed again if a command fails empty)
+
+
+def remove_empty_reports() -> None:
+    """After a failed command: remove the report folders it created and left empty."""
+    while CREATED:
+        path = CREATED.pop()
+        try:
+            path.rmdir()             # only an empty folder: never loses anything
+        except OSError:
+            pass
 
 
 @dataclass

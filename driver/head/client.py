@@ -79,7 +79,10 @@ class HeadClient:
         self.sync_state = sync or ClockSync()
         self.sync_every_s = sync_every_s
         self.depth = depth
-        # not 1 after every start: replies to an earlier client must not match ours
+        # not 1 after every start: replies to an earlier client must not match ours. A replay
+        # link knows the sequence the recorded client drew (recorded_first_seq)
+        if first_seq is None:
+            first_seq = getattr(link, "recorded_first_seq", lambda: None)()
         self._seq = (secrets.randbits(16) if first_seq is None else int(first_seq) - 1) & 0xFFFF
         self._last_sync = -1e300
         self.info: dict | None = None

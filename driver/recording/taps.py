@@ -164,6 +164,20 @@ class ReplayLink:
                                    f"{lf.KIND_NAMES.get(rec.kind, rec.kind)} at t={rec.t_ns} ns")
         return rec
 
+    def recorded_first_seq(self) -> int | None:
+        """Sequence number of the next request the recorded client sent (a new client on this
+        link starts there, as the recorded one drew it), or None."""
+        from ..protocol.errors import FrameError
+        from ..protocol.framing import decode_frame
+
+        for rec in self._q:
+            if rec.kind == lf.TX:
+                try:
+                    return decode_frame(rec.payload[_RX.size:].split(b"\x00")[0]).seq
+                except FrameError:
+                    return None
+        return None
+
     def send(self, data) -> float:
         data = bytes(data)
         rec = self._next(lf.TX, f"send of {len(data)} bytes")
