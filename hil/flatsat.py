@@ -140,7 +140,8 @@ def simulated_gyro(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int):
     sampling (the register model quantises at the range the driver sets)."""
     from ..mocks.gyro_truth import GyroStream, gyro_params
 
-    gp = gyro_params(scen.gyro_errors or cfg.sim.gyro_errors, range_dps=0.0, odr_hz=float(cfg.gyro.odr_hz))
+    gp = gyro_params(scen.gyro_errors or cfg.sim.gyro_errors, range_dps=0.0, odr_hz=float(cfg.gyro.odr_hz),
+                     **scen.gyro_overrides)
     return GyroStream(scenario_profile(scen), gp, seed=seed)
 
 
@@ -454,7 +455,8 @@ def _sim_head(cfg, scen, sim, truth, seed, faults, lockstep):
 
     cat = load_catalog(cfg.sim.catalog, scen.mag_limit or cfg.sim.mag_limit)
     dev_clock = SimulatedClock(lockstep.clock.now())
-    emu = HeadEmulator(Sky(cat, sim, seed=seed), ScenarioScene(truth, sim.detector.exposure_s), noise=True,
+    sky = Sky(cat, sim, seed=seed, false_spots=scen.false_spots or None)
+    emu = HeadEmulator(sky, ScenarioScene(truth, sim.detector.exposure_s), noise=True,
                        clock=dev_clock)
     head = SimHead(emu, dev_clock, link_preset(cfg.head.link), lockstep)
     head.start()
@@ -480,7 +482,8 @@ def _head_devices(cfg, scen, sim, truth, seed, faults, lockstep=None):
             from ..mocks.sky import Sky
 
             cat = load_catalog(cfg.sim.catalog, scen.mag_limit or cfg.sim.mag_limit)
-            emu = HeadEmulator(Sky(cat, sim, seed=seed), ScenarioScene(truth, sim.detector.exposure_s), noise=True)
+            sky = Sky(cat, sim, seed=seed, false_spots=scen.false_spots or None)
+            emu = HeadEmulator(sky, ScenarioScene(truth, sim.detector.exposure_s), noise=True)
             # render once up front (numba load, fixed-pattern noise)
             warm = emu._sky_for(emu.exposure_us)
             warm.render_frame(truth.q0, np.zeros(3), frame=0)
@@ -498,6 +501,9 @@ def _head_devices(cfg, scen, sim, truth, seed, faults, lockstep=None):
             return SerialLink(emu.path, baudrate=h.baudrate)
 
         return open_link, f"Python head emulator (mocks) in a child process, on pty {emu.path}", [emu.stop]
+    if scen.false_spots:
+        raise ConfigError(f"scenario '{scen.name}': false_spots are rendered by the head emulator only "
+                          f"(head.kind = 'emulator'), not by head.kind = '{h.kind}'")
     if h.kind == "firmware-host":
         from .fwhead import FirmwareHead
 

@@ -102,7 +102,8 @@ def run(args) -> int:
 
 def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed: int, folder: Path,
                 realtime: bool = False, plots: bool = True, status: bool = True, config_path=None,
-                record: bool | None = None, on_output=None, probe=None, fast: bool = False) -> dict:
+                record: bool | None = None, on_output=None, probe=None, fast: bool = False,
+                keep_arrays: bool = False) -> dict:
     """Run one flatsat session and return its summary (also written to summary.json).
 
     ``fast``: the emulated devices on a simulated clock in lock-step with the loop
@@ -133,7 +134,7 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
         writer.flush()          # on disk before anything can fail: a failed run's log still says what it was
     try:
         return _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer, on_output, probe,
-                        fast)
+                        fast, keep_arrays)
     except BaseException as exc:
         if writer:
             try:
@@ -147,7 +148,8 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
             writer.close()
 
 
-def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer, on_output, probe, fast) -> dict:
+def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer, on_output, probe, fast,
+             keep_arrays=False) -> dict:
     """The body of :func:`run_flatsat` once its log holds the META record."""
     import sys
 
@@ -234,6 +236,9 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
             leave_realtime()
         for s in sinks:
             s.close()
+        # the run's start-up heap goes back to the collector: a process that runs many
+        # sessions (a Monte Carlo worker) must not keep every run's objects frozen forever
+        gc.unfreeze()
     wall = time.perf_counter() - t_wall0
     cpu_proc = time.process_time() - cpu0
     out = np.concatenate(chunks) if chunks else np.zeros(0, loop.out_buf.dtype)
@@ -323,6 +328,9 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
             res_top["centroid_error_px_rms"] = float(np.sqrt(np.mean(cerr[:, 1:] ** 2)))
         res_top["plots"] = [str(p) for p in write_plots(folder, out, truth, cerr)]
     (folder / "summary.json").write_text(json.dumps(_jsonable(res_top), indent=2))
+    if keep_arrays:
+        # for evaluations (gyrostar eval loop): the outputs, the truth at each, the scenario start, the camera
+        res_top["arrays"] = {"out": out, "truth": truth, "t0": t_start_of(fs), "camera": fs.camera}
     return res_top
 
 
