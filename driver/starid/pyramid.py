@@ -597,12 +597,12 @@ class Pyramid:
                             for t, cap, d in zip(tiers, caps, dens))
         # every indexed star (labels): the full tier's navigation density scaled to all stars
         self._lab_nloc = dens[-1] * (len(self.index) / np.count_nonzero(self.index.is_nav))
-        # a StarCheck runs inside the compiled call; another stage runs after it
-        self._fused = self.check.settings() if isinstance(self.check, StarCheck) else np.empty(0)
-        self._no_mag = np.empty(0)
         if self.check is None:
             self.check = StarCheck(self.sigma_px, self.camera.focal_length_px, mag_limit=self.index.mag_limit,
                                    min_stars=3)
+        # a StarCheck runs inside the compiled call; another stage runs after it
+        self._fused = self.check.settings() if isinstance(self.check, StarCheck) else np.empty(0)
+        self._no_mag = np.empty(0)
 
     def identify_vectors(self, b: np.ndarray, mag=None) -> StarIdResult:
         """Identify body unit vectors (n, 3), brightest first; ``mag`` (n,) measured V or None."""
