@@ -107,6 +107,7 @@ CASES = [
     ("cal-camera-empty-npz", ["calibrate", "camera", "{d}/empty.npz"], USAGE, ["INPUT"]),
     ("cal-dark-corrupt-fits", ["calibrate", "dark", "{d}/fits"], USAGE,
      ["INPUT", "dark1.fits"]),
+    ("cal-dark-frames-0", ["calibrate", "dark", "--simulate", "--frames", "0"], USAGE, ["--frames"]),
     ("cal-dark-frames-1", ["calibrate", "dark", "--simulate", "--frames", "1"], USAGE, ["--frames"]),
     ("cal-dark-exposures", ["calibrate", "dark", "--simulate", "--exposures", "0,-1"], USAGE, ["--exposures"]),
     ("cal-dark-empty-npz", ["calibrate", "dark", "{d}/empty.npz"], USAGE, ["INPUT"]),
