@@ -123,6 +123,12 @@ CASES = [
     ("bench-unknown-suite", ["bench", "nosuch"], USAGE, ["nosuch"]),
     ("fw-ping-no-device", ["fw", "ping", "{d}/no-such-tty", "-n", "1"], DEVICE, ["no-such-tty"]),
     ("fw-unknown-target", ["fw", "flash"], USAGE, ["flash"]),
+    ("fw-host-no-sensor", ["fw", "host"], USAGE, ["--sensor"]),
+    ("fw-arm-run-no-sensor", ["fw", "arm", "--run"], USAGE, ["--sensor"]),
+    ("fw-build-unknown-flag", ["fw", "build", "--bogus"], USAGE, ["--bogus"]),
+    ("sim-frame-rate-dps", ["sim", "frame", "--out", "{d}/x.fits", "--rate-dps", "1,2"], USAGE, ["--rate-dps"]),
+    ("eval-centroid-window", ["eval", "centroid", "--window-k", "0"], USAGE, ["window"]),
+    ("eval-starcount-fov", ["eval", "starcount", "--fov-deg", "-1", "--trials", "10"], USAGE, ["fov"]),
 ]
 
 
