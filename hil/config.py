@@ -139,6 +139,9 @@ class LoopConfig:
     # xing2012/bmi088 models' is 4.78 ms, but carrying each output over it with the latest
     # (noisy) rate sample costs more than the delay (fast demo: 4.44 -> 4.83 arcsec): off
     gyro_delay_ms: float = 0.0
+    # cut-off of the gyro's 2nd-order low-pass (Hz; 0: none): it takes the rate noise above
+    # it out of short windows (BMI088 at 400 Hz ODR: 47 Hz); the simulated flatsat uses its model's
+    gyro_lowpass_hz: float = 47.0
 
     def validate(self):
         from ..loop.record import MAX_STARS
@@ -146,6 +149,8 @@ class LoopConfig:
         for key in ("confirm_images", "wrong_id_rejects", "head_timeouts_lost"):
             if getattr(self, key) < 1:
                 raise ValueError(f"loop.{key} must be at least 1")
+        if not 0.0 <= self.gyro_lowpass_hz < 10000.0:
+            raise ValueError("loop.gyro_lowpass_hz must be in [0, 10000)")
         if not 0.0 <= self.gyro_delay_ms < 100.0:
             raise ValueError("loop.gyro_delay_ms must be in [0, 100)")
         for key in ("neighbour_sep_px", "reconnect_every_s", "gyro_arw_deg_rts"):
@@ -242,6 +247,8 @@ class Scenario:
     preset: str = ""                   # overrides sim.preset when set
     gyro_errors: str = ""              # overrides sim.gyro_errors when set
     mag_limit: float = 0.0             # overrides sim.mag_limit when > 0
+    gyro_overrides: dict[str, float] = field(default_factory=dict)  # fields of the gyro error set replaced
+    false_spots: list[tuple[float, float, float]] = field(default_factory=list)  # [col, row, vmag] glints
     # acceptance of the scenario in the HIL suite
     max_error_arcsec_1sigma: float = 0.0   # 0 = not checked
     min_track_fraction: float = 0.0
@@ -270,8 +277,19 @@ def scenario_names() -> list[str]:
 
 
 def load_scenario(name_or_path: str | None) -> Scenario:
-    """A built-in scenario by name (default ``demo``) or a scenario TOML file by path."""
+    """A built-in scenario by name (default ``demo``), a scenario TOML file by path, or a
+    Monte Carlo case ``mc:SEED@DURATION`` (``gyrostar eval loop``; run it with ``--seed SEED``)."""
     name_or_path = name_or_path or "demo"
+    if name_or_path.startswith("mc:"):
+        from .montecarlo.cases import case_scenario, draw_case
+
+        try:
+            seed_s, dur_s = name_or_path[3:].split("@")
+            seed, dur = int(seed_s), float(dur_s)
+            return case_scenario(draw_case(seed, dur), dur)
+        except ValueError as exc:
+            raise ConfigError(f"--scenario {name_or_path}: a Monte Carlo case is mc:SEED@DURATION, "
+                              f"e.g. mc:100007@30 ({exc})") from None
     path = Path(name_or_path)
     if not path.suffix == ".toml":
         path = Path(str(resources.files("gyrostar.hil") / "scenarios" / f"{name_or_path}.toml"))

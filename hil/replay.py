@@ -9,7 +9,7 @@ mismatch an error, exit code 1).
 
 ``--export csv|hdf5 --out PATH`` writes the recorded outputs (and truth, when the log has
 it) instead: CSV with one row per output (quaternion, rates, bias, covariance diagonal,
-the mid-exposure product: t_mid, q_mid and its variances,
+the mid-exposure products: t_mid, q_mid and its variances, filtered and smoothed (_s),
 mode, flags, stars), HDF5 (h5py) with the full structured arrays and the run's META.
 """
 
@@ -142,7 +142,8 @@ def export(path: str | Path, fmt: str, out: str | Path) -> dict:
 def _export_csv(recs: np.ndarray, truth, out: Path) -> None:
     cols = ["t", "seq", "mode", "flags", "n_stars", "qx", "qy", "qz", "qw", "wx", "wy", "wz", "bx", "by", "bz",
             "var_tx", "var_ty", "var_tz", "var_bx", "var_by", "var_bz", "latency_us", "star_ids",
-            "t_mid", "qx_mid", "qy_mid", "qz_mid", "qw_mid", "var_tx_mid", "var_ty_mid", "var_tz_mid"]
+            "t_mid", "qx_mid", "qy_mid", "qz_mid", "qw_mid", "var_tx_mid", "var_ty_mid", "var_tz_mid",
+            "t_mid_s", "qx_mid_s", "qy_mid_s", "qz_mid_s", "qw_mid_s", "var_tx_mid_s", "var_ty_mid_s", "var_tz_mid_s"]
     has_truth = truth is not None and len(truth) == len(recs)
     if has_truth:
         cols += ["true_qx", "true_qy", "true_qz", "true_qw"]
@@ -156,6 +157,8 @@ def _export_csv(recs: np.ndarray, truth, out: Path) -> None:
             row += [repr(float(v)) for v in r["bias"]] + [repr(float(v)) for v in np.diag(r["cov"])]
             row += [repr(float(r["latency_us"])), ids, repr(float(r["t_mid"]))]
             row += [repr(float(v)) for v in r["q_mid"]] + [repr(float(v)) for v in np.diag(r["cov_mid"])]
+            row += [repr(float(r["t_mid_s"]))] + [repr(float(v)) for v in r["q_mid_s"]]
+            row += [repr(float(v)) for v in np.diag(r["cov_mid_s"])]
             if has_truth:
                 row += [repr(float(v)) for v in truth[i]["q"]]
             fh.write(",".join(row) + "\n")

@@ -34,9 +34,6 @@ def run(args) -> int:
         return 0 if ok else 1
     with sigterm_as_interrupt(), qemu.QemuHead(args.sensor, elf=build.arm_elf_path(), port=args.port or None) as q:
         print(f"gyrostar-head (mps2-an385 under QEMU): {q.url}", flush=True)
-        try:
-            while q.proc.poll() is None:
-                time.sleep(0.5)
-        except KeyboardInterrupt:   # Ctrl-C or SIGTERM: QEMU is stopped on the way out
-            return 130
+        while q.proc.poll() is None:   # Ctrl-C or SIGTERM: QEMU is stopped on the way out, exit 130
+            time.sleep(0.5)
     return 1

@@ -19,9 +19,11 @@ band-limited to the internal rate's Nyquist frequency).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from ..attitude import quat_conj, quat_mult, quat_normalize, quat_propagate, quat_to_dcm
+from ..attitude import quat_conj, quat_mult, quat_normalize, quat_propagate, quat_to_dcm, rotvec_to_quat
 from ..core.mekf import mekf_update
 from . import record as R
 from .kernels import predict_batch
@@ -31,7 +33,8 @@ GATE = 13.815510557964274  # χ² 2 dof, P = 0.001
 
 
 class AttitudeFilter:
-    def __init__(self, arw: float, sigma_bias_rw: float, bias_prior: float, period_s: float, delay_s: float = 0.0):
+    def __init__(self, arw: float, sigma_bias_rw: float, bias_prior: float, period_s: float, delay_s: float = 0.0,
+                 lowpass_hz: float = 0.0):
         self.q = np.array([0.0, 0.0, 0.0, 1.0])   # ACQUIRE: gyro-relative attitude from the start
         self.b = np.zeros(3)
         self.P = np.zeros((6, 6))
@@ -42,8 +45,13 @@ class AttitudeFilter:
         self.hist_q = np.zeros((HIST, 4))
         self.ih = np.array([HIST - 1, 0], np.int64)   # [ring head, output seq]
         self.prm = np.array([period_s, arw, sigma_bias_rw, (1e-4) ** 2, delay_s])
+        # the gyro's 2nd-order low-pass takes the rate noise above f_c out of every finite
+        # window: the angle walk over Δ is N²(Δ − κ), κ = 1/(2√2 π f_c) (Δ ≫ 1/f_c)
+        self.kappa = 1.0 / (2.0 * math.sqrt(2.0) * math.pi * lowpass_hz) if lowpass_hz > 0 else 0.0
         self.valid = False                            # q is an identified attitude
         self.mid = np.full(R.MID_N, np.nan)           # [t_mid, q_mid, cov_mid]: the newest frame's product
+        self.smoothed = np.full(R.MID_N, np.nan)      # the frame before it, smoothed with the newest
+        self._state = (self.q, self.b, self.P, self.ts, self.hist_t, self.hist_q, self.ih, self.prm)
 
     @property
     def omega(self) -> np.ndarray:
@@ -59,9 +67,8 @@ class AttitudeFilter:
     def predict(self, smp, flags_first: int, flags_base: int, mode: int, refs, ids, cam, uv_last, out) -> int:
         """Predict every sample of a FIFO batch and write its output record (one numba call);
         returns the count of stuck-axis samples."""
-        return predict_batch(smp.t, smp.rate, smp.flags, smp.n, self.q, self.b, self.P, self.ts, self.hist_t,
-                             self.hist_q, self.ih, self.prm, flags_first, flags_base, mode, refs, ids, cam,
-                             uv_last, self.mid, out)
+        return predict_batch(smp.t, smp.rate, smp.flags, smp.n, *self._state, flags_first, flags_base, mode, refs,
+                             ids, cam, uv_last, self.mid, self.smoothed, out)
 
     def q_at(self, t: float) -> np.ndarray:
         """Attitude estimate at host time ``t`` (s): the newest sample at or before it,
@@ -84,14 +91,16 @@ class AttitudeFilter:
         (rotation R from the attitude history) plus the gyro's random walk since then,
         Q_Δ = N² Δ I (Δ = now − t_mid), which the measurement knows nothing of. So the
         update runs on P − Q_Δ (the prior at ``t_mid`` seen from now) with the directions
-        rotated to now, and Q_Δ is added back after it: P⁺ = Φ P⁺_mid Φᵀ + Q_Δ (exact for
-        this linear structure; adding Q_Δ to the star noise instead would ignore that the
-        same random walk is in the state).
+        rotated to now, and the walk since ``t_mid`` is added back after it: P⁺ = Φ P⁺_mid Φᵀ
+        + N²(Δ − κ) I (exact for this linear structure; adding Q_Δ to the star noise instead
+        would ignore that the same random walk is in the state). κ: the gyro low-pass's
+        share of the walk over a finite window (``lowpass_hz``; 0: white rate noise).
 
         Also sets the mid-exposure product (:attr:`mid`): the updated attitude carried back
         to ``t_mid`` along R, with the attitude block of Φ P⁺_mid Φᵀ rotated back to the body
         axes at ``t_mid``."""
-        rq = quat_mult(self.q, quat_conj(self.q_at(t_mid)))                # body(t_mid) → body(now)
+        q_prior_mid = self.q_at(t_mid)
+        rq = quat_mult(self.q, quat_conj(q_prior_mid))                    # body(t_mid) → body(now)
         rot = quat_to_dcm(rq)
         bvecs = np.ascontiguousarray(b_mid @ rot.T)
         lag = max((self.t_last if self.t_last is not None else t_mid) - t_mid, 0.0)
@@ -102,15 +111,44 @@ class AttitudeFilter:
                 P[i, i] -= qd
         else:
             qd = 0.0
+        p_prior_mid = rot.T @ P[:3, :3] @ rot
         n = int(mekf_update(self.q, self.b, P, bvecs, np.ascontiguousarray(refs),
                             np.ascontiguousarray(sigmas), GATE, accepted))
         if n:
+            q_mid = quat_mult(quat_conj(rq), self.q)
+            p_mid = rot.T @ P[:3, :3] @ rot
+            self._smooth_previous(q_prior_mid, p_prior_mid, q_mid, p_mid)
             self.mid[0] = t_mid
-            self.mid[1:5] = quat_mult(quat_conj(rq), self.q)
-            self.mid[5:] = (rot.T @ P[:3, :3] @ rot).ravel()
+            self.mid[1:5] = q_mid
+            self.mid[5:] = p_mid.ravel()
+        # back to now: the walk since t_mid, less what the gyro's low-pass takes out of it
+        back = self.prm[1] ** 2 * max(lag - self.kappa, 0.0) if qd > 0 else 0.0
         for i in range(3):
-            P[i, i] += qd
+            P[i, i] += back
         return n
+
+    def _smooth_previous(self, q_prior, p_prior, q_post, p_post) -> None:
+        """The previous frame's mid-exposure attitude smoothed with this frame (one-lag
+        Rauch–Tung–Striebel on the attitude error): this frame's correction δ (its filtered
+        attitude against its prior, both at its mid-exposure) is carried back through the
+        gyro rotation R between the two mid-exposures with the gain C = P_k Rᵀ (P⁻_k+1)⁻¹:
+        q_s = δq(C δ) ⊗ q_k, P_s = P_k + C (P_k+1 − P⁻_k+1) Cᵀ. Sets :attr:`smoothed`."""
+        prev = self.mid
+        if not np.isfinite(prev[0]):
+            return
+        q_k = prev[1:5]
+        p_k = prev[5:].reshape(3, 3)
+        r = quat_to_dcm(quat_mult(q_prior, quat_conj(q_k)))       # body(mid_k) → body(mid_k+1), the gyro's
+        d = quat_mult(q_post, quat_conj(q_prior))
+        delta = 2.0 * d[:3] * (1.0 if d[3] >= 0 else -1.0)      # correction at mid_k+1 (rad, its body axes)
+        try:
+            c = p_k @ r.T @ np.linalg.inv(p_prior)
+        except np.linalg.LinAlgError:
+            return
+        self.smoothed[0] = prev[0]
+        self.smoothed[1:5] = quat_normalize(quat_mult(rotvec_to_quat(c @ delta), q_k))
+        ps = p_k + c @ (p_post - p_prior) @ c.T
+        self.smoothed[5:] = (0.5 * (ps + ps.T)).ravel()
 
     def set_attitude(self, q_ident, t_mid: float, now: float, sigma_rad: float) -> None:
         """A lost-in-space attitude ``q_ident`` measured at ``t_mid``: carried to now along

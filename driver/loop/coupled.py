@@ -67,6 +67,7 @@ class LoopParams:
     e_per_dn: float = 5.0             # detector gain, e⁻ per DN (shot noise in centroid variances)
     gyro_arw: float = 1.7277e-4       # gyro angle random walk N, rad/√s (BMI088: 0.014 °/s/√Hz one-sided / √2)
     gyro_delay_s: float = 0.0         # group delay of the gyro's low-pass filter, s (compensated)
+    gyro_lowpass_hz: float = 47.0     # the gyro's 2nd-order low-pass cut-off, Hz (BMI088 at 400 Hz ODR: 47)
     sigma_bias_rw: float = 1e-6       # drift random walk, rad/s/√s
     psf_sigma_px: float = 0.85        # PSF σ of the optics (px), for the smeared-spot fit
     bias_prior: float = 0.02          # initial drift uncertainty, rad/s (≈ 1.1 °/s: BMI088 offset ±1 °/s)
@@ -134,7 +135,8 @@ class CoupledLoop:
         self.c = Counters()
         self.samples = GyroSamples(256)
         self.filter = AttitudeFilter(params.gyro_arw, params.sigma_bias_rw, params.bias_prior,
-                                     1.0 / gyro.odr_hz if gyro.odr_hz else 0.0025, params.gyro_delay_s)
+                                     1.0 / gyro.odr_hz if gyro.odr_hz else 0.0025, params.gyro_delay_s,
+                                     params.gyro_lowpass_hz)
         self.tracks = StarTracks(params, camera, star_index)
         self.image = ImagePipeline(params, camera, identifier)
         self.outputs = OutputStage(sinks, self.lat_clock)
@@ -449,7 +451,7 @@ class CoupledLoop:
 
     def floor_summary(self) -> dict:
         """The steady-state floor for this run's gyro ARW, star noise, star count and timing."""
-        return self.floor.summary(self.p.gyro_arw)
+        return self.floor.summary(self.p.gyro_arw, self.filter.kappa)
 
     def host_us_per_gyro_sample(self) -> float | None:
         """Host µs per gyro sample in the 400 Hz path after the FIFO read (wall clock)."""
@@ -486,7 +488,7 @@ def warmup() -> dict:
     calls = [
         (kernels.predict_batch, (np.zeros(4), np.zeros((4, 3)), np.zeros(4, np.uint8), 1, af.q, af.b, af.P, af.ts,
                                  af.hist_t, af.hist_q, af.ih, af.prm, 0, 0, 0, ref, ref[:, 0].astype(np.int32), cam,
-                                 np.zeros((2, 2)), af.mid, R.empty(4))),
+                                 np.zeros((2, 2)), af.mid, af.smoothed, R.empty(4))),
         (mekf_update, (q, b, P, ref, ref, np.array([1e-5, 1e-5]), GATE, np.zeros(2, np.uint8))),
         (kernels.project_refs, (cam, q, ref)),
         (quat_propagate, (q, w, 0.001)),

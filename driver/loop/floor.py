@@ -7,7 +7,9 @@ seconds. In steady state the prior variance at a measurement epoch is
 P⁻ = (qT + √(q²T² + 4qTr)) / 2 and the posterior P⁺ = P⁻ r / (P⁻ + r). An output t seconds
 after its frame's mid-exposure has σ²(t) = P⁺ + q t; the outputs that carry a frame span
 t ∈ [d, d + T], d the delay from mid-exposure to the first of them, so the output floor
-is √(P⁺ + q (d + T/2)) and the mid-exposure product's floor √P⁺.
+is √(P⁺ + q (d + T/2)) and the mid-exposure product's floor √P⁺. A gyro with a low-pass
+(cut-off f_c, 2nd order) walks less over a finite window: q (Δ − κ), κ = 1/(2√2 π f_c)
+(the rate noise above f_c is filtered out), which enters every window above.
 """
 
 from __future__ import annotations
@@ -17,14 +19,16 @@ import math
 ARCSEC = math.pi / 180.0 / 3600.0
 
 
-def attitude_floor(arw: float, r: float, period_s: float, delay_s: float) -> dict:
+def attitude_floor(arw: float, r: float, period_s: float, delay_s: float, kappa_s: float = 0.0) -> dict:
     """Floor (1σ per cross-boresight axis) of the real-time output and of the mid-exposure
-    product, in arcsec. ``arw`` rad/√s, ``r`` rad² per frame, ``period_s`` and ``delay_s`` s."""
+    product, in arcsec. ``arw`` rad/√s, ``r`` rad² per frame, ``period_s`` and ``delay_s`` s;
+    ``kappa_s``: the gyro low-pass's share of the walk over a window (its windows walk
+    N²(Δ − κ))."""
     q = arw * arw
-    qt = q * period_s
+    qt = q * max(period_s - kappa_s, 0.0)
     p_minus = 0.5 * (qt + math.sqrt(qt * qt + 4.0 * qt * r))
     p_plus = p_minus * r / (p_minus + r) if p_minus + r > 0 else 0.0
-    out = p_plus + q * (delay_s + 0.5 * period_s)
+    out = p_plus + q * max(delay_s + 0.5 * period_s - kappa_s, 0.0)
     return {"floor_arcsec": math.sqrt(out) / ARCSEC, "floor_mid_exposure_arcsec": math.sqrt(p_plus) / ARCSEC}
 
 
@@ -50,14 +54,15 @@ class FloorInputs:
             self.t_first = t_mid
         self.t_last = t_mid
 
-    def summary(self, arw: float) -> dict:
+    def summary(self, arw: float, kappa_s: float = 0.0) -> dict:
         if self.n < 2:
             return {"floor_arcsec": None}
         period = (self.t_last - self.t_first) / (self.n - 1)
         r = self.sum_r / self.n
         delay = self.sum_delay / self.n
-        res = attitude_floor(arw, r, period, delay)
-        res.update({"floor_inputs": {"arw_rad_rts": arw, "frame_period_ms": period * 1e3,
+        res = attitude_floor(arw, r, period, delay, kappa_s)
+        res.update({"floor_inputs": {"arw_rad_rts": arw, "lowpass_share_ms": kappa_s * 1e3,
+                                     "frame_period_ms": period * 1e3,
                                      "exposure_to_output_ms_mean": delay * 1e3,
                                      "star_sigma_combined_arcsec": math.sqrt(r) / ARCSEC,
                                      "stars_per_update": self.sum_stars / self.n, "updates": self.n}})

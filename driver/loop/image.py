@@ -15,12 +15,17 @@ from .image_kernels import measure_windows
 
 
 class ImagePipeline:
-    def __init__(self, params, camera, identifier):
+    """``threaded`` False (lock-step runs, where steps take no simulated time): the readout is
+    centroided at once on the caller's thread; the result is the same, it is taken at the
+    same step, and no thread hand-over is paid per frame."""
+
+    def __init__(self, params, camera, identifier, threaded: bool = True):
         self.p = params
         self.cam = camera.as_array()
         self.identifier = identifier
+        self.threaded = threaded
         self._pool = None
-        self._job = None           # (plan, image result, future)
+        self._job = None           # (plan, image result, future or measured tuple)
 
     @property
     def busy(self) -> bool:
@@ -28,16 +33,19 @@ class ImagePipeline:
 
     def submit(self, plan: dict, res) -> None:
         """Centroid ``res.values`` (pixels in span order) of the windows ``plan`` commanded."""
-        self._job = (plan, res, self._measure_pool().submit(self._measure, plan, res.values))
+        if self.threaded:
+            self._job = (plan, res, self._measure_pool().submit(self._measure, plan, res.values))
+        else:
+            self._job = (plan, res, self._measure(plan, res.values))
 
     def result(self):
         """``(plan, image result, (state, b_mid (n, 3), σ (n,) rad))`` of the submitted
         readout (waits for the measuring thread), or None."""
         if self._job is None:
             return None
-        plan, res, fut = self._job
+        plan, res, job = self._job
         self._job = None
-        return plan, res, fut.result()
+        return plan, res, (job.result() if self.threaded else job)
 
     def _measure(self, plan: dict, values) -> tuple:
         p = self.p

@@ -29,7 +29,7 @@ def project_refs(params, q, refs):
 
 @njit(cache=True)
 def predict_batch(smp_t, smp_rate, smp_flags, n, q, b, P, ts, hist_t, hist_q, ih, prm, flags_first, flags_base,
-                  mode, refs, ids, cam, uv_last, mid, out):
+                  mode, refs, ids, cam, uv_last, mid, smoothed, out):
     """One FIFO batch through the 400 Hz path: for every sample predict the attitude MEKF
     (:func:`gyrostar.core.mekf.mekf_predict_blocks`), keep the attitude history, project the
     tracked stars and write the output record — no Python object per sample.
@@ -45,7 +45,8 @@ def predict_batch(smp_t, smp_rate, smp_flags, n, q, b, P, ts, hist_t, hist_q, ih
     refs (k, 3), ids (k,): tracked stars' catalog vectors and ids (k = 0 when the attitude is
     not valid); cam: camera array. uv_last (k, 2):
     their centroids at the last sample (px). mid (14,): the mid-exposure product
-    [t_mid, q_mid, cov_mid] copied to every record. out: OUTPUT_DTYPE records, first ``n`` written
+    [t_mid, q_mid, cov_mid] copied to every record; smoothed (14,): the frame before,
+    smoothed with it (``*_mid_s`` fields). out: OUTPUT_DTYPE records, first ``n`` written
     (every field but ``latency_us``).
     Returns the count of samples with a stuck gyro axis.
     """
@@ -58,6 +59,7 @@ def predict_batch(smp_t, smp_rate, smp_flags, n, q, b, P, ts, hist_t, hist_q, ih
     E = np.empty((3, 3))
     T = np.empty((3, 3))
     wt = np.empty(3)
+    vb = np.empty(3)
     for i in range(n):
         t = smp_t[i] - tau
         dt = period if ts[0] != ts[0] else t - ts[0]
@@ -110,7 +112,9 @@ def predict_batch(smp_t, smp_rate, smp_flags, n, q, b, P, ts, hist_t, hist_q, ih
         if k > 0:
             A = quat_to_dcm(qo)
             for s in range(k):
-                u, v, _ = project_point(cam, A @ refs[s])
+                for j in range(3):       # A @ refs[s] into scratch (no allocation per star)
+                    vb[j] = A[j, 0] * refs[s, 0] + A[j, 1] * refs[s, 1] + A[j, 2] * refs[s, 2]
+                u, v, _ = project_point(cam, vb)
                 r.star_id[s] = ids[s]
                 r.centroid_px[s, 0] = u
                 r.centroid_px[s, 1] = v
@@ -125,7 +129,11 @@ def predict_batch(smp_t, smp_rate, smp_flags, n, q, b, P, ts, hist_t, hist_q, ih
         r.t_mid = mid[0]
         for j in range(4):
             r.q_mid[j] = mid[1 + j]
+        r.t_mid_s = smoothed[0]
+        for j in range(4):
+            r.q_mid_s[j] = smoothed[1 + j]
         for a in range(3):
             for c in range(3):
                 r.cov_mid[a, c] = mid[5 + 3 * a + c]
+                r.cov_mid_s[a, c] = smoothed[5 + 3 * a + c]
     return stuck

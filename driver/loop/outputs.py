@@ -8,8 +8,6 @@ and hands the batch to every sink in one call.
 
 from __future__ import annotations
 
-import numpy as np
-
 from . import record as R
 
 
@@ -19,16 +17,14 @@ class OutputStage:
         self.lat_clock = lat_clock
         self.buf = R.empty(capacity)
         self._latency = self.buf["latency_us"]    # a field view made once (making one costs µs)
-        self._last = R.empty(1)
-        self._isz = R.OUTPUT_DTYPE.itemsize
-        self._buf_u8 = self.buf.view(np.uint8)    # byte views: a record copy is one memcpy
-        self._last_u8 = self._last.view(np.uint8)
+        self._n = 0
         self.count = 0
 
     @property
     def last(self):
-        """The newest record emitted (None before the first)."""
-        return self._last[0] if self.count else None
+        """The newest record emitted (None before the first): a view into the buffer, valid
+        until the next step (copy it to keep it)."""
+        return self.buf[self._n - 1] if self._n else None
 
     def batch(self, n: int):
         """The first ``n`` records of the buffer, for the kernel to write."""
@@ -37,9 +33,13 @@ class OutputStage:
     def emit(self, out, t_read: float, t_last: float) -> None:
         """Stamp latency (from ``t_read``, the FIFO read on the latency clock) and send."""
         n = len(out)
-        self._latency[:n] = (self.lat_clock.now() - t_read) * 1e6
+        lat = (self.lat_clock.now() - t_read) * 1e6
+        if n == 1:
+            self._latency[0] = lat
+        else:
+            self._latency[:n] = lat
         t_ns = int(t_last * 1e9)
         for sink in self.sinks:
             sink.put(out, t_ns)
-        self._last_u8[:] = self._buf_u8[(n - 1) * self._isz:n * self._isz]
+        self._n = n
         self.count += n

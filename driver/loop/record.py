@@ -21,12 +21,16 @@ field              type        meaning (frames: gyrostar.attitude; body = camera
 ``t_mid``          f8          mid-exposure host time of the newest frame applied, s (nan: none)
 ``q_mid``          f8[4]       attitude at ``t_mid`` (filtered with that frame), ICRS → body
 ``cov_mid``        f8[3,3]     covariance of ``q_mid``'s δθ (rad², body axes at ``t_mid``)
+``t_mid_s``        f8          mid-exposure time of the frame before (s; nan: none)
+``q_mid_s``        f8[4]       attitude at ``t_mid_s`` smoothed with the newest frame
+``cov_mid_s``      f8[3,3]     its covariance (rad², body axes at ``t_mid_s``)
 =================  ==========  ===============================================================
 
 Two attitude products: the real-time one (``q``, ``cov``) at every gyro sample, and per
 frame the attitude at mid-exposure with its own timestamp (``t_mid``, ``q_mid``,
-``cov_mid``), as conventional star trackers report; it repeats on every record until the
-next frame is applied.
+``cov_mid``, filtered with that frame; ``*_mid_s``: the frame before, smoothed with the
+next), as conventional star trackers report; they repeat on every record until the next
+frame is applied.
 """
 
 from __future__ import annotations
@@ -65,6 +69,7 @@ OUTPUT_DTYPE = np.dtype([
     ("q", "<f8", (4,)), ("omega", "<f8", (3,)), ("bias", "<f8", (3,)), ("cov", "<f8", (6, 6)),
     ("star_id", "<i4", (MAX_STARS,)), ("centroid_px", "<f4", (MAX_STARS, 2)), ("latency_us", "<f4"),
     ("t_mid", "<f8"), ("q_mid", "<f8", (4,)), ("cov_mid", "<f8", (3, 3)),
+    ("t_mid_s", "<f8"), ("q_mid_s", "<f8", (4,)), ("cov_mid_s", "<f8", (3, 3)),
 ])
 MID_N = 14
 """Length of the mid-exposure product array the loop keeps: [t_mid, q_mid (4), cov_mid (9)]."""
@@ -83,6 +88,7 @@ def empty(n: int = 0) -> np.ndarray:
     out = np.zeros(n, OUTPUT_DTYPE)
     out["star_id"] = -1
     out["t_mid"] = np.nan
+    out["t_mid_s"] = np.nan
     return out
 
 

@@ -22,7 +22,8 @@ neighbour-star selection of the reference stars (grid methods): the neighbour ch
 the observed (or extended C) image is the neighbour the true star's catalog pattern is
 oriented on (for the extended grid: one of its ``--orientations``).
 
-``--peer`` (Pyramid only): each worker also solves its fields with a peer of
+Pyramid is given the measured magnitudes with the centroids (its per-star check tests
+them; a peer gets them as brightness). ``--peer`` (Pyramid only): each worker also solves its fields with a peer of
 :mod:`gyrostar.starid.peers` (tetra3rs, or cedar-solve), after ours, on the same centroids
 (with their brightness) and a database built for the same field; reported with the ratios
 of its median and p99 time to ours.
@@ -279,7 +280,7 @@ def run_chunk(cfg: TrialConfig, seed: int, n: int) -> dict:
         trials.append((frame, q_pred, gyro_err))
     for frame, q_pred, gyro_err in trials:
         t0, c0 = time.perf_counter(), time.thread_time()
-        r = ident.identify(frame.uv, q_pred) if tracking else ident.identify(frame.uv)
+        r = ident.identify(frame.uv, q_pred) if tracking else ident.identify(frame.uv, mag=frame.mag)
         dt, dc = time.perf_counter() - t0, time.thread_time() - c0
         c, w = score(r.ids, frame.truth, frame.alt)
         res["success"].append(c >= 2 and w == 0)

@@ -267,7 +267,8 @@ def _search(b, vec, vmag, is_nav, pt, pa, pb, kv, km, kq, vstart, vstars, vvec, 
     match = -np.ones(n, dtype=np.int64)
     q = np.array([0.0, 0.0, 0.0, 1.0])
     cand = np.empty((_MAX_CAND, 3), dtype=np.int64)
-    last_sig = -1
+    last_q = np.zeros(4)
+    same_q = np.cos(5.0 * label_tol)  # two attitudes within 10 label tolerances: the same solution
     lab_min = nstar * label_tol * label_tol / 4.0 * nmin / nnav  # least chance of a random label
     nxt = np.empty(256, dtype=np.int32)
     oth = np.empty(256, dtype=np.int32)
@@ -371,15 +372,13 @@ def _search(b, vec, vmag, is_nav, pt, pa, pb, kv, km, kq, vstart, vstars, vvec, 
                     if pf > p_false_max:
                         status = ST_REJECTED
                         match[:] = -1
-                        # every spot labelled, or the same labelling of most spots from a second
-                        # pyramid, and still the bound is not met: the field has too few stars for
+                        # every spot labelled, or a second pyramid at the same attitude labelling
+                        # half the spots or more, and still the bound is not met: the field has too few stars for
                         # the confidence asked (speed only: stopping never outputs anything)
-                        sig = 0
-                        for t in range(n):
-                            sig = sig * 1000003 + out[t] + 1
-                        if nok == n or (sig == last_sig and 4 * nok >= 3 * n):
+                        if nok == n or (2 * nok >= n and abs(q @ last_q) >= same_q):
                             return match, q, np.inf, ST_SPARSE, tried
-                        last_sig = sig
+                        if 2 * nok >= n:
+                            last_q = q
                         continue
                     return out, q, pf, ST_OK, tried
         prev = nb

@@ -97,3 +97,27 @@ def test_fw_host_stops_its_program_when_signalled(tmp_path, sig):
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+@pytest.mark.skipif(shutil.which("arm-none-eabi-gcc") is None or shutil.which("qemu-system-arm") is None,
+                    reason="arm-none-eabi-gcc and qemu-system-arm needed (.ci/run)")
+def test_fw_arm_run_stops_qemu_on_sigterm(tmp_path):
+    from gyrostar.mocks.firmware_host import PixelFile
+
+    px = PixelFile(tmp_path / "px.gspx", 64, 32)
+    proc = subprocess.Popen([sys.executable, "-m", "gyrostar", "fw", "arm", "--run", "--sensor", str(px.path)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        for line in proc.stdout:
+            if "under QEMU" in line:
+                break
+        kids = [k for k in _children(proc.pid) if _alive(k)]
+        assert len(kids) == 1
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=20)
+        assert not _alive(kids[0]), "QEMU outlived its launcher"
+        assert proc.returncode == 130 and "Traceback" not in err and "interrupted" in err
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()

@@ -101,3 +101,10 @@ def test_fast_run_repeats_and_replays_exactly(tmp_path):
     mid = o1[np.isfinite(o1["t_mid"])]
     assert len(np.unique(mid["t_mid"])) > 30 and np.all(mid["t_mid"] < mid["t"])
     assert np.any(o1["flags"] & 0x0800)
+    # smoothed product: the frame before the newest, with no more variance than when filtered
+    filt = {float(r["t_mid"]): np.trace(r["cov_mid"]) for r in mid}
+    sm = o1[np.isfinite(o1["t_mid_s"])]
+    assert len(sm) and np.all(sm["t_mid_s"] < sm["t_mid"])
+    ok = [np.trace(r["cov_mid_s"]) <= filt[float(r["t_mid_s"])] * (1 + 1e-9) for r in sm
+          if float(r["t_mid_s"]) in filt]
+    assert len(ok) > 100 and all(ok)

@@ -41,3 +41,12 @@ def test_inputs_average_the_run():
     assert s["floor_inputs"]["frame_period_ms"] == pytest.approx(10.0)
     assert s["floor_inputs"]["exposure_to_output_ms_mean"] == pytest.approx(4.0)
     assert s["floor_arcsec"] == pytest.approx(attitude_floor(1.7e-4, 4e-12, 0.01, 0.004)["floor_arcsec"])
+
+
+def test_lowpass_share_shortens_every_window():
+    arw, r = 1.7e-4, (0.7 * ARCSEC) ** 2
+    kappa = 1.0 / (2.0 * math.sqrt(2.0) * math.pi * 47.0)
+    a = attitude_floor(arw, r, 0.016, 0.011, kappa)
+    b = attitude_floor(arw, r, 0.016 - kappa, 0.011 - kappa / 2, 0.0)   # same windows, written out
+    assert a["floor_mid_exposure_arcsec"] == pytest.approx(b["floor_mid_exposure_arcsec"], rel=1e-12)
+    assert a["floor_arcsec"] < attitude_floor(arw, r, 0.016, 0.011)["floor_arcsec"]

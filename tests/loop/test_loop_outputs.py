@@ -15,7 +15,7 @@ from gyrostar.realtime import join_realtime, leave_realtime
 
 def test_record_layout_is_fixed_little_endian():
     dt = record.OUTPUT_DTYPE
-    assert dt.itemsize == 8 + 4 + 1 + 1 + 2 + 32 + 24 + 24 + 288 + 64 + 128 + 4 + 8 + 32 + 72 == 692
+    assert dt.itemsize == 8 + 4 + 1 + 1 + 2 + 32 + 24 + 24 + 288 + 64 + 128 + 4 + 2 * (8 + 32 + 72) == 804
     assert dt.fields["q"][1] == 16 and dt.fields["cov"][1] == 96
     r = record.empty(2)
     assert (r["star_id"] == -1).all()
