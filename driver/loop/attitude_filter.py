@@ -30,11 +30,12 @@ from .kernels import predict_batch
 
 HIST = 2048              # gyro samples of history (5 s at 400 Hz) for delayed measurements
 GATE = 13.815510557964274  # χ² 2 dof, P = 0.001
+SMOOTH_GAP_S = 0.1       # s: frames further apart than this are not smoothed together
 
 
 class AttitudeFilter:
     def __init__(self, arw: float, sigma_bias_rw: float, bias_prior: float, period_s: float, delay_s: float = 0.0,
-                 lowpass_hz: float = 0.0):
+                 lowpass_hz: float = 0.0, rate_error: float = 0.0, rate_error_horizon_s: float = 5.0):
         self.q = np.array([0.0, 0.0, 0.0, 1.0])   # ACQUIRE: gyro-relative attitude from the start
         self.b = np.zeros(3)
         self.P = np.zeros((6, 6))
@@ -44,7 +45,12 @@ class AttitudeFilter:
         self.hist_t = np.full(HIST, -np.inf)
         self.hist_q = np.zeros((HIST, 4))
         self.ih = np.array([HIST - 1, 0], np.int64)   # [ring head, output seq]
-        self.prm = np.array([period_s, arw, sigma_bias_rw, (1e-4) ** 2, delay_s])
+        # rate-proportional gyro error left after calibration (scale factor and misalignment,
+        # 1σ per axis, rad per rad): a constant error, folded into the rate noise as a walk
+        # whose variance matches its linear growth (σ_s |ω| t)² at t = rate_error_horizon_s
+        # and exceeds it before, so a coast at speed is never over-confident
+        self.prm = np.array([period_s, arw, sigma_bias_rw, (1e-4) ** 2, delay_s,
+                             rate_error ** 2 * rate_error_horizon_s])
         # the gyro's 2nd-order low-pass takes the rate noise above f_c out of every finite
         # window: the angle walk over Δ is N²(Δ − κ), κ = 1/(2√2 π f_c) (Δ ≫ 1/f_c)
         self.kappa = 1.0 / (2.0 * math.sqrt(2.0) * math.pi * lowpass_hz) if lowpass_hz > 0 else 0.0
@@ -117,7 +123,7 @@ class AttitudeFilter:
         if n:
             q_mid = quat_mult(quat_conj(rq), self.q)
             p_mid = rot.T @ P[:3, :3] @ rot
-            self._smooth_previous(q_prior_mid, p_prior_mid, q_mid, p_mid)
+            self._smooth_previous(t_mid, q_prior_mid, p_prior_mid, q_mid, p_mid)
             self.mid[0] = t_mid
             self.mid[1:5] = q_mid
             self.mid[5:] = p_mid.ravel()
@@ -127,14 +133,19 @@ class AttitudeFilter:
             P[i, i] += back
         return n
 
-    def _smooth_previous(self, q_prior, p_prior, q_post, p_post) -> None:
+    def _smooth_previous(self, t_mid, q_prior, p_prior, q_post, p_post) -> None:
         """The previous frame's mid-exposure attitude smoothed with this frame (one-lag
         Rauch–Tung–Striebel on the attitude error): this frame's correction δ (its filtered
         attitude against its prior, both at its mid-exposure) is carried back through the
         gyro rotation R between the two mid-exposures with the gain C = P_k Rᵀ (P⁻_k+1)⁻¹:
-        q_s = δq(C δ) ⊗ q_k, P_s = P_k + C (P_k+1 − P⁻_k+1) Cᵀ. Sets :attr:`smoothed`."""
+        q_s = δq(C δ) ⊗ q_k, P_s = P_k + C (P_k+1 − P⁻_k+1) Cᵀ. Sets :attr:`smoothed`.
+        Frames more than ``SMOOTH_GAP_S`` apart (a coast between them) are not combined: the
+        previous product is passed on as it was filtered."""
         prev = self.mid
         if not np.isfinite(prev[0]):
+            return
+        if t_mid - prev[0] > SMOOTH_GAP_S:
+            self.smoothed[:] = prev
             return
         q_k = prev[1:5]
         p_k = prev[5:].reshape(3, 3)
