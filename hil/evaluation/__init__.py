@@ -1,0 +1,1 @@
+"""Evaluations on the simulator: paper 000's centroid simulations (``gyrostar eval centroid``)."""
