@@ -17,7 +17,7 @@ SECONDS  ?= 60
 help:
 	@echo "make run    - set up and run the coupled loop on the built-in simulated flatsat"
 	@echo "make test   - set up and run every test (Python + firmware C)"
-	@echo "make lint   - ruff over the Python tree"
+	@echo "make lint   - ruff over the Python tree, and the flight/ground import contract (import-linter)"
 	@echo "make bench  - speed benchmarks (ratios against plain-numpy / peer baselines)"
 	@echo "make fw-arm - build the Cortex-M3 image for QEMU mps2-an385 and print its size"
 	@echo "make fw-fuzz SECONDS=N - libFuzzer over the firmware decoder and dispatcher"
@@ -59,7 +59,7 @@ fuzz: setup
 
 soak: setup
 	@mkdir -p build/reliability
-	nice -n 5 $(PY) -m gyrostar.reliability.soak --duration $(SOAK_S) --out build/reliability/soak.json
+	nice -n 5 $(PY) -m gyrostar.hil.reliability.soak --duration $(SOAK_S) --out build/reliability/soak.json
 
 run: setup fw-host
 	$(GYROSTAR) run $(RUN_ARGS)
@@ -69,6 +69,10 @@ test: setup fw-host fw-test
 
 lint: setup
 	$(VENV)/bin/ruff check driver mocks hil tests bench setup.py
+	@# import contract on the installed layout: gyrostar/ (driver) with mocks/ and hil/ inside it
+	rm -rf build/importlint && mkdir -p build/importlint
+	cp -r driver build/importlint/gyrostar && cp -r mocks build/importlint/gyrostar/mocks && cp -r hil build/importlint/gyrostar/hil
+	cd build/importlint && PYTHONPATH=. $(abspath $(VENV))/bin/lint-imports --config $(CURDIR)/pyproject.toml
 
 xtce: setup
 	$(PY) -m gyrostar.telemetry.xtce docs/telemetry.xtce.xml

@@ -13,7 +13,7 @@ Truth is rebuilt from the log's META (scenario [truth], gyro error set and seed)
 * time offset — measured when the log's folder holds the ``calib.npz`` export: the shift
   that best explains its raw gyro samples by the true body rate through a free linear map;
   else the model value, the scenario's offset minus the gyro's low-pass group delay
-  (:func:`gyrostar.calibration.gyro_sim.filter_delay_s`), which the measurement does not confirm.
+  (:func:`gyrostar.hil.calibrate.gyro_sim.filter_delay_s`), which the measurement does not confirm.
 """
 
 from __future__ import annotations
@@ -60,9 +60,9 @@ def _angle(a: np.ndarray, b: np.ndarray) -> float:
 def compare(log_path, cal_path) -> dict:
     from .. import config as gconfig
     from ..calibration import calfile
-    from ..calibration.gyro_sim import filter_delay_s
     from ..camera import camera_preset
     from . import config as hc
+    from .calibrate.gyro_sim import filter_delay_s
     from .flatsat import simulated_gyro, true_camera, true_mounting
     from .replay import load_log
 

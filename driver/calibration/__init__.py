@@ -1,9 +1,10 @@
 """Field calibration: gyro noise and bias, gyro scale/misalignment, dark frames, camera
 intrinsics, gyro–camera alignment and time offset.
 
-One CLI module per command (``gyro_static``, ``gyro_scale``, ``dark``, ``camera``,
-``alignment``; each exposes ``HELP``, ``configure(parser)``, ``run(args)``) over small
-estimation modules that take plain arrays (``allan``, ``scale_fit``, ``dark_frames``,
-``intrinsics``, ``align_fit``). Results go to the calibration TOML (``calfile``) that the
-driver loads, and to a report folder with plots (``report``).
+The command-line front ends (``gyrostar calibrate NAME``, with their ``--simulate`` paths)
+are ground code in ``gyrostar.hil.calibrate``; here are the flight parts: estimation
+modules that take plain arrays (``allan``, ``scale_fit``, ``dark_frames``, ``intrinsics``,
+``align_fit``, ``gyro_integral``, ``star_fields``), live gyro recording (``gyro_log``), the
+calibration TOML (``calfile``) and its use in the loop (``apply``, ``hot_pixels``), and the
+report folder helpers (``report``).
 """

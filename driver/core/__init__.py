@@ -10,8 +10,9 @@ Modules (import the one you need; this package imports nothing heavy):
 * ``mekf``         — attitude multiplicative EKF (quaternion + gyro bias)
 * ``quest``        — QUEST snapshot attitude with covariance
 * ``crlb``         — Cramér–Rao bound of a centroid (Mortensen et al. 2010)
-* ``paper000_sim`` — paper 000's sim1..sim4 on the simulator (fixed window, gyro window, EKF)
-* ``eval_centroid`` — ``gyrostar eval centroid`` (CLI target over ``paper000_sim``)
+
+Paper 000's sim1..sim4 on the simulator (``gyrostar eval centroid``) are ground code:
+``gyrostar.hil.evaluation``.
 
 Frames: ``gyrostar.attitude`` (body = camera, +z boresight, x columns, y rows; q scalar
 last, ICRS → body). Image-plane coordinates in pixels from the principal point.

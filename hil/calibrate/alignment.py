@@ -33,7 +33,7 @@ TRUE_MOUNT_DEG = (0.3, -0.5, 90.2)  # rotation vector of the simulated gyro → 
 
 
 def configure(parser) -> None:
-    from .report import add_common_args
+    from ...calibration.report import add_common_args
 
     add_common_args(parser, "slew log .npz: t, rate (gyro) and t_cam, q_cam (tracker)")
     parser.add_argument("--gyro-cal", default=None, help="calibration TOML whose [gyro_scale] is applied first")
@@ -51,14 +51,14 @@ def configure(parser) -> None:
 
 def mount_rotation() -> np.ndarray:
     """The simulated gyro → camera rotation (from :data:`TRUE_MOUNT_DEG`)."""
-    from .intrinsics import rotvec_dcm
+    from ...calibration.intrinsics import rotvec_dcm
 
     return rotvec_dcm(np.radians(np.array([TRUE_MOUNT_DEG])))[0]
 
 
 def simulate(args):
     """(t_g, rate, t_cam, q_cam, truth) of a simulated slew."""
-    from ..cli.output import progress
+    from ...cli.output import progress
     from . import gyro_sim
     from .slew_sim import simulate_attitudes, slew_profile
 
@@ -80,9 +80,9 @@ def simulate(args):
 def run(args) -> int:
     from pathlib import Path
 
-    from ..errors import ConfigError
-    from . import calfile, report
-    from .align_fit import fit_alignment, rotation_angle
+    from ...calibration import calfile, report
+    from ...calibration.align_fit import fit_alignment, rotation_angle
+    from ...errors import ConfigError
 
     source = report.check_source(args)
     folder = report.report_dir(args, "alignment")
@@ -91,7 +91,7 @@ def run(args) -> int:
     if source == "simulate":
         t_g, rate, t_cam, q_cam, truth = simulate(args)
     else:
-        from .star_fields import load_slew_input
+        from ...calibration.star_fields import load_slew_input
 
         target = calfile.load(args.toml) if args.toml and Path(args.toml).exists() else None
         t_g, rate, t_cam, q_cam, extra_in["attitudes"] = load_slew_input(args.input, target)
@@ -110,7 +110,7 @@ def run(args) -> int:
         table.add("q_gyro_to_camera", q, "[x, y, z, w]")
         table.add("time_offset_ms", fit.time_offset * 1e3, "ms")
     else:
-        from ..attitude import dcm_to_quat
+        from ...attitude import dcm_to_quat
 
         qt = dcm_to_quat(np.ascontiguousarray(truth["rotation"]))
         if np.dot(q, qt) < 0:
@@ -136,9 +136,9 @@ def run(args) -> int:
 
 
 def _plot(folder, t_g, rate, t_cam, q_cam, fit) -> None:
-    from .gyro_integral import GyroIntegral
-    from .report import new_figure, save_figure
-    from .scale_fit import attitude_increments
+    from ...calibration.gyro_integral import GyroIntegral
+    from ...calibration.report import new_figure, save_figure
+    from ...calibration.scale_fit import attitude_increments
 
     gi = GyroIntegral(t_g, rate)
     sel = (t_cam - 0.1 > gi.t[0]) & (t_cam + 0.1 < gi.t[-1])

@@ -31,8 +31,8 @@ TRUE_OFFSETS = {"dcx_px": 3.2, "dcy_px": -2.1, "f_scale": 1.0008, "k1": 0.3, "k2
 
 
 def configure(parser) -> None:
-    from ..cli.argtypes import positive_int
-    from .report import add_common_args
+    from ...calibration.report import add_common_args
+    from ...cli.argtypes import positive_int
 
     add_common_args(parser, "identified-star table (.npz: field, uv, ref; or .csv: field,u,v,ra_deg,dec_deg)")
     parser.add_argument("--camera", default="xing2012", help="nominal camera preset (default xing2012)")
@@ -53,13 +53,13 @@ def load_table(path):
     """StarFields from an .npz or CSV table (see the module docstring)."""
     from pathlib import Path
 
-    from ..attitude import radec_to_vec
-    from ..errors import ConfigError
-    from .intrinsics import StarFields
+    from ...attitude import radec_to_vec
+    from ...calibration.intrinsics import StarFields
+    from ...errors import ConfigError
 
     path = Path(path)
     if path.suffix == ".npz":
-        from .report import read_npz
+        from ...calibration.report import read_npz
 
         z = read_npz(path, ("field", "uv", "ref"))
         return StarFields(z["field"], z["uv"], z["ref"])
@@ -97,12 +97,12 @@ def simulate(args, nominal):
     """Identified-star table from the simulator's sky through the 'real' camera."""
     import dataclasses
 
-    from ..catalog import load_catalog
-    from ..cli.output import progress
-    from ..mocks.sim_preset import load_preset
-    from ..mocks.sky import Sky
-    from ..mocks.trajectory import random_attitudes
-    from .intrinsics import StarFields
+    from ...calibration.intrinsics import StarFields
+    from ...catalog import load_catalog
+    from ...cli.output import progress
+    from ...mocks.sim_preset import load_preset
+    from ...mocks.sky import Sky
+    from ...mocks.trajectory import random_attitudes
 
     rng = np.random.default_rng(args.seed)
     cam = true_camera(nominal)
@@ -130,10 +130,10 @@ def simulate(args, nominal):
 
 
 def run(args) -> int:
-    from ..camera import camera_preset
-    from ..errors import ConfigError
-    from . import calfile, report
-    from .intrinsics import NAMES, fit, model_difference
+    from ...calibration import calfile, report
+    from ...calibration.intrinsics import NAMES, fit, model_difference
+    from ...camera import camera_preset
+    from ...errors import ConfigError
 
     source = report.check_source(args)
     nominal = camera_preset(args.camera)
@@ -187,7 +187,7 @@ def run(args) -> int:
 
 
 def _plots(folder, stars, before, after, w, h) -> None:
-    from .report import new_figure, save_figure
+    from ...calibration.report import new_figure, save_figure
 
     fig, axes = new_figure(1, 2, figsize=(12, 5.5))
     for ax, fitres, title in ((axes[0], before, "nominal model"), (axes[1], after, "calibrated model")):

@@ -25,8 +25,8 @@ HELP = "dark frames at several exposures -> dark-current map, hot pixels, read n
 
 
 def configure(parser) -> None:
-    from ..cli.argtypes import int_at_least, positive_float_list
-    from .report import add_common_args
+    from ...calibration.report import add_common_args
+    from ...cli.argtypes import int_at_least, positive_float_list
 
     add_common_args(parser, "folder of FITS dark frames (EXPTIME header) or .npz (frames, exposure)", live=True)
     parser.add_argument("--preset", default="xing2012", help="--simulate: simulator preset (default xing2012)")
@@ -48,8 +48,8 @@ def capture_stacks(client, exposures: list[float], n_frames: int, step=None, kee
     """Dark stacks from a live head: per exposure (s) ``n_frames`` CAPTURE + FULL_FRAME reads
     (a one-pixel window is set, since the head exposes only with windows defined).
     The raw frames go into ``keep`` (``frames``, ``exposure``) when given."""
-    from ..errors import DeviceError
-    from .dark_frames import stack
+    from ...calibration.dark_frames import stack
+    from ...errors import DeviceError
 
     stacks = []
     client.set_windows(np.array([[0, 0, 0, 1]], np.int32))  # a CAPTURE needs a window; the frame is read whole
@@ -77,11 +77,11 @@ def simulate(args):
     """Dark stacks rendered by the simulator, and the truth (rate DN/s map, hot mask, read noise DN)."""
     import dataclasses
 
-    from ..catalog import StarCatalog
-    from ..cli.output import progress
-    from ..mocks.sim_preset import load_preset
-    from ..mocks.sky import Sky
-    from .dark_frames import stack
+    from ...calibration.dark_frames import stack
+    from ...catalog import StarCatalog
+    from ...cli.output import progress
+    from ...mocks.sim_preset import load_preset
+    from ...mocks.sky import Sky
 
     exposures = list(args.exposures)
     base = load_preset(args.preset)
@@ -109,8 +109,8 @@ def simulate(args):
 
 
 def run(args) -> int:
-    from . import calfile, report
-    from .dark_frames import load_frames, solve, write_fits
+    from ...calibration import calfile, report
+    from ...calibration.dark_frames import load_frames, solve, write_fits
 
     source = report.check_source(args)
     folder = report.report_dir(args, "dark")
@@ -162,10 +162,10 @@ def run(args) -> int:
 
 
 def _live(args, folder):
-    from ..cli.output import progress
-    from ..errors import ConfigError
-    from ..head import HeadClient
-    from ..transport.serial_link import SerialLink
+    from ...cli.output import progress
+    from ...errors import ConfigError
+    from ...head import HeadClient
+    from ...transport.serial_link import SerialLink
 
     if not args.port:
         raise ConfigError("--live needs --port (the camera head's serial port or URL)")
@@ -179,7 +179,7 @@ def _live(args, folder):
 
 
 def _plots(folder, res) -> None:
-    from .report import new_figure, save_figure
+    from ...calibration.report import new_figure, save_figure
 
     fig, axes = new_figure(1, 2, figsize=(12, 5))
     lo, hi = np.percentile(res.rate, [1, 99])

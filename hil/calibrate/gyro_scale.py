@@ -15,7 +15,7 @@ Inputs:
   ``--alignment`` names a calibration TOML whose [alignment] rotation is removed first (by
   default the ``--out`` file's, when it has one).
 
-``--simulate``: the simulator's gyro model (:mod:`gyrostar.calibration.gyro_sim`, parameter
+``--simulate``: the simulator's gyro model (:mod:`gyrostar.hil.calibrate.gyro_sim`, parameter
 set ``--gyro-params``) turned at ±``--rates`` about each axis for ``--run-seconds`` per run
 (rate table), or a simulated slew seen by the tracker (slew).
 """
@@ -29,7 +29,7 @@ DEG = np.pi / 180.0
 
 
 def configure(parser) -> None:
-    from .report import add_common_args
+    from ...calibration.report import add_common_args
 
     add_common_args(parser, "gyro log .npz (see --help: t, rate, run, table_rate; or t_cam, q_cam for slews)")
     parser.add_argument("--method", choices=("rate-table", "slew"), default=None,
@@ -49,7 +49,7 @@ def rate_table_schedule(rates_dps, run_s: float, gap_s: float = 2.0):
     """Table rate vectors (K×3 rad/s: ± each rate about each axis, then two tilted runs),
     the session as a piecewise-constant body-rate profile (table at rest between runs) and
     the session length (s)."""
-    from ..mocks.trajectory import Piecewise
+    from ...mocks.trajectory import Piecewise
 
     vecs = []
     for r in rates_dps:
@@ -76,7 +76,7 @@ def run_ids(t: np.ndarray, n_runs: int, run_s: float, gap_s: float = 2.0) -> np.
 
 
 def _from_rate_table(rec_t, rate, run, table, trim_s):
-    from .scale_fit import fit_rate_table, run_means
+    from ...calibration.scale_fit import fit_rate_table, run_means
 
     fs = 1.0 / np.median(np.diff(rec_t))
     means, _ = run_means(rate, run, len(table), trim=int(trim_s * fs))
@@ -84,7 +84,7 @@ def _from_rate_table(rec_t, rate, run, table, trim_s):
 
 
 def _from_slews(t_g, w_g, t_cam, q_cam, lag: int = 5):
-    from .scale_fit import attitude_increments, fit_slews, integrate_gyro
+    from ...calibration.scale_fit import attitude_increments, fit_slews, integrate_gyro
 
     sel = (t_cam >= t_g[0]) & (t_cam <= t_g[-1])
     t_cam, q_cam = t_cam[sel], q_cam[sel]
@@ -97,8 +97,9 @@ def _from_slews(t_g, w_g, t_cam, q_cam, lag: int = 5):
 def run(args) -> int:
     from pathlib import Path
 
-    from ..errors import ConfigError
-    from . import calfile, gyro_sim, report
+    from ...calibration import calfile, report
+    from ...errors import ConfigError
+    from . import gyro_sim
 
     source = report.check_source(args)
     folder = report.report_dir(args, "gyro-scale")
@@ -138,21 +139,21 @@ def run(args) -> int:
             t_g = t - truth["delay_s"]  # the alignment calibration's time offset, applied
             t_cam, q_cam = sl.t_cam, sl.q_cam
         else:
-            from .star_fields import load_slew_input
+            from ...calibration.star_fields import load_slew_input
 
             t_g, rate, t_cam, q_cam, note = load_slew_input(args.input, target)
             if args.alignment:
                 al = calfile.load(args.alignment).alignment
                 if al is None:
                     raise ConfigError(f"{args.alignment} has no [alignment] table")
-                from ..attitude import quat_to_dcm
+                from ...attitude import quat_to_dcm
 
                 r_align = quat_to_dcm(np.asarray(al.q_gyro_to_camera, float))
                 rate = rate @ r_align.T
                 t_g = t_g + al.time_offset_s
         fit = _from_slews(t_g, rate, t_cam, q_cam)
         if args.alignment and source != "simulate":  # back to gyro axes: S_g = Rᵀ S_cam R
-            from .scale_fit import ScaleFit
+            from ...calibration.scale_fit import ScaleFit
 
             s_g = r_align.T @ fit.sensitivity @ r_align
             fit = ScaleFit(s_g, np.linalg.inv(s_g), r_align.T @ fit.bias, fit.sensitivity_sigma, fit.residual_rms)
@@ -187,7 +188,7 @@ def _mat(m):
 
 
 def _plot(folder, fit, truth) -> None:
-    from .report import new_figure, save_figure
+    from ...calibration.report import new_figure, save_figure
 
     fig, ax = new_figure(figsize=(7, 4.5))
     est = (fit.sensitivity - np.eye(3)).ravel() * 1e6

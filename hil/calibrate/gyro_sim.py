@@ -19,14 +19,14 @@ import math
 
 import numpy as np
 
-from ..errors import ConfigError
+from ...errors import ConfigError
 
 DEG = math.pi / 180.0
 
 
 def params(name: str, overrides: list[str] | None = None):
     """Parameter set ``name`` with ``KEY=VALUE`` overrides (floats) applied."""
-    from ..mocks.gyro_truth import gyro_params
+    from ...mocks.gyro_truth import gyro_params
 
     kw = {}
     for item in overrides or []:
@@ -44,7 +44,7 @@ def filter_delay_s(p) -> float:
     """Low-frequency group delay (s) of the set's Butterworth at its internal rate (0 if none)."""
     if p.filter_hz <= 0:
         return 0.0
-    from ..mocks.gyro_truth import butterworth2
+    from ...mocks.gyro_truth import butterworth2
 
     b, a = butterworth2(p.filter_hz, p.internal_hz)
     k = np.arange(3)
@@ -67,7 +67,7 @@ def measure_profile(profile, duration_s: float, p, seed: int, body_to_sensor: np
     """Gyro output for a body-rate profile (optionally mounted with ``body_to_sensor``):
     ``(t, rate_meas (N, 3) rad/s, truth dict)``; sample i is stamped with the true time
     of the sensor's sample, ``t = (i + 1)/odr``."""
-    from ..mocks.gyro_truth import simulate_gyro
+    from ...mocks.gyro_truth import simulate_gyro
 
     prof = profile if body_to_sensor is None else _Rotated(profile, body_to_sensor)
     g = simulate_gyro(prof, duration_s, p, seed=seed)
@@ -81,8 +81,8 @@ def measure_profile(profile, duration_s: float, p, seed: int, body_to_sensor: np
 
 def static_record(p, hours: float, seed: int):
     """A static (zero-rate) record as a :class:`~gyrostar.calibration.gyro_log.GyroRecord` and its truth."""
-    from ..mocks.trajectory import Constant
-    from .gyro_log import GyroRecord
+    from ...calibration.gyro_log import GyroRecord
+    from ...mocks.trajectory import Constant
 
     t, w, truth = measure_profile(Constant((0.0, 0.0, 0.0)), hours * 3600.0, p, seed)
     return GyroRecord(t, w), truth

@@ -31,9 +31,9 @@ RAD2DEG = 180.0 / np.pi
 
 
 def configure(parser) -> None:
-    from ..cli.argtypes import positive_float
-    from .gyro_log import add_live_args
-    from .report import add_common_args
+    from ...calibration.gyro_log import add_live_args
+    from ...calibration.report import add_common_args
+    from ...cli.argtypes import positive_float
 
     add_common_args(parser, "static gyro log (.npz with t [s], rate [rad/s, N×3], optional temperature [C])", live=True)
     add_live_args(parser)
@@ -51,14 +51,14 @@ def configure(parser) -> None:
 def analyse(rec, tau_min: float = 0.1, bias_model: str = "auto", step=None):
     """Bias, temperature coefficient, Allan curves and noise terms of a static record
     (``step()`` is called after each axis)."""
-    from .allan import allan_deviation, fit_noise_terms, slope_readings
+    from ...calibration.allan import allan_deviation, fit_noise_terms, slope_readings
 
     fs = rec.fs
     bias = rec.rate.mean(axis=0)
     tc = None
     if rec.temperature is not None and np.ptp(rec.temperature) > 1.0:
         blk = max(int(fs), 1)
-        from .allan import block_average
+        from ...calibration.allan import block_average
 
         tb = block_average(rec.temperature, blk)
         rb = block_average(rec.rate, blk)
@@ -109,9 +109,9 @@ def simulate(args):
 
 
 def run(args) -> int:
-    from ..cli.output import progress
-    from . import calfile, report
-    from .gyro_log import load, record_live
+    from ...calibration import calfile, report
+    from ...calibration.gyro_log import load, record_live
+    from ...cli.output import progress
 
     source = report.check_source(args)
     rec = load(args.input) if source == "file" else None
@@ -168,7 +168,7 @@ def run(args) -> int:
 
 
 def _plot(folder, a) -> None:
-    from .report import new_figure, save_figure
+    from ...calibration.report import new_figure, save_figure
 
     fig, axes = new_figure(1, 3, figsize=(16, 5), sharey=True)
     to_dph = RAD2DEG * 3600.0

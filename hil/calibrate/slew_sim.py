@@ -32,7 +32,7 @@ class SlewTruth:
 
 def slew_profile(amplitude_dps=(10.0, 8.0, 6.0), period_s=(2.0, 2.7, 3.3)):
     """Back-and-forth slew: one sinusoid per body axis (rates in °/s, periods in s)."""
-    from ..mocks.trajectory import Constant, Jitter
+    from ...mocks.trajectory import Constant, Jitter
 
     return Jitter(Constant((0.0, 0.0, 0.0)), tuple(a * DEG for a in amplitude_dps),
                   tuple(1.0 / p for p in period_s), (0.0, 0.7, 1.9))
@@ -42,12 +42,12 @@ def simulate_attitudes(duration_s: float, camera_hz: float, seed: int, preset: s
                        mag_limit: float = 6.5, centroid_noise_px: float = 0.05, profile=None,
                        progress_step=None) -> SlewTruth:
     """Measured camera attitudes over a slew (see the module docstring)."""
-    from ..camera import unproject_many
-    from ..catalog import load_catalog
-    from ..core.quest import quest
-    from ..mocks.sim_preset import load_preset
-    from ..mocks.sky import Sky
-    from ..mocks.trajectory import integrate, random_attitudes
+    from ...camera import unproject_many
+    from ...catalog import load_catalog
+    from ...core.quest import quest
+    from ...mocks.sim_preset import load_preset
+    from ...mocks.sky import Sky
+    from ...mocks.trajectory import integrate, random_attitudes
 
     rng = np.random.default_rng(seed)
     profile = slew_profile() if profile is None else profile

@@ -1,6 +1,6 @@
 """``gyrostar eval centroid``: paper 000's simulations — fixed window vs gyro window vs EKF.
 
-Runs :func:`gyrostar.core.paper000_sim.run_paper000` (one Mv 5 star on the ``xing2012``
+Runs :func:`gyrostar.hil.evaluation.paper000_sim.run_paper000` (one Mv 5 star on the ``xing2012``
 preset, rendered by the simulator) and reports, per method, the per-axis RMS centroid
 error (px), the fraction of frames in which the fixed and the gyro window lose the star,
 the highest rate each still tracks, the final drift-estimate error and the CRLB.
@@ -13,7 +13,7 @@ HELP = "paper 000 centroid simulations sim1..sim4: fixed window, gyro window, EK
 
 
 def configure(parser) -> None:
-    from ..cli.main import add_json
+    from ...cli.main import add_json
 
     parser.add_argument("--scenario", choices=("sim1", "sim2", "sim3", "sim4"), default="sim2",
                         help="paper 000 simulation (default sim2)")
@@ -32,7 +32,7 @@ def configure(parser) -> None:
 
 
 def run(args) -> int:
-    from ..cli.output import emit, progress
+    from ...cli.output import emit, progress
     from .paper000_sim import Paper000Config, run_paper000
 
     kw = {}
@@ -41,7 +41,7 @@ def run(args) -> int:
     cfg = Paper000Config(scenario=args.scenario, max_rate_dps=args.max_rate_dps, seed=args.seed,
                          centroid=args.centroid, model=args.model, window_k=args.window_k, **kw)
     cfg.validate()
-    from ..mocks.trajectory import paper000
+    from ...mocks.trajectory import paper000
 
     _, n = paper000(cfg.scenario)
     with progress(args, f"eval centroid {cfg.scenario}", n) as advance:

@@ -36,9 +36,8 @@ import math
 
 import numpy as np
 
-from ..attitude import quat_conj, quat_from_boresight, quat_mult, quat_to_dcm
-from ..errors import ConfigError
-from .centroid import (
+from ...attitude import quat_conj, quat_from_boresight, quat_mult, quat_to_dcm
+from ...core.centroid import (
     background_far,
     centroid_variance,
     cog,
@@ -47,16 +46,17 @@ from .centroid import (
     smear_fit,
     suppress_isolated,
 )
-from .crlb import mortensen_crlb_px
-from .motion import MODEL_FIRST_ORDER, MODEL_PINHOLE, predict_trajectory, substeps_for
-from .spot_ekf import (
+from ...core.crlb import mortensen_crlb_px
+from ...core.motion import MODEL_FIRST_ORDER, MODEL_PINHOLE, predict_trajectory, substeps_for
+from ...core.spot_ekf import (
     CHI2_2DOF_999,
     spot_ekf_init,
     spot_ekf_propagate,
     spot_ekf_reset,
     spot_ekf_update,
 )
-from .windows import concat_windows, fixed_window, trajectory_window
+from ...core.windows import concat_windows, fixed_window, trajectory_window
+from ...errors import ConfigError
 
 DEG = math.pi / 180.0
 SCENARIOS = ("sim1", "sim2", "sim3", "sim4")
@@ -103,7 +103,7 @@ class Paper000Config:
 
 
 def _profile(cfg: Paper000Config):
-    from ..mocks import trajectory
+    from ...mocks import trajectory
 
     profile, n = trajectory.paper000(cfg.scenario)
     if cfg.max_rate_dps is not None:
@@ -130,7 +130,7 @@ def _interval_rates(qs: np.ndarray, dt: float) -> np.ndarray:
 def _gyro(profile, n_samples: int, cfg: Paper000Config):
     """Measured rates (n, 3) rad/s from the simulator's gyro model, its true drift (3,) and
     its white-noise density (°/s/√Hz)."""
-    from ..mocks import gyro_truth
+    from ...mocks import gyro_truth
 
     over = {"odr_hz": cfg.gyro_hz}
     if cfg.gyro_noise_dps_rthz is not None:
@@ -169,12 +169,12 @@ def _plan_stars(qs_frames, f, cx, cy, cfg, mean_rates):
 def run_paper000(cfg: Paper000Config, progress=None) -> dict:
     """Run one scenario; returns per-frame arrays and the summary figures (see module doc)."""
     cfg.validate()
-    from ..catalog import StarCatalog
-    from ..mocks import trajectory
-    from ..mocks.sky import Sky
+    from ...catalog import StarCatalog
+    from ...mocks import trajectory
+    from ...mocks.sky import Sky
 
     rng = np.random.default_rng(cfg.seed)
-    from ..mocks.sim_preset import load_preset
+    from ...mocks.sim_preset import load_preset
 
     preset = load_preset("xing2012")
     cam = preset.camera

@@ -9,6 +9,6 @@ recorder crash safety, the Python decoder/config fuzz campaign, and the soak.
 * :mod:`.starid_safety` — trials with false stars and magnitude noise through the tracker.
 * :mod:`.recorder_kill` — SIGKILL a recording process at random points and check the logs.
 
-Every campaign is a ``python -m gyrostar.reliability.<name>`` command printing one JSON object
+Every campaign is a ``python -m gyrostar.hil.reliability.<name>`` command printing one JSON object
 (the figures in ``docs/RELIABILITY.md``).
 """

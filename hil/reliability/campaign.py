@@ -107,10 +107,10 @@ def run_campaign(events, duration: float, seed: int = 1, keep_hz: float = 400.0,
     "byte_faults", "wall_s"}``: ``trace`` (:data:`TRACE_DTYPE`), ``truth`` (simulator truth
     at the trace times), ``rss`` rows ``[t, rss_self_bytes, rss_emulator_bytes]``.
     """
-    from ..hil import config as hc
-    from ..hil import flatsat
-    from ..loop.coupled import warmup
-    from ..loop.scheduler import PeriodicScheduler
+    from ...loop.coupled import warmup
+    from ...loop.scheduler import PeriodicScheduler
+    from .. import config as hc
+    from .. import flatsat
 
     cfg = cfg or hc.load_flatsat(None)
     segs = segments or [hc.Segment(seconds=duration, rate_dps=(0.3, 0.2, 0.05))]
@@ -133,7 +133,7 @@ def run_campaign(events, duration: float, seed: int = 1, keep_hz: float = 400.0,
     def keep(records):
         state["last"] = records[-1]
 
-    from ..loop.sinks import CallbackSink
+    from ...loop.sinks import CallbackSink
 
     loop = fs.make_loop([CallbackSink(keep)])
     loop.warm_identifier()
@@ -195,8 +195,8 @@ def run_campaign(events, duration: float, seed: int = 1, keep_hz: float = 400.0,
 
 def cross_boresight_error_arcsec(trace: np.ndarray, truth: np.ndarray) -> np.ndarray:
     """|δθ_xy| (arcsec) of each trace row's attitude against the truth (NaN where invalid)."""
-    from ..hil.analysis import ARCSEC, quat_error_angles_many
-    from ..loop.record import FLAG_ATTITUDE_VALID
+    from ...loop.record import FLAG_ATTITUDE_VALID
+    from ..analysis import ARCSEC, quat_error_angles_many
 
     e = quat_error_angles_many(trace["q"], truth["q"]) * ARCSEC
     err = np.hypot(e[:, 0], e[:, 1])

@@ -1,6 +1,6 @@
 """Link faults during a run of the coupled loop at 100 Hz frames (400 Hz gyro).
 
-``python -m gyrostar.reliability.linkfaults [--duration 30] [--seed 1]`` runs the built-in
+``python -m gyrostar.hil.reliability.linkfaults [--duration 30] [--seed 1]`` runs the built-in
 flatsat with four faults on the head → host reply stream (one after another, each
 ``FAULT_S`` long, starting at ``FIRST_S``): 1 % random byte corruption, dropped bytes
 (0.1 %), garbage bursts (8–64 random bytes before 30 % of replies), and a 2 s disconnect
@@ -52,7 +52,7 @@ IN_FLIGHT_S = 0.05   # s: longer than one image cycle (windows, exposure, reply)
 
 def analyse(res: dict, faults) -> dict:
     """Per-fault continuity, resynchronisation and bad-frame accounting from a campaign result."""
-    from ..loop.record import MODE_NAMES
+    from ...loop.record import MODE_NAMES
     from .campaign import cross_boresight_error_arcsec
 
     tr, truth = res["trace"], res["truth"]
@@ -115,7 +115,7 @@ def _nanmax(x):
 
 
 def run(duration: float = 30.0, seed: int = 1) -> dict:
-    from ..loop.record import MODE_NAMES
+    from ...loop.record import MODE_NAMES
     from .campaign import run_campaign
 
     faults = schedule()
@@ -137,11 +137,12 @@ def run(duration: float = 30.0, seed: int = 1) -> dict:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m gyrostar.reliability.linkfaults", description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(prog="python -m gyrostar.hil.reliability.linkfaults",
+                                 description=__doc__.split("\n")[0])
     ap.add_argument("--duration", type=float, default=30.0)
     ap.add_argument("--seed", type=int, default=1)
     a = ap.parse_args(argv)
-    from ..cli.output import _clean
+    from ...cli.output import _clean
 
     s = run(a.duration, a.seed)
     json.dump(_clean(s), sys.stdout, indent=1)

@@ -1,6 +1,6 @@
 """Recorder crash safety: SIGKILL a recording process at random points, then read the log.
 
-``python -m gyrostar.reliability.recorder_kill [--runs 100] [--flatsat-runs 5] [--seed 1]``
+``python -m gyrostar.hil.reliability.recorder_kill [--runs 100] [--flatsat-runs 5] [--seed 1]``
 
 * ``--runs``: a child process records deterministic records (random kinds, channels and
   payload sizes 0–20 kB, content a function of the record number) through
@@ -47,7 +47,7 @@ def expected_record(i: int) -> tuple[int, int, int, bytes]:
 
 def child(log: str, side: str, seed: int) -> None:
     """Record forever; after every explicit flush store the flushed count in ``side``."""
-    from ..recording.logfile import LogWriter
+    from ...recording.logfile import LogWriter
 
     rng = random.Random(seed)
     fd = os.open(side, os.O_WRONLY | os.O_CREAT, 0o644)
@@ -64,7 +64,7 @@ def child(log: str, side: str, seed: int) -> None:
 
 
 def check_synthetic_log(log: Path, side: Path) -> dict:
-    from ..recording import logfile as lf
+    from ...recording import logfile as lf
 
     flushed = COUNT.unpack(side.read_bytes()[:8])[0] if side.exists() and side.stat().st_size >= 8 else 0
     rep = lf.ReadReport()
@@ -83,7 +83,7 @@ def synthetic_runs(runs: int, seed: int, folder: Path) -> dict:
     results = []
     for k in range(runs):
         log, side = folder / f"kill{k}.gslog", folder / f"kill{k}.count"
-        p = subprocess.Popen([sys.executable, "-m", "gyrostar.reliability.recorder_kill", "--child", str(log),
+        p = subprocess.Popen([sys.executable, "-m", "gyrostar.hil.reliability.recorder_kill", "--child", str(log),
                               str(side), str(seed * 1000 + k)])
         # wait until the child has created its log (interpreter start-up), then a random delay
         t_end = time.monotonic() + 30.0
@@ -109,8 +109,8 @@ def synthetic_runs(runs: int, seed: int, folder: Path) -> dict:
 
 
 def flatsat_runs(runs: int, seed: int, folder: Path) -> dict:
-    from ..hil.replay import load_log, replay
-    from ..recording.logfile import LogWriter
+    from ...recording.logfile import LogWriter
+    from ..replay import load_log, replay
 
     flush_s = LogWriter.__init__.__defaults__[1]
     rng = random.Random(seed + 77)
@@ -152,7 +152,7 @@ def flatsat_runs(runs: int, seed: int, folder: Path) -> dict:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m gyrostar.reliability.recorder_kill",
+    ap = argparse.ArgumentParser(prog="python -m gyrostar.hil.reliability.recorder_kill",
                                  description=__doc__.split("\n")[0])
     ap.add_argument("--runs", type=int, default=100)
     ap.add_argument("--flatsat-runs", type=int, default=5)

@@ -1,6 +1,6 @@
 """Soak: the coupled loop on the simulated flatsat for an hour with random faults.
 
-``python -m gyrostar.reliability.soak [--duration 3600] [--seed 1] [--out soak.json]``
+``python -m gyrostar.hil.reliability.soak [--duration 3600] [--seed 1] [--out soak.json]``
 (``make soak``). The body rate changes every 2 min (uniform ±0.4 °/s per axis); faults
 arrive as a Poisson process (mean every ``--fault-every`` s): reply-stream corruption
 (1 %), dropped bytes (0.1 %), garbage bursts, a head disconnect (1–3 s), gyro NACK bursts
@@ -52,7 +52,7 @@ def random_schedule(duration: float, seed: int, every_s: float = 45.0, quiet_sta
 
 
 def rate_segments(duration: float, seed: int, every_s: float = 120.0, max_dps: float = 0.4):
-    from ..hil import config as hc
+    from .. import config as hc
 
     rng = np.random.default_rng(seed)
     n = int(np.ceil((duration + 60.0) / every_s))
@@ -62,7 +62,7 @@ def rate_segments(duration: float, seed: int, every_s: float = 120.0, max_dps: f
 
 def run(duration: float = 3600.0, seed: int = 1, fault_every_s: float = 45.0, max_rss_growth_mb: float = 20.0,
         progress: bool = True) -> dict:
-    from ..loop.record import MODE_NAMES, MODE_TRACK
+    from ...loop.record import MODE_NAMES, MODE_TRACK
     from .campaign import cross_boresight_error_arcsec, run_campaign
 
     faults = random_schedule(duration, seed, fault_every_s)
@@ -124,14 +124,14 @@ def run(duration: float = 3600.0, seed: int = 1, fault_every_s: float = 45.0, ma
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m gyrostar.reliability.soak", description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(prog="python -m gyrostar.hil.reliability.soak", description=__doc__.split("\n")[0])
     ap.add_argument("--duration", type=float, default=3600.0, help="flatsat seconds (real time)")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--fault-every", type=float, default=45.0, help="mean seconds between faults")
     ap.add_argument("--max-rss-growth-mb", type=float, default=20.0)
     ap.add_argument("--out", default="", help="also write the JSON here")
     a = ap.parse_args(argv)
-    from ..cli.output import _clean
+    from ...cli.output import _clean
 
     s = _clean(run(a.duration, a.seed, a.fault_every, a.max_rss_growth_mb))
     text = json.dumps(s, indent=1)

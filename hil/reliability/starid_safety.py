@@ -1,6 +1,6 @@
 """Star-identification safety: false stars and magnitude noise never yield a wrong attitude.
 
-``python -m gyrostar.reliability.starid_safety [--trials 10000] [--seed 1]``. Each trial
+``python -m gyrostar.hil.reliability.starid_safety [--trials 10000] [--seed 1]``. Each trial
 draws a random attitude, 0–5 false stars (uniform over the sensor, as bright as real ones)
 and noisy magnitudes and centroids (:class:`gyrostar.starid.synth.Sky`), and runs the image
 through :class:`gyrostar.starid.tracker.StarTracker` — Pyramid lost-in-space and the
@@ -37,7 +37,7 @@ MAX_FALSE = 5
 
 def _with_checks(sp: dict, se: dict, cfg) -> tuple:
     """The two identifiers with per-star checks that know the magnitude noise."""
-    from ..starid.star_check import StarCheck
+    from ...starid.star_check import StarCheck
 
     f = sp["camera"].focal_length_px
     pyr, ext = sp["ident"], se["ident"]
@@ -47,7 +47,7 @@ def _with_checks(sp: dict, se: dict, cfg) -> tuple:
 
 
 def _configs(mag_noise: float, pos_noise: float):
-    from ..starid.eval_starid import TrialConfig
+    from ...starid.eval_starid import TrialConfig
 
     base = dict(preset="qian2015", catalog="hip2", mag_limit=7.5, pos_noise_px=pos_noise, mag_noise=mag_noise)
     return TrialConfig(method="pyramid", **base), TrialConfig(method="extended-grid", **base)
@@ -55,17 +55,17 @@ def _configs(mag_noise: float, pos_noise: float):
 
 def boresight_and_roll_arcsec(q_est, q_true) -> tuple[float, float]:
     """(angle between estimated and true boresights, roll error about it), arcsec."""
-    from ..attitude import quat_error_angles
+    from ...attitude import quat_error_angles
 
     e = quat_error_angles(np.asarray(q_est, float), np.asarray(q_true, float)) * 180.0 / math.pi * 3600.0
     return float(math.hypot(e[0], e[1])), float(abs(e[2]))
 
 
 def run(trials: int = 10000, seed: int = 1, mag_noise: float = 0.3, pos_noise: float = 0.5) -> dict:
-    from ..attitude import quat_propagate, random_attitudes
-    from ..starid.eval_starid import setup
-    from ..starid.synth import score
-    from ..starid.tracker import Mode, StarTracker
+    from ...attitude import quat_propagate, random_attitudes
+    from ...starid.eval_starid import setup
+    from ...starid.synth import score
+    from ...starid.tracker import Mode, StarTracker
 
     cfg_p, cfg_e = _configs(mag_noise, pos_noise)
     sp, se = setup(cfg_p), setup(cfg_e)
@@ -147,7 +147,7 @@ def run(trials: int = 10000, seed: int = 1, mag_noise: float = 0.3, pos_noise: f
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m gyrostar.reliability.starid_safety",
+    ap = argparse.ArgumentParser(prog="python -m gyrostar.hil.reliability.starid_safety",
                                  description=__doc__.split("\n")[0])
     ap.add_argument("--trials", type=int, default=10000)
     ap.add_argument("--seed", type=int, default=1)

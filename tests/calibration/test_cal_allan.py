@@ -98,9 +98,9 @@ def test_gyro_static_from_a_log_file_with_temperature(tmp_path, capsys):
 def test_recording_through_the_bmi088_driver_and_emulator():
     # the --live path (driver FIFO reading, frame-count time base) on the register model
     from gyrostar.calibration.gyro_log import record
-    from gyrostar.calibration.gyro_static import analyse
     from gyrostar.clock import SimulatedClock
     from gyrostar.gyro import Bmi088Gyro
+    from gyrostar.hil.calibrate.gyro_static import analyse
     from gyrostar.mocks.bmi088_model import Bmi088GyroModel
     from gyrostar.mocks.fake_rates import ProfileRates
     from gyrostar.transport import I2CBus, I2CRegisters

@@ -1,6 +1,6 @@
 """Human output never says 'nan' for 'never'; summaries of runs that never tracked say so."""
 
-from gyrostar.core.eval_centroid import _after
+from gyrostar.hil.evaluation.eval_centroid import _after
 from gyrostar.hil.runner import human_summary
 
 

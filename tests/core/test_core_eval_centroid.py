@@ -6,7 +6,7 @@ import sys
 
 import numpy as np
 import pytest
-from gyrostar.core.paper000_sim import Paper000Config, run_paper000
+from gyrostar.hil.evaluation.paper000_sim import Paper000Config, run_paper000
 
 
 @pytest.fixture(scope="module")

@@ -1,12 +1,12 @@
 """Link faults during a short run of the coupled loop on the simulated flatsat (the 30 s
-campaign is ``python -m gyrostar.reliability.linkfaults``): the loop never raises, coasts on
+campaign is ``python -m gyrostar.hil.reliability.linkfaults``): the loop never raises, coasts on
 the gyro with a valid attitude, gets a good frame back within 2 frames, counts bad frames."""
 
 import numpy as np
 import pytest
+from gyrostar.hil.reliability.campaign import FaultEvent, run_campaign
+from gyrostar.hil.reliability.linkfaults import _cum, analyse
 from gyrostar.loop.record import MODE_ACQUIRE
-from gyrostar.reliability.campaign import FaultEvent, run_campaign
-from gyrostar.reliability.linkfaults import _cum, analyse
 
 
 def test_cum_counter_survives_client_restart():

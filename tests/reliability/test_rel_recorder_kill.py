@@ -1,11 +1,11 @@
-"""Recorder crash safety (small version of ``python -m gyrostar.reliability.recorder_kill``):
+"""Recorder crash safety (small version of ``python -m gyrostar.hil.reliability.recorder_kill``):
 SIGKILLed recordings open, keep everything flushed, and hold exactly what was written; a
 log cut at any byte reads up to its last whole record."""
 
 import random
 
+from gyrostar.hil.reliability.recorder_kill import expected_record, synthetic_runs
 from gyrostar.recording import logfile as lf
-from gyrostar.reliability.recorder_kill import expected_record, synthetic_runs
 
 
 def test_sigkill_at_random_points(tmp_path):

@@ -1,7 +1,7 @@
-"""Star-identification safety (small version of ``python -m gyrostar.reliability.starid_safety``):
+"""Star-identification safety (small version of ``python -m gyrostar.hil.reliability.starid_safety``):
 false stars and magnitude noise through the tracker never give a wrong attitude."""
 
-from gyrostar.reliability.starid_safety import WRONG_BORESIGHT_PX, run
+from gyrostar.hil.reliability.starid_safety import WRONG_BORESIGHT_PX, run
 
 
 def test_false_stars_never_give_a_wrong_attitude():
