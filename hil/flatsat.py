@@ -396,10 +396,11 @@ def emulated_gyro(cfg: hc.FlatsatConfig) -> bool:
     return cfg.gyro.kind == "emulator"
 
 
-def preflight(cfg: hc.FlatsatConfig, scen: hc.Scenario, simulated_clock: bool = False) -> None:
+def preflight(cfg: hc.FlatsatConfig, scen: hc.Scenario, simulated_clock: bool = False, devices: bool = True) -> None:
     """Refuse, before anything is opened or compiled, a device mix that cannot work
     (:class:`ConfigError`, exit 2, with the reason) and a real device node that is not
-    there (:class:`DeviceError`, exit 3, naming it).
+    there (:class:`DeviceError`, exit 3, naming it; ``devices=False`` skips the device nodes:
+    the runner checks them once the run's log holds its META, so a failed run says what it was).
 
     Any mix of real and emulated devices is allowed: an emulated device takes its scenario
     from the simulator, a real one its physics from the bench. What cannot work: the gyro
@@ -422,6 +423,8 @@ def preflight(cfg: hc.FlatsatConfig, scen: hc.Scenario, simulated_clock: bool = 
                           f"(head.kind = '{cfg.head.kind}')")
     if simulated_clock and not cfg.simulated:
         raise ConfigError("a simulated clock (--fast) needs every device emulated: real devices keep real time")
+    if not devices:
+        return
     if cfg.head.kind == "serial" and "://" not in cfg.head.url and not os.path.exists(cfg.head.url):
         raise DeviceError(f"head serial port {cfg.head.url} does not exist")
     if cfg.gyro.kind == "i2c" and not os.path.exists(f"/dev/i2c-{cfg.gyro.i2c_bus}"):

@@ -77,7 +77,7 @@ def run(args) -> int:
     from .flatsat import emulated_head, preflight
 
     scen = hc.load_scenario(getattr(args, "scenario", None) or ("demo" if emulated_head(cfg) else "bench"))
-    preflight(cfg, scen, simulated_clock=bool(getattr(args, "fast", False)))
+    preflight(cfg, scen, simulated_clock=bool(getattr(args, "fast", False)), devices=False)
     duration = scen.duration_s if getattr(args, "duration", None) is None else float(args.duration)
     if not (duration > 0 and np.isfinite(duration)):
         raise ConfigError(f"--duration must be a finite number of seconds > 0, got {duration}")
@@ -172,6 +172,7 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
     from .analysis import summarize
     from .status import StatusLine
 
+    flatsat.preflight(cfg, scen, simulated_clock=fast)    # device nodes: exit 3 naming one that is not there
     # the loop shares the interpreter with the link reader and head worker threads (and
     # in-process emulators): switch threads often so the 400 Hz path is not held off
     if not fast:

@@ -62,14 +62,11 @@ def load_slew_input(path, cal=None, min_stars: int = 3):
     When the file holds the identified stars (``field``, ``uv``, ``ref``) and ``cal`` has a
     [camera] table, the field attitudes are recomputed through that calibrated camera (a
     principal-point or distortion error of the run's camera would otherwise bend them)."""
-    from ..errors import ConfigError
+    from .report import read_npz
 
-    with np.load(path) as z:
-        missing = {"t", "rate", "t_cam", "q_cam"} - set(z.files)
-        if missing:
-            raise ConfigError(f"{path} lacks arrays {sorted(missing)}")
-        t, rate, t_cam, q_cam = z["t"], z["rate"], z["t_cam"], z["q_cam"]
-        stars = {k: z[k] for k in ("field", "uv", "ref", "camera") if k in z.files}
+    z = read_npz(path, ("t", "rate", "t_cam", "q_cam"))
+    t, rate, t_cam, q_cam = z["t"], z["rate"], z["t_cam"], z["q_cam"]
+    stars = {k: z[k] for k in ("field", "uv", "ref", "camera") if k in z}
     note = "attitudes as exported"
     if cal is not None and cal.camera is not None and {"field", "uv", "ref", "camera"} <= set(stars):
         from ..camera import CameraModel

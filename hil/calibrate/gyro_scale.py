@@ -107,8 +107,8 @@ def run(args) -> int:
     if args.method is None:
         args.method = "rate-table"
         if source == "file":
-            with np.load(args.input) as z:
-                args.method = "rate-table" if "run" in z.files else "slew"
+            z = report.read_npz(args.input, ("t", "rate"))
+            args.method = "rate-table" if "run" in z else "slew"
     target = None
     if source == "file" and args.toml and Path(args.toml).exists():
         target = calfile.load(args.toml)
