@@ -88,10 +88,12 @@ class AttitudeFilter:
             return self.q.copy()
         return quat_propagate(self.hist_q[best], self.omega, t - best_t)
 
-    def update(self, t_mid: float, b_mid, refs, sigmas, accepted) -> int:
+    def update(self, t_mid: float, b_mid, refs, sigmas, accepted, min_used: int = 1) -> int:
         """Star directions measured at mid-exposure ``t_mid`` (body unit vectors (n, 3)),
         catalog vectors (n, 3), σ (n,) rad, applied now (χ² gated per star; ``accepted``
-        (n,) uint8 written). Returns the count used.
+        (n,) uint8 written). Returns the count used; an image in which fewer than
+        ``min_used`` stars pass their gates is not applied at all (returns 0): one star
+        alone, at speed, can carry a smeared or confused centroid that its gate admits.
 
         A delayed measurement: the state now is the state at ``t_mid`` carried by the gyro
         (rotation R from the attitude history) plus the gyro's random walk since then,
@@ -118,8 +120,12 @@ class AttitudeFilter:
         else:
             qd = 0.0
         p_prior_mid = rot.T @ P[:3, :3] @ rot
+        saved = (self.q.copy(), self.b.copy(), P.copy()) if min_used > 1 else None
         n = int(mekf_update(self.q, self.b, P, bvecs, np.ascontiguousarray(refs),
                             np.ascontiguousarray(sigmas), GATE, accepted))
+        if saved is not None and 0 < n < min_used:
+            self.q[:], self.b[:], P[:, :] = saved
+            n = 0
         if n:
             q_mid = quat_mult(quat_conj(rq), self.q)
             p_mid = rot.T @ P[:3, :3] @ rot

@@ -404,7 +404,7 @@ class CoupledLoop:
         updated = 0
         if len(slots):
             acc = np.zeros(len(slots), np.uint8)
-            updated = self.filter.update(res.t_mid, b_mid[use], tr.ref[slots], sig[use], acc)
+            updated = self.filter.update(res.t_mid, b_mid[use], tr.ref[slots], sig[use], acc, self.p.min_stars)
             self.c.updates += updated
             good = acc.astype(np.bool_)
             if updated:
