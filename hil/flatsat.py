@@ -422,7 +422,7 @@ def _head_devices(cfg, scen, sim, truth, seed, faults):
             warm.render_windows(np.array([[0, 10, 10, 16]], np.int32), truth.q0, np.zeros(3), frame=0)
             return emu, truth
 
-        emu = EmulatorProcess(make)
+        emu = EmulatorProcess(make, link=None if h.link == "none" else h.link)
         emu.start()
         faults.head_emulator = emu
         truth.on_restart.append(emu.set_origin)
@@ -432,15 +432,18 @@ def _head_devices(cfg, scen, sim, truth, seed, faults):
                 raise DeviceError("head emulator is disconnected (pty closed)")
             return SerialLink(emu.path, baudrate=h.baudrate)
 
-        return open_link, f"Python head emulator (mocks) in a child process, on pty {emu.path}", [emu.stop]
+        return open_link, (f"Python head emulator (mocks) in a child process, on pty {emu.path} "
+                           f"(link {h.link})"), [emu.stop]
     if h.kind == "firmware-host":
         from .fwhead import FirmwareHead
 
-        fw = FirmwareHead(h.program or None, sim, truth, seed, cfg.sim, scen.mag_limit or cfg.sim.mag_limit)
+        fw = FirmwareHead(h.program or None, sim, truth, seed, cfg.sim, scen.mag_limit or cfg.sim.mag_limit,
+                          link=None if h.link == "none" else h.link)
         fw.start()
         faults.firmware_head = fw
         truth.on_restart.append(fw.set_origin)
-        return fw.open_link, f"firmware host program {fw.program} on a pty (relay {fw.path})", [fw.stop]
+        wiring = f"firmware host program {fw.program} on a pty (relay {fw.path}, link {h.link})"
+        return fw.open_link, wiring, [fw.stop]
 
     def open_serial():
         return SerialLink(h.url, baudrate=h.baudrate)
