@@ -37,9 +37,10 @@ class HeadConfig:
     retries: int = 2
     exposure_ms: float = 10.0
     gain: int = 1
-    # the head link (gyrostar.transport.linkrate preset): simulated heads are paced at its line
-    # rate, and the loop budgets its windows with it; "none" = unpaced (tests of the head only)
-    link: str = "usb-fs"
+    # the head link (gyrostar.transport.linkrate preset): simulated links are paced at its line
+    # rate and the loop budgets its windows with it. A 100 Hz head moves 0.3-0.5 MB/s, within
+    # USB full speed (0.9 MB/s), beyond a 921.6 kBd UART. "none": unpaced (head tests only)
+    link: Literal["uart-921k", "uart-3m", "usb-fs", "none"] = "usb-fs"
     mode: Literal["stream", "request"] = "stream"   # streaming head, or CAPTURE request by request
     pixel_format: Literal["packed10", "u16"] = "packed10"
 

@@ -71,12 +71,13 @@ class Truth:
     Scenario time is host time minus ``t_origin`` (the run's start on the host clock).
     """
 
-    def __init__(self, scen: hc.Scenario, gyro_samples, t_origin: float = 0.0):
+    def __init__(self, scen: hc.Scenario, gyro_stream, t_origin: float = 0.0):
+        """``gyro_stream``: the run's simulated gyro (:class:`gyrostar.mocks.gyro_truth.GyroStream`)."""
         from ..attitude import quat_from_boresight
 
         self.profile = scenario_profile(scen)
         self.q0 = np.asarray(quat_from_boresight(scen.ra_deg * DEG, scen.dec_deg * DEG, scen.roll_deg * DEG))
-        self.gyro = gyro_samples
+        self.gyro = gyro_stream
         self.t_origin = t_origin
         self._cache: dict = {}
         self._lock = threading.Lock()
@@ -121,8 +122,7 @@ class Truth:
         out["q"][order] = q
         out["omega"] = self.profile.rate(ts)
         g = self.gyro
-        k = np.clip(np.round(ts * g.params.odr_hz).astype(np.int64) - 1, 0, len(g.t) - 1)
-        out["bias"] = g.bias[k]
+        out["bias"] = g.bias(np.maximum(np.round(ts * g.odr_hz).astype(np.int64) - 1, 0))
         return out
 
     def at(self, t: float):
@@ -132,6 +132,16 @@ class Truth:
         row["t"] = t
         row["q"] = self.q_at(t, "status")
         return row
+
+
+def simulated_gyro(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int):
+    """The simulated gyro's output for a run of any length: the scenario's rate profile (held
+    at its last rate after the scenario ends) through the configured error model, ideal
+    sampling (the register model quantises at the range the driver sets)."""
+    from ..mocks.gyro_truth import GyroStream, gyro_params
+
+    gp = gyro_params(scen.gyro_errors or cfg.sim.gyro_errors, range_dps=0.0, odr_hz=float(cfg.gyro.odr_hz))
+    return GyroStream(scenario_profile(scen), gp, seed=seed)
 
 
 class ScenarioScene:
@@ -219,6 +229,7 @@ class Flatsat:
     faults: object = None
     closers: tuple = ()
     irq: object = None
+    lockstep: object = None    # fast mode: the lock-step schedule (gyrostar.hil.lockstep.Lockstep)
 
     def make_loop(self, sinks):
         return make_loop(self.cfg, self.clock, self.gyro, self.head, self.camera, sinks, self.lat_clock,
@@ -231,8 +242,14 @@ class Flatsat:
         self.base_clock.sleep(dt)
 
     def start_faults(self, t0: float) -> None:
-        if self.faults is not None:
+        """Real time: the fault plan's own thread applies it; fast mode: :meth:`apply_faults`."""
+        if self.faults is not None and self.lockstep is None:
             self.faults.start(t0, self.base_clock)
+
+    def apply_faults(self, t: float) -> None:
+        """Fast mode: the faults and eclipses due at scenario time ``t`` (s), from the runner."""
+        if self.faults is not None:
+            self.faults.apply(t)
 
     def loop_stalled(self, t: float) -> bool:
         return self.faults is not None and self.faults.stalled(t)
@@ -280,14 +297,16 @@ class Flatsat:
                 log.debug("close: %s", exc)
 
 
-def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, writer) -> Flatsat:
+def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, writer, fast: bool = False) -> Flatsat:
     """Devices + recording taps + driver for ``cfg`` running ``scen``.
 
-    Every device runs on the host monotonic clock: the head emulator's and the firmware's
-    exposures take their real time, so a simulated flatsat runs in real time too.
+    Real time (default): every device runs on the host monotonic clock; the head emulator's
+    and the firmware's exposures take their real time. ``fast``: every device on one
+    simulated clock in lock-step (:mod:`gyrostar.hil.lockstep`), the head emulator in this
+    process behind the link's line-rate model; needs the emulated head and gyro.
     """
     from ..camera import camera_preset
-    from ..clock import MONOTONIC
+    from ..clock import MONOTONIC, SimulatedClock
     from ..transport import I2CBus, I2CRegisters
 
     wiring = {}
@@ -295,17 +314,26 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
     preset = scen.preset or cfg.sim.preset
     camera = camera_preset(preset)
     base = MONOTONIC
+    lockstep = None
+    if fast:
+        from ..errors import NotAvailableError
+        from .lockstep import Lockstep
+
+        if cfg.head.kind != "emulator" or cfg.gyro.kind != "emulator":
+            raise NotAvailableError(f"--fast runs the emulated head and gyro only (this config: head.kind = "
+                                    f"'{cfg.head.kind}', gyro.kind = '{cfg.gyro.kind}'); run it in real time")
+        base = SimulatedClock(FAST_T0)
+        lockstep = Lockstep(base)
     truth = sim = gsamp = None
     e_per_dn = None
     if cfg.simulated:
-        from ..mocks.gyro_truth import gyro_params, simulate_gyro
         from ..mocks.sim_preset import load_preset
 
         sim = load_preset(preset)
-        gp = gyro_params(scen.gyro_errors or cfg.sim.gyro_errors, range_dps=0.0, odr_hz=float(cfg.gyro.odr_hz))
-        gsamp = simulate_gyro(scenario_profile(scen), scen.duration_s + 60.0, gp, seed=seed)
+        gsamp = simulated_gyro(cfg, scen, seed)
         truth = Truth(scen, gsamp, t_origin=base.now())
-        wiring["sky"] = f"simulator: {preset} preset, {cfg.sim.catalog} catalog, gyro errors '{gp.name}'"
+        wiring["sky"] = (f"simulator: {preset} preset, {cfg.sim.catalog} catalog, "
+                         f"gyro errors '{gsamp.params.name}'")
         e_per_dn = sim.detector.gain_e_per_adu
     rec_clock = taps.RecordingClock(base, writer) if writer else base
     head_clock = taps.RecordingClock(base, writer, channel=CH_HEAD_CLOCK) if writer else base
@@ -315,11 +343,12 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
     # gyro bus
     if cfg.gyro.kind == "emulator":
         from ..mocks.bmi088_model import Bmi088GyroModel
+        from ..mocks.fake_rates import StreamRates
         from ..mocks.faults import FaultyBus
 
         if cfg.gyro.model != "bmi088":
             raise ConfigError("the gyro emulator models the BMI088 (gyro.model = 'bmi088')")
-        model = Bmi088GyroModel(base, _SampleSource(gsamp, truth))
+        model = Bmi088GyroModel(base, StreamRates(gsamp, lambda: truth.t_origin))
         model.truth_log = False    # the run's truth is the simulator's; the model's test log grows ~90 kB/s
         smbus = FaultyBus(model.smbus(cfg.gyro.i2c_address, bus_hz=None), clock=base, seed=seed)
         faults.gyro_bus = smbus
@@ -344,7 +373,7 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
     gyro = make_gyro(cfg, regs, rec_clock)
 
     # head link
-    open_link, head_wiring, head_closers = _head_devices(cfg, scen, sim, truth, seed, faults)
+    open_link, head_wiring, head_closers = _head_devices(cfg, scen, sim, truth, seed, faults, lockstep)
     wiring["head"] = head_wiring
     closers += head_closers
     current = {}
@@ -369,11 +398,19 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
                       "windows), CoG + smeared-PSF centroids (gyrostar.core.centroid)")
     wiring["gyro_time"] = ("FIFO watermark interrupt edges (emulated INT3 line) anchor the sample times"
                            if irq is not None else "FIFO polls bound the sample times (no interrupt line wired)")
-    return Flatsat(cfg, scen, camera, rec_clock, base, gyro, head, truth, simulated_clock=False, wiring=wiring,
-                   e_per_dn=e_per_dn, faults=faults, closers=tuple(closers), irq=irq)
+    lat_clock = None
+    if fast:
+        # host compute time from FIFO read to outputs (simulated time stands still in a step)
+        lat_clock = taps.RecordingClock(MONOTONIC, writer, channel=lf.CH_LATENCY) if writer else MONOTONIC
+        wiring["clock"] = ("simulated clock in lock-step (gyrostar.hil.lockstep): devices, link and loop on "
+                           "one time line; the host's compute time is not simulated")
+    return Flatsat(cfg, scen, camera, rec_clock, base, gyro, head, truth, simulated_clock=fast, wiring=wiring,
+                   lat_clock=lat_clock, e_per_dn=e_per_dn, faults=faults, closers=tuple(closers), irq=irq,
+                   lockstep=lockstep)
 
 
 CH_IRQ = 5
+FAST_T0 = 1000.0    # s: start of the simulated clock in fast mode
 
 
 class _IrqLine:
@@ -387,24 +424,33 @@ class _IrqLine:
         return float("nan") if t is None else float(t)
 
 
-class _SampleSource:
-    """Rate source for the BMI088 register model: the simulator's gyro output at host time t."""
+def _sim_head(cfg, scen, sim, truth, seed, faults, lockstep):
+    """The head emulator in this process on a device clock, behind the line-rate link model."""
+    from ..catalog import load_catalog
+    from ..clock import SimulatedClock
+    from ..mocks.head_emulator import HeadEmulator
+    from ..mocks.sky import Sky
+    from ..transport.linkrate import preset as link_preset
+    from .lockstep import SimHead
 
-    def __init__(self, gsamp, truth: Truth):
-        self.g = gsamp
-        self.truth = truth
+    cat = load_catalog(cfg.sim.catalog, scen.mag_limit or cfg.sim.mag_limit)
+    dev_clock = SimulatedClock(lockstep.clock.now())
+    emu = HeadEmulator(Sky(cat, sim, seed=seed), ScenarioScene(truth, sim.detector.exposure_s), noise=True,
+                       clock=dev_clock)
+    head = SimHead(emu, dev_clock, link_preset(cfg.head.link), lockstep)
+    head.start()
+    faults.head_emulator = head
+    return (head.open_link, f"Python head emulator (mocks) in process on a simulated clock, link "
+            f"{head.preset.description}", [head.stop])
 
-    def __call__(self, k, t):
-        ts = np.maximum(np.asarray(t) - self.truth.t_origin, 0.0)
-        i = np.clip(np.round(ts * self.g.params.odr_hz).astype(np.int64) - 1, 0, len(self.g.t) - 1)
-        return self.g.omega_meas[i]
 
-
-def _head_devices(cfg, scen, sim, truth, seed, faults):
+def _head_devices(cfg, scen, sim, truth, seed, faults, lockstep=None):
     """(open_link() -> SerialLink, wiring text, closers) for the configured head."""
     from ..transport import SerialLink
 
     h = cfg.head
+    if lockstep is not None:
+        return _sim_head(cfg, scen, sim, truth, seed, faults, lockstep)
     if h.kind == "emulator":
         from .emuproc import EmulatorProcess
 

@@ -205,6 +205,11 @@ class HeadPort:
     def busy(self) -> bool:
         return self._job is not None
 
+    @property
+    def job_done(self) -> bool:
+        """The job in flight has finished (its result waits for :meth:`poll`)."""
+        return self._done.is_set()
+
     def submit_windows(self, spans: np.ndarray) -> None:
         self._submit("windows", spans)
 

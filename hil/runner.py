@@ -64,15 +64,18 @@ def run(args) -> int:
                          realtime=bool(getattr(args, "realtime", False)),
                          plots=not getattr(args, "no_plots", False),
                          status=getattr(args, "verbose", 0) >= 0,
-                         config_path=getattr(args, "config", None))
+                         config_path=getattr(args, "config", None), fast=bool(getattr(args, "fast", False)))
     emit(args, result, human_summary(result))
     return 0
 
 
 def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed: int, folder: Path,
                 realtime: bool = False, plots: bool = True, status: bool = True, config_path=None,
-                record: bool | None = None, on_output=None, probe=None) -> dict:
+                record: bool | None = None, on_output=None, probe=None, fast: bool = False) -> dict:
     """Run one flatsat session and return its summary (also written to summary.json).
+
+    ``fast``: the emulated devices on a simulated clock in lock-step with the loop
+    (:mod:`gyrostar.hil.lockstep`), as fast as the host computes; same loop, log and figures.
 
     ``probe``: a :class:`gyrostar.loop.wakeup_probe.WakeupProbe` to run beside the loop; the
     summary's ``host_wakeups`` then says how often the host itself woke a real-time task
@@ -87,8 +90,10 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
 
     record = cfg.outputs.record if record is None else record
     writer = lf.LogWriter(folder / "flatsat.gslog", background=True) if record else None
+    if fast and (realtime or probe is not None):
+        raise ConfigError("--fast runs on a simulated clock: it cannot be combined with --realtime or a probe")
     meta = {"format": "gyrostar flatsat log 1", "config": _cfg_dict(cfg), "scenario": _cfg_dict(scen),
-            "duration_s": duration, "seed": seed, "realtime": realtime, "output": describe(),
+            "duration_s": duration, "seed": seed, "realtime": realtime, "fast": fast, "output": describe(),
             "started_utc": datetime.now(UTC).isoformat()}
     if writer:
         writer.meta(meta)
@@ -96,7 +101,8 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
 
     # the loop shares the interpreter with the link reader and head worker threads (and
     # in-process emulators): switch threads often so the 400 Hz path is not held off
-    sys.setswitchinterval(0.0002)
+    if not fast:
+        sys.setswitchinterval(0.0002)
     rt = None
     if realtime:
         rt = realtime_setup(cfg.realtime.sched_fifo_priority or None, cfg.realtime.cpus or None)
@@ -118,7 +124,7 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
         udp = UdpSink(cfg.outputs.udp_host, cfg.outputs.udp_port)
         sinks.append(udp)
 
-    fs = flatsat.build(cfg, scen, seed=seed, realtime=realtime, writer=writer)
+    fs = flatsat.build(cfg, scen, seed=seed, realtime=realtime, writer=writer, fast=fast)
     loop = fs.make_loop(sinks)
     warm["identifier_s"] = loop.warm_identifier()
     import gc
@@ -134,7 +140,8 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
     t_wall0 = time.perf_counter()
     cpu0 = time.process_time()
     # the head worker's Python work stays out of the steps (it shares the interpreter lock)
-    gate = StepGate()
+    gate = fs.lockstep if fs.lockstep is not None else StepGate()
+    sched = None
     if hasattr(loop.head, "step_gate"):
         loop.head.step_gate = gate
     try:
@@ -145,31 +152,11 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
         loop.start()
         fs.start_faults(t_start_of(fs))
         period = 1.0 / loop.gyro.odr_hz
-        sched = PeriodicScheduler(period)
-        if probe is not None:
-            probe.start(duration)
-        sched.start()
-        t_start = t_start_of(fs)
-        while True:
-            sched.wait()
-            t = fs.clock_now() - t_start
-            if t >= duration:
-                break
-            if fs.loop_stalled(t):       # injected "loop does not read the FIFO" fault
-                sched.done()
-                gate.loop_exit(sched.deadline)
-                continue
-            c0 = time.thread_time()
-            w0 = time.perf_counter()
-            gate.loop_enter()
-            loop.step()
-            step_wall.append(time.perf_counter() - w0)
-            cpu_loop += time.thread_time() - c0
-            sched.done()
-            gate.loop_exit(sched.deadline)
-            if status and loop.last_output is not None:
-                line.update(loop.last_output, fs.truth_at(loop.last_output["t"]), step_wall[-1] * 1e6,
-                            sched.overruns, duration, t0=t_start)
+        if fs.lockstep is not None:
+            cpu_loop = _run_lockstep(fs, loop, duration, period, step_wall, line if status else None)
+        else:
+            sched = PeriodicScheduler(period)
+            cpu_loop = _run_realtime(fs, loop, gate, sched, duration, step_wall, line if status else None, probe)
     finally:
         gate.open()
         line.close()
@@ -195,8 +182,9 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
         "duration_s": duration,
         "attitude_error_arcsec_1sigma": res.get("attitude_error_arcsec_1sigma"),
         "latency_p99_ms": res.get("latency_p99_ms"),
-        "cpu_percent": 100.0 * cpu_loop / wall if wall > 0 else None,
-        "overruns": sched.overruns,
+        # fast mode: loop CPU per second of flatsat time (the share of a core it needs in real time)
+        "cpu_percent": (100.0 * cpu_loop / (duration if fast else wall)) if wall > 0 else None,
+        "overruns": sched.overruns if sched is not None else 0,
         "mode_seconds": res["mode_seconds"],
         "frames": counters["frames"],
         "gyro_samples": counters["gyro_samples"],
@@ -207,7 +195,11 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
     res_top["process_cpu_percent"] = 100.0 * cpu_proc / wall if wall > 0 else None
     res_top["wall_s"] = wall
     res_top["realtime"] = realtime
-    res_top["latency_clock"] = "host monotonic clock, FIFO read complete → output emitted"
+    res_top["fast"] = fast
+    if fast:
+        res_top["speedup"] = duration / wall if wall > 0 else None
+    res_top["latency_clock"] = "host monotonic clock, FIFO read complete → output emitted" + (
+        " (host compute time; the simulated clock stands still inside a step)" if fast else "")
     res_top["counters"] = counters
     client = getattr(loop.head, "client", None)
     if client is not None:
@@ -241,6 +233,78 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
         res_top["plots"] = [str(p) for p in write_plots(folder, out, truth, cerr)]
     (folder / "summary.json").write_text(json.dumps(_jsonable(res_top), indent=2))
     return res_top
+
+
+def _run_realtime(fs, loop, gate, sched, duration: float, step_wall: list, line, probe) -> float:
+    """Real time: one loop step every gyro period on the monotonic clock. Returns the loop's
+    CPU seconds."""
+    cpu = 0.0
+    if probe is not None:
+        probe.start(duration)
+    sched.start()
+    t_start = t_start_of(fs)
+    while True:
+        sched.wait()
+        t = fs.clock_now() - t_start
+        if t >= duration:
+            break
+        if fs.loop_stalled(t):       # injected "loop does not read the FIFO" fault
+            sched.done()
+            gate.loop_exit(sched.deadline)
+            continue
+        c0 = time.thread_time()
+        w0 = time.perf_counter()
+        gate.loop_enter()
+        loop.step()
+        step_wall.append(time.perf_counter() - w0)
+        cpu += time.thread_time() - c0
+        sched.done()
+        gate.loop_exit(sched.deadline)
+        if line is not None and loop.last_output is not None:
+            line.update(loop.last_output, fs.truth_at(loop.last_output["t"]), step_wall[-1] * 1e6,
+                        sched.overruns, duration, t0=t_start)
+    return cpu
+
+
+def _run_lockstep(fs, loop, duration: float, period: float, step_wall: list, line) -> float:
+    """Fast mode: step the loop every gyro period of simulated time; between steps let the
+    head worker run at the simulated times its replies (or timeouts) are due. Returns the
+    loop's CPU seconds."""
+    lk = fs.lockstep
+    clock = fs.base_clock
+    head = loop.head
+    lk.begin()
+    t_start = t_start_of(fs)
+    t_next = clock.now() + period
+    cpu = 0.0
+    shown = time.perf_counter()
+    while True:
+        while True:
+            w = lk.wake_time
+            if w is None or w > t_next:
+                break
+            lk.wake()
+            lk.settle(head)
+        if t_next - t_start >= duration:
+            break
+        if t_next > clock.now():
+            clock.set(t_next)
+        t = t_next - t_start
+        t_next += period
+        fs.apply_faults(t)
+        if fs.loop_stalled(t):        # injected "loop does not read the FIFO" fault
+            continue
+        c0 = time.thread_time()
+        w0 = time.perf_counter()
+        loop.step()
+        step_wall.append(time.perf_counter() - w0)
+        cpu += time.thread_time() - c0
+        lk.settle(head)
+        if line is not None and loop.last_output is not None and w0 - shown > 0.2:
+            shown = w0
+            line.update(loop.last_output, fs.truth_at(loop.last_output["t"]), step_wall[-1] * 1e6, 0, duration,
+                        t0=t_start)
+    return cpu
 
 
 def t_start_of(fs) -> float:

@@ -233,6 +233,16 @@ class Bmi088GyroModel(RegisterModelBase):
             return
         self.regs[addr] = val
 
+    def brownout(self) -> None:
+        """A silent reset (a supply glitch): every register back to its reset value (FIFO in
+        bypass, ODR code 0x00), the FIFO emptied, the global sample count running on; the
+        part keeps answering and nothing tells the host."""
+        with self.lock:
+            self._advance()
+            k = self._k_next
+            self._power_on(self.clock.now())
+            self._k_next = k
+
     # --- tests' view --------------------------------------------------------------------------
     def watermark_time(self) -> float | None:
         """Model time (s) of the latest FIFO watermark interrupt edge (None before any)."""

@@ -7,6 +7,9 @@ splitmix64 hash of (seed, k, axis) → Box–Muller normal deviates.
 * :class:`ProfileRates` — body rate ``ω(t) = ω0 + A·sin(2πft + φ)`` per axis plus bias and
   white noise of a given density (°/s/√Hz at the sampling rate), a datasheet-class
   MEMS error model; used where a test needs to know the value behind every index.
+* :class:`TruthRates` — the simulator's gyro output over a fixed span (``simulate_gyro``).
+* :class:`StreamRates` — the simulator's gyro output for a run of any length
+  (:class:`~gyrostar.mocks.gyro_truth.GyroStream`): the simulated flatsat's source.
 """
 
 from __future__ import annotations
@@ -82,3 +85,21 @@ class TruthRates:
             raise ValueError(f"gyro truth covers {len(self.samples.t) / self.odr_hz:.1f} s from t0={self.t0}; "
                              f"asked t in [{np.min(t):.3f}, {np.max(t):.3f}] s")
         return self.samples.omega_meas[i]
+
+
+class StreamRates:
+    """Measured rates from a :class:`~gyrostar.mocks.gyro_truth.GyroStream` at model (host) time.
+
+    ``origin()`` is the host time (s) of the stream's time 0 (the scenario start; it may move
+    when the run restarts). Model time ``t`` maps to output sample ``round((t − origin)·odr) − 1``
+    (clamped at 0): fresh samples for as long as the run lasts.
+    """
+
+    def __init__(self, stream, origin):
+        self.stream = stream
+        self.origin = origin
+
+    def __call__(self, k: np.ndarray, t: np.ndarray) -> np.ndarray:
+        ts = np.maximum(np.asarray(t, float) - self.origin(), 0.0)
+        i = np.maximum(np.round(ts * self.stream.odr_hz).astype(np.int64) - 1, 0)
+        return self.stream.meas(i)

@@ -7,7 +7,10 @@ real bus) and, per transaction, can:
   simulated-time window is open (the transaction never reaches the device);
 * stick — reads return a constant byte (a stuck SDA/MISO line) without reaching the device;
 * corrupt — flip a random bit in read bytes with a given probability;
-* disconnect — every transaction fails with ``OSError(errno.ENODEV)`` until reconnected.
+* disconnect — every transaction fails with ``OSError(errno.ENODEV)`` until reconnected;
+* fail part-way — a read reaches the device, which shifts out only the first part of the
+  bytes (a FIFO pops the frames those carry), then the transfer fails with
+  ``OSError(errno.ETIMEDOUT)`` (an I2C clock-stretch timeout, an aborted SPI transfer).
 
 :class:`ByteFaults` mutates a byte stream on its way out: corrupt (bit flips), drop
 (bytes vanish), garbage (a burst of random bytes, delimiters included, written before a
@@ -39,7 +42,8 @@ class FaultyBus:
         self.stuck_byte: int | None = None
         self.corrupt_p = 0.0
         self.disconnected = False
-        self.injected = {"nack": 0, "stuck": 0, "corrupt": 0, "disconnect": 0}
+        self._midway: list = []    # [reads left, fraction delivered, minimum data bytes]
+        self.injected = {"nack": 0, "stuck": 0, "corrupt": 0, "disconnect": 0, "midway": 0}
 
     # --- arming -------------------------------------------------------------------------------
     def nack_next(self, n: int) -> None:
@@ -53,6 +57,14 @@ class FaultyBus:
     def stick(self, value: int | None = 0xFF) -> None:
         """Reads return ``value`` for every byte (``None`` to release)."""
         self.stuck_byte = value
+
+    def fail_midway_next(self, n: int = 1, fraction: float = 0.5, min_bytes: int = 7) -> None:
+        """The next ``n`` reads of at least ``min_bytes`` data bytes (FIFO bursts, not status
+        bytes) fail part-way: the device delivers the first ``fraction`` of the bytes, then
+        the call raises ``OSError(errno.ETIMEDOUT)`` and the caller gets nothing."""
+        if not 0.0 < fraction < 1.0:
+            raise ValueError(f"fraction must be in (0, 1), got {fraction}")
+        self._midway = [n, fraction, min_bytes]
 
     def corrupt(self, p: float) -> None:
         self.corrupt_p = p
@@ -96,6 +108,13 @@ class FaultyBus:
 
         def call(*args, **kwargs):
             self._gate()
+            if self._midway and self._midway[0] > 0 and name in READS | {"i2c_rdwr"}:
+                cut = self._cut_short(name, args)
+                if cut is not None:
+                    self._midway[0] -= 1
+                    self.injected["midway"] += 1
+                    attr(*cut, **kwargs)
+                    raise OSError(errno.ETIMEDOUT, "Connection timed out (transfer aborted part-way)")
             if self.stuck_byte is not None and name in READS | {"i2c_rdwr"}:
                 self.injected["stuck"] += 1
                 return self._stuck(name, args)
@@ -117,6 +136,26 @@ class FaultyBus:
             return result
 
         return call
+
+    def _cut_short(self, name, args):
+        """The arguments of the same read asking for its first ``fraction`` of data bytes, or
+        None when the read is shorter than ``min_bytes``."""
+        _, fraction, min_bytes = self._midway
+
+        def part(n):
+            return max(1, int(n * fraction))
+
+        if name == "read_i2c_block_data" and args[2] >= min_bytes:
+            return (args[0], args[1], part(args[2]))
+        if name in ("xfer2", "xfer") and len(args[0]) - 1 >= min_bytes:
+            return (list(args[0])[:1 + part(len(args[0]) - 1)],)
+        if name == "readbytes" and args[0] >= min_bytes:
+            return (part(args[0]),)
+        if name == "i2c_rdwr" and any(m.flags & 1 and m.len >= min_bytes for m in args):
+            from smbus2 import i2c_msg
+
+            return tuple(i2c_msg.read(m.addr, part(m.len)) if m.flags & 1 else m for m in args)
+        return None
 
     def _stuck(self, name, args):
         v = self.stuck_byte

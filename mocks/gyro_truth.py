@@ -20,12 +20,17 @@ Model (body axes; ω in rad/s internally, parameters in the units their names ca
 Parameter sets (:func:`gyro_params`): ``xing2012`` (paper 000: drift 0.02 °/s per axis,
 BMI088-class noise and sampling), ``qian2015`` (paper 001: 1 °/h constant + 0.5 °/h random,
 ideal sampling), ``bmi088`` (datasheet class). The hot loop is numba.
+
+:func:`simulate_gyro` gives a fixed span at once; :class:`GyroStream` gives the same model for
+a run of any length, generated in chunks on demand (a flatsat run, a soak).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
+import threading
+from collections import OrderedDict
 
 import numpy as np
 from gyrostar.errors import ConfigError
@@ -148,23 +153,31 @@ def butterworth2(fc: float, fs: float) -> tuple[np.ndarray, np.ndarray]:
 
 @njit(cache=True)
 def _sensor_chain(omega_in, b0, gm_sigma, gm_phi, rrw_step, white_int, white_out, filt_b, filt_a, use_filter,
-                  decim, seed):
-    """Internal-rate chain: add biases and noise, filter, decimate. Returns (meas, bias) at ODR."""
+                  decim, seed, state):
+    """Internal-rate chain: add biases and noise, filter, decimate. Returns (meas, bias) at ODR.
+
+    ``state`` (7, 3) carries the chain from one call to the next and is updated in place:
+    rows 0–1 the Gauss–Markov and random-walk biases, rows 2–5 the filter's x[n−1], x[n−2],
+    y[n−1], y[n−2], row 6 column 0 nonzero once started. All zeros is a fresh start (the
+    Gauss–Markov bias is drawn from its stationary distribution, the filter starts in steady
+    state at the first value). The noise comes from ``seed``.
+    """
     np.random.seed(seed)
     n_int = omega_in.shape[0]
     n_out = n_int // decim
     meas = np.empty((n_out, 3))
     bias = np.empty((n_out, 3))
-    gm = np.zeros(3)
-    rw = np.zeros(3)
-    for j in range(3):
-        gm[j] = gm_sigma * np.random.standard_normal()
-    x1 = np.zeros(3)
-    x2 = np.zeros(3)
-    y1 = np.zeros(3)
-    y2 = np.zeros(3)
+    gm = state[0]
+    rw = state[1]
+    x1 = state[2]
+    x2 = state[3]
+    y1 = state[4]
+    y2 = state[5]
+    primed = state[6, 0] != 0.0
+    if not primed:
+        for j in range(3):
+            gm[j] = gm_sigma * np.random.standard_normal()
     drive = math.sqrt(max(0.0, 1.0 - gm_phi * gm_phi)) * gm_sigma
-    primed = False
     for i in range(n_int):
         for j in range(3):
             gm[j] = gm_phi * gm[j] + drive * np.random.standard_normal()
@@ -183,7 +196,44 @@ def _sensor_chain(omega_in, b0, gm_sigma, gm_phi, rrw_step, white_int, white_out
                 meas[k, j] = y + white_out * np.random.standard_normal()
                 bias[k, j] = b0[j] + gm[j] + rw[j]
         primed = True
+    if primed:
+        state[6, 0] = 1.0
     return meas, bias
+
+
+class _Chain:
+    """The per-run draws (constant bias, scale factors, misalignment) and the chain's
+    coefficients for one parameter set and seed, as :func:`simulate_gyro` draws them."""
+
+    def __init__(self, params: GyroErrorParams, seed: int):
+        p = params
+        p.validate()
+        rng = np.random.default_rng(seed)
+        self.p = p
+        self.decim = int(round(p.internal_hz / p.odr_hz))
+        self.b0 = np.asarray(p.bias_dps, dtype=np.float64) * DEG + rng.standard_normal(3) * p.bias_sigma_dps * DEG
+        self.scale = rng.standard_normal(3) * p.scale_factor_sigma_ppm * 1e-6
+        self.mis = np.eye(3) + _skew(rng.standard_normal(3) * p.misalignment_sigma_mrad * 1e-3)
+        self.sens = np.diag(1.0 + self.scale) @ self.mis
+        dt = 1.0 / p.internal_hz
+        self.gm_phi = math.exp(-dt / p.bias_tau_s)
+        self.white_int = p.noise_density_dps_rthz * DEG * math.sqrt(p.internal_hz / 2.0)
+        self.rrw_step = p.rrw_dps_per_rts * DEG * math.sqrt(dt)
+        if p.filter_hz > 0:
+            self.fb, self.fa = butterworth2(p.filter_hz, p.internal_hz)
+        else:
+            self.fb, self.fa = np.zeros(3), np.zeros(3)
+        self.seed = int(rng.integers(0, 2**31 - 1))
+
+    def run(self, profile: RateProfile, i0_out: int, n_out: int, seed: int, state: np.ndarray):
+        """(meas, bias) for output samples ``i0_out … i0_out + n_out − 1`` (sample i at
+        ``(i + 1) / odr_hz``), continuing ``state``."""
+        p = self.p
+        t_int = np.arange(i0_out * self.decim + 1, (i0_out + n_out) * self.decim + 1) / p.internal_hz
+        omega_int = profile.rate(t_int) @ self.sens.T
+        return _sensor_chain(np.ascontiguousarray(omega_int), self.b0, p.bias_instability_dph * DPH, self.gm_phi,
+                             self.rrw_step, self.white_int, p.white_sigma_dph * DPH, self.fb, self.fa,
+                             p.filter_hz > 0, self.decim, seed, state)
 
 
 def _skew(v):
@@ -200,32 +250,103 @@ def simulate_gyro(profile: RateProfile, duration_s: float, params: GyroErrorPara
     p.validate()
     if not (math.isfinite(duration_s) and duration_s > 0):
         raise ConfigError(f"gyro duration_s must be > 0, got {duration_s!r}")
-    rng = np.random.default_rng(seed)
-    decim = int(round(p.internal_hz / p.odr_hz))
     n_out = int(math.floor(duration_s * p.odr_hz + 1e-9))
     if n_out < 1:
         raise ConfigError("gyro duration shorter than one output sample")
-    n_int = n_out * decim
-    t_int = np.arange(1, n_int + 1) / p.internal_hz
-    b0 = np.asarray(p.bias_dps, dtype=np.float64) * DEG + rng.standard_normal(3) * p.bias_sigma_dps * DEG
-    scale = rng.standard_normal(3) * p.scale_factor_sigma_ppm * 1e-6
-    mis = np.eye(3) + _skew(rng.standard_normal(3) * p.misalignment_sigma_mrad * 1e-3)
-    sens = np.diag(1.0 + scale) @ mis
-    omega_int = profile.rate(t_int) @ sens.T
-    dt = 1.0 / p.internal_hz
-    gm_phi = math.exp(-dt / p.bias_tau_s)
-    white_int = p.noise_density_dps_rthz * DEG * math.sqrt(p.internal_hz / 2.0)
-    if p.filter_hz > 0:
-        fb, fa = butterworth2(p.filter_hz, p.internal_hz)
-    else:
-        fb, fa = np.zeros(3), np.zeros(3)
-    meas, bias = _sensor_chain(np.ascontiguousarray(omega_int), b0, p.bias_instability_dph * DPH, gm_phi,
-                               p.rrw_dps_per_rts * DEG * math.sqrt(dt), white_int, p.white_sigma_dph * DPH,
-                               fb, fa, p.filter_hz > 0, decim, int(rng.integers(0, 2**31 - 1)))
+    chain = _Chain(p, seed)
+    meas, bias = chain.run(profile, 0, n_out, chain.seed, np.zeros((7, 3)))
     t = np.arange(1, n_out + 1) / p.odr_hz
     raw = None
     sensed = meas
     if p.range_dps > 0:
         raw = quantise(sensed, p.range_dps)
         meas = raw.astype(np.float64) * p.lsb_dps * DEG
-    return GyroSamples(t, profile.rate(t), meas, sensed, raw, bias, scale, mis, p)
+    return GyroSamples(t, profile.rate(t), meas, sensed, raw, bias, chain.scale, chain.mis, p)
+
+
+class GyroStream:
+    """Gyro output for a run of any length, generated on demand in chunks.
+
+    The error model and sensor chain of :func:`simulate_gyro` (same per-run draws; its first
+    ``chunk`` samples are exactly ``simulate_gyro``'s), with the chain's state carried from
+    one chunk to the next and chunk ``c ≥ 1`` drawing its noise from a seed derived from
+    ``(seed, c)``: the output is a pure function of the seed, whatever the order and size of
+    the requests. Output sample ``i`` (0, 1, …) is taken at ``t = (i + 1) / odr_hz`` s from the
+    profile's start. Memory stays bounded: the chain state at every chunk start is kept
+    (168 bytes per chunk) and the last ``cache_chunks`` chunks; an older chunk asked for again
+    is regenerated from its start state. Thread-safe.
+    """
+
+    def __init__(self, profile: RateProfile, params: GyroErrorParams | str = "bmi088", seed: int = 0,
+                 chunk: int = 4096, cache_chunks: int = 8):
+        p = gyro_params(params) if isinstance(params, str) else params
+        if chunk < 1 or cache_chunks < 1:
+            raise ConfigError(f"gyro stream chunk and cache must be >= 1, got {chunk}, {cache_chunks}")
+        self.params = p
+        self.profile = profile
+        self.seed = int(seed)
+        self.chunk = int(chunk)
+        self.cache_chunks = int(cache_chunks)
+        self._chain = _Chain(p, seed)
+        self.scale, self.misalignment = self._chain.scale, self._chain.mis
+        self._starts = [np.zeros((7, 3))]   # chain state before chunk c
+        self._cache: OrderedDict = OrderedDict()   # c -> (meas, bias)
+        self.generated = 0                  # chunks generated (regenerations included)
+        self._lock = threading.Lock()
+
+    @property
+    def odr_hz(self) -> float:
+        return self.params.odr_hz
+
+    def _chunk_seed(self, c: int) -> int:
+        if c == 0:
+            return self._chain.seed
+        return int(np.random.SeedSequence([self.seed, c]).generate_state(1)[0] & 0x7FFFFFFF)
+
+    def _chunk(self, c: int):
+        """(meas, bias) of chunk ``c`` (lock held)."""
+        hit = self._cache.get(c)
+        if hit is not None:
+            self._cache.move_to_end(c)
+            return hit
+        first = min(c, len(self._starts) - 1)   # generate on from the nearest known start state
+        for cc in range(first, c + 1):
+            state = self._starts[cc].copy()
+            got = self._chain.run(self.profile, cc * self.chunk, self.chunk, self._chunk_seed(cc), state)
+            self.generated += 1
+            if cc + 1 == len(self._starts):
+                self._starts.append(state)
+            self._cache[cc] = got
+            self._cache.move_to_end(cc)
+            while len(self._cache) > self.cache_chunks:
+                self._cache.popitem(last=False)
+        return got
+
+    def _rows(self, which: int, i) -> np.ndarray:
+        i = np.atleast_1d(np.asarray(i, np.int64))
+        out = np.empty((len(i), 3))
+        if not len(i):
+            return out
+        if i.min() < 0:
+            raise ValueError(f"gyro sample index must be >= 0, got {int(i.min())}")
+        c = i // self.chunk
+        order = np.argsort(c, kind="stable")
+        cuts = np.flatnonzero(np.diff(c[order])) + 1
+        with self._lock:
+            for seg in np.split(order, cuts):
+                cc = int(c[seg[0]])
+                out[seg] = self._chunk(cc)[which][i[seg] - cc * self.chunk]
+        return out
+
+    def meas(self, i) -> np.ndarray:
+        """What the gyro reports (rad/s, body axes, filtered; quantised at ``params.range_dps``
+        unless 0) at output sample index/indices ``i``."""
+        out = self._rows(0, i)
+        p = self.params
+        if p.range_dps > 0:
+            out = quantise(out, p.range_dps).astype(np.float64) * p.lsb_dps * DEG
+        return out
+
+    def bias(self, i) -> np.ndarray:
+        """Total additive bias b₀ + b_gm + b_rw (rad/s) at output sample index/indices ``i``."""
+        return self._rows(1, i)

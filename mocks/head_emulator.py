@@ -88,7 +88,10 @@ class ConstantRateScene:
 
 class HeadEmulator:
     def __init__(self, sky, scene, mcu_offset_us: int = 123_456_789, drift_ppm: float = 0.0, faults=None,
-                 noise: bool = True):
+                 noise: bool = True, clock=None):
+        from gyrostar.clock import MONOTONIC
+
+        self.clock = MONOTONIC if clock is None else clock   # host time: exposures take their time on it
         self.sky = sky
         self.scene = scene
         self.width = sky.camera.width_px
@@ -98,7 +101,7 @@ class HeadEmulator:
         self.faults = faults
         self.noise = noise
         self._skies = {}
-        self._t_boot = time.monotonic()
+        self._t_boot = self.clock.now()
         self.master = self.slave = None
         self.path = None
         self._thread = None
@@ -110,7 +113,7 @@ class HeadEmulator:
 
     # --- clocks -------------------------------------------------------------------------------
     def mcu_us(self, t_host: float | None = None) -> int:
-        t = time.monotonic() if t_host is None else t_host
+        t = self.clock.now() if t_host is None else t_host
         return self.mcu_offset_us + int(round(t * 1e6 * (1 + self.drift_ppm * 1e-6)))
 
     def mcu_offset_us_at(self, t_host: float) -> float:
@@ -134,6 +137,16 @@ class HeadEmulator:
         self.last_stream = None
         self.cnt = dict(rx_frames=0, crc_errors=0, framing_errors=0, overruns=0, rejected=0, last_error=0)
         self._boot_us = self.mcu_us()
+
+    def eclipse(self, on: bool) -> None:
+        """No starlight reaches the sensor while ``on`` (stars' signal 0; background and noise stay)."""
+        sky = self._sky_for(self.exposure_us)
+        if on and getattr(self, "_eclipsed", None) is None:
+            self._eclipsed = sky.electrons.copy()
+            sky.electrons[:] = 0.0
+        elif not on and getattr(self, "_eclipsed", None) is not None:
+            sky.electrons[:] = self._eclipsed
+            self._eclipsed = None
 
     def _sky_for(self, exposure_us: int):
         sky = self._skies.get(exposure_us)
@@ -308,7 +321,7 @@ class HeadEmulator:
         return spans, ids, slices, total
 
     def _capture(self) -> bytes:
-        t0_host = time.monotonic()
+        t0_host = self.clock.now()
         t0 = self.mcu_us(t0_host)
         q_start, omega = self.scene.at(t0_host)
         sky = self._sky_for(self.exposure_us)
@@ -316,10 +329,10 @@ class HeadEmulator:
         pixels, _ = sky.render_windows(self.spans, q_start, omega, frame=self.sensor_frame, noise=self.noise)
         self.rendered_pixels += len(pixels)
         # the exposure takes its time: the reply leaves after the exposure end
-        remaining = t0_host + self.exposure_us * 1e-6 - time.monotonic()
+        remaining = t0_host + self.exposure_us * 1e-6 - self.clock.now()
         if remaining > 0:
-            time.sleep(remaining)
-        t1_host = time.monotonic()
+            self.clock.sleep(remaining)
+        t1_host = self.clock.now()
         t1 = self.mcu_us(t1_host)
         self.last_exposure_host = (t0_host, t1_host)  # truth for tests: exposure start/end, host s
         self.pixels = np.minimum(pixels, 0x3FF).astype(np.uint16)
@@ -372,7 +385,7 @@ class HeadEmulator:
         if off + count > self.width * self.height:
             raise _Reject(ErrorCode.FRAME_RANGE, off)
         if self._full is None or self._full[0] != self.sensor_frame:
-            q_start, omega = self.scene.at(time.monotonic())
+            q_start, omega = self.scene.at(self.clock.now())
             img, _ = self._sky_for(self.exposure_us).render_frame(q_start, omega, frame=self.sensor_frame,
                                                                  noise=self.noise)
             self.full_renders += 1

@@ -157,5 +157,12 @@ class L3gd20hModel(RegisterModelBase):
             return
         self.regs[addr] = val
 
+    def brownout(self) -> None:
+        """A silent reset (a supply glitch): registers back to their reset values (powered
+        down, FIFO off), the FIFO emptied, the global sample count running on."""
+        with self.lock:
+            self._advance()
+            self._reset()
+
     def watermark_time(self):
         return None

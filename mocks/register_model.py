@@ -23,6 +23,14 @@ class RegisterModelBase:
         """Global indices of every frame delivered through the FIFO data port, in order."""
         return np.concatenate(self._popped) if self._popped else np.zeros(0, np.int64)
 
+    @property
+    def next_sample_index(self) -> int:
+        """Global index of the next sample the part will produce (e.g. the first frame a
+        FIFO started now will hold)."""
+        with self.lock:
+            self._advance()
+            return self._k_next
+
     def sample_time(self, k) -> np.ndarray:
         """Model time (s) of global sample(s) ``k``, valid since the last ODR (re)start."""
         return self._t_next - self.period * (self._k_next - np.asarray(k, np.float64))

@@ -23,6 +23,9 @@ def configure(parser) -> None:
     parser.add_argument("--realtime", action="store_true",
                         help="ask for the config's SCHED_FIFO priority / CPU affinity (the loop always runs on "
                              "the monotonic clock: the emulated head's exposures take real time)")
+    parser.add_argument("--fast", action="store_true",
+                        help="run the emulated devices on a simulated clock in lock-step with the loop, as fast as "
+                             "the host computes (same loop, log and figures; not with --realtime)")
     add_json(parser)
 
 

@@ -19,6 +19,7 @@ from ..errors import DeviceError
 from ..transport.spi import SPIRegisters
 from .base import DPS, FifoGyro
 from .registers import ROBits, ROByte, ROStruct, RWByte, WOByte
+from .regtable import RegisterSetting
 
 CHIP_ID = 0x0F
 I2C_ADDRESSES = (0x68, 0x69)
@@ -32,6 +33,21 @@ RESET_WAIT_S = 0.030
 FIFO_STREAM = 0x80
 FIFO_CAPACITY = 100
 SELF_TEST_TIMEOUT_S = 0.1
+
+
+def register_table(range_code: int, bandwidth_code: int, watermark: int) -> tuple[RegisterSetting, ...]:
+    """The gyro die's configuration, entry by entry (applied, verified, re-checked in flight)."""
+    return (
+        RegisterSetting("GYRO_RANGE", 0x0F, range_code, 0x07 & ~range_code),
+        RegisterSetting("GYRO_BANDWIDTH", 0x10, bandwidth_code, 0x0F & ~bandwidth_code),  # bit 7 reads 1
+        RegisterSetting("GYRO_LPM1", 0x11, 0x00, 0xA0),                  # normal mode (not (deep) suspend)
+        RegisterSetting("FIFO_WM_ENABLE", 0x1E, 0x80),
+        RegisterSetting("INT3_INT4_IO_CONF", 0x16, 0x01, 0x0E),          # INT3 active high, push-pull
+        RegisterSetting("INT3_INT4_IO_MAP", 0x18, 0x04, 0xA1),           # FIFO interrupt → INT3 only
+        RegisterSetting("GYRO_INT_CTRL", 0x15, 0x40, 0x80),              # FIFO interrupt on, data-ready off
+        RegisterSetting("FIFO_CONFIG_0", 0x3D, watermark, 0x7F & ~watermark),
+        RegisterSetting("FIFO_CONFIG_1", 0x3E, FIFO_STREAM, 0x43),       # stream mode, XYZ frames
+    )
 
 
 def spi_registers(spi, name: str = "spi") -> SPIRegisters:
@@ -80,8 +96,9 @@ class Bmi088Gyro(FifoGyro):
 
     def configure(self, odr_hz: float = 400, range_dps: float = 2000, watermark: int = 10,
                   bandwidth_code: int | None = None) -> None:
-        """Reset, set range and ODR/bandwidth (verified by read-back), set up the FIFO
-        (stream mode is entered by :meth:`start`) and route the FIFO interrupt to INT3."""
+        """Reset, then apply and verify :func:`register_table`: range, ODR/bandwidth, normal
+        power mode, FIFO watermark and stream mode (restarted by :meth:`start`), the FIFO
+        interrupt on INT3."""
         if range_dps not in RANGES_DPS:
             raise ValueError(f"BMI088 range must be one of {sorted(RANGES_DPS)} °/s, got {range_dps}")
         if bandwidth_code is None:
@@ -96,16 +113,7 @@ class Bmi088Gyro(FifoGyro):
         self.probe()
         self.soft_reset()
         self.probe()
-        self._write_verified("GYRO_RANGE", 0x0F, RANGES_DPS[range_dps], 0xFF)
-        self._write_verified("GYRO_BANDWIDTH", 0x10, bandwidth_code, 0x7F)
-        if self.lpm1 != 0x00:
-            self.lpm1 = 0x00
-            self.clock.sleep(RESET_WAIT_S)
-        self._write_verified("FIFO_CONFIG_0", 0x3D, watermark, 0x7F)
-        self.fifo_wm_enable = 0x80
-        self.int3_int4_io_conf = 0x01   # INT3 active high, push-pull
-        self.int3_int4_io_map = 0x04    # FIFO interrupt → INT3
-        self.int_ctrl = 0x40            # FIFO interrupt enable
+        self._configure_table(register_table(RANGES_DPS[range_dps], bandwidth_code, watermark))
         self.odr_hz = float(BANDWIDTHS[bandwidth_code][0])
         self.range_dps = float(range_dps)
         self.watermark = watermark

@@ -21,6 +21,7 @@ from ..errors import DeviceError
 from ..transport.spi import SPIRegisters
 from .base import DPS, FifoGyro
 from .registers import ROByte, RWByte
+from .regtable import RegisterSetting
 
 WHO_AM_I = 0xD7
 I2C_ADDRESSES = (0x6A, 0x6B)
@@ -29,6 +30,20 @@ ODR_BITS = {100: 0b00, 200: 0b01, 400: 0b10, 800: 0b11}
 FULL_SCALE = {245: (0b00, 8.75e-3), 500: (0b01, 17.5e-3), 2000: (0b10, 70e-3)}  # code, °/s per LSB
 FIFO_LEVELS = 32
 RESET_WAIT_S = 0.010
+
+
+def register_table(odr_code: int, fs_code: int, watermark: int) -> tuple[RegisterSetting, ...]:
+    """The L3GD20H's configuration, entry by entry (applied, verified, re-checked in flight)."""
+    ctrl1 = odr_code << 6 | 0x0F   # ODR, bandwidth 00, power on, X/Y/Z on
+    ctrl4 = 0x80 | fs_code << 4    # BDU, full scale, no self test, 4-wire SPI
+    fifo = 0x40 | watermark        # stream mode, threshold
+    return (
+        RegisterSetting("LOW_ODR", 0x39, 0x00, 0x01),
+        RegisterSetting("CTRL4", 0x23, ctrl4, 0xFF & ~ctrl4),
+        RegisterSetting("CTRL1", 0x20, ctrl1, 0xFF & ~ctrl1),
+        RegisterSetting("CTRL5", 0x24, 0x40, 0xBF),      # FIFO on (no reboot, no high-pass)
+        RegisterSetting("FIFO_CTRL", 0x2E, fifo, 0xFF & ~fifo),
+    )
 
 
 def spi_registers(spi, name: str = "spi") -> SPIRegisters:
@@ -64,11 +79,8 @@ class L3gd20hGyro(FifoGyro):
         self.low_odr = 0x04          # software reset
         self.clock.sleep(RESET_WAIT_S)
         self.probe()
-        self.low_odr = 0x00
         fs_code, dps_per_lsb = FULL_SCALE[range_dps]
-        self._write_verified("CTRL4", 0x23, 0x80 | fs_code << 4)           # BDU + full scale
-        self._write_verified("CTRL1", 0x20, ODR_BITS[odr_hz] << 6 | 0x0F)  # ODR, power on, XYZ
-        self._write_verified("CTRL5", 0x24, 0x40)                          # FIFO enable
+        self._configure_table(register_table(ODR_BITS[odr_hz], fs_code, watermark))
         self.odr_hz = float(odr_hz)
         self.range_dps = float(range_dps)
         self.watermark = watermark

@@ -25,6 +25,7 @@ class GyroSamples:
         self.gaps = 0         # number of flagged gaps
         self.saturated = 0    # samples with an axis at the range limit (FLAG_SAT_*)
         self.stuck_axis = 0   # samples flagged FLAG_STUCK_AXIS
+        self.register_faults = 0  # gyro configuration found lost (and restored) during these reads
 
     @property
     def room(self) -> int:
@@ -37,6 +38,7 @@ class GyroSamples:
         self.gaps = 0
         self.saturated = 0
         self.stuck_axis = 0
+        self.register_faults = 0
 
     def view(self):
         """``(t, index, rate, flags)`` views of the valid rows."""

@@ -157,6 +157,11 @@ class FrameTimebase:
     def ready(self) -> bool:
         return self.k_ref is not None
 
+    def assume(self, k: int, t: float) -> None:
+        """A guess until the first anchor: frame ``k`` was sampled near host time ``t`` (s),
+        frames one nominal period apart (e.g. just after the FIFO was started)."""
+        self.k_ref, self.t_ref, self.period = float(k), float(t), self.nominal
+
     def add_event(self, k: int, t: float) -> None:
         """Frame ``k`` was sampled at host time ``t`` (s)."""
         self._since_event = 0

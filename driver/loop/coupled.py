@@ -86,6 +86,7 @@ class Counters:
     gyro_errors: int = 0
     gyro_saturated: int = 0        # samples with an axis at the range limit
     gyro_stuck: int = 0            # samples flagged with a stuck axis (≥ 32 unchanged frames)
+    gyro_register_faults: int = 0  # gyro configuration found lost in flight and restored (silent reset)
     frames: int = 0
     frames_failed: int = 0
     full_frames: int = 0
@@ -220,6 +221,7 @@ class CoupledLoop:
             self.flags_pending |= R.FLAG_GYRO_GAP
             log.debug("gyro read failed: %s", exc)
         t_read = self.lat_clock.now()
+        self.c.gyro_register_faults += smp.register_faults
         n = smp.n
         if n == 0:
             return 0

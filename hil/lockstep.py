@@ -1,0 +1,298 @@
+"""Fast mode: the flatsat on a simulated clock in lock-step, faster than real time.
+
+``gyrostar run --fast`` runs the same loop, gyro driver, head client and head port as a
+real-time run; only the devices and the clock differ:
+
+* :class:`Lockstep` — one simulated clock for every part and a turn-taking rule: either
+  the runner's thread (loop steps, time) or the head port's worker runs, never both, and
+  the worker runs until it waits for a reply. Time moves only in the runner: to the next
+  gyro step, or earlier to the arrival of the reply the worker waits for (or its
+  timeout). The order of events is fixed by simulated time alone, so a run is repeatable.
+  It has the :class:`gyrostar.loop.scheduler.StepGate` interface the head port calls.
+* :class:`SimHead` — the Python head emulator in this process on a device clock, behind a
+  link modelled at its line rate (:mod:`gyrostar.transport.linkrate`): every frame takes
+  the preset's latency plus its bytes at the sustained rate, one after the other in each
+  direction; the head serves requests in order, an exposure takes its time on the device
+  clock. Faults (disconnect, reply corruption, eclipse) as on the emulator process.
+* :class:`SimLink` — the packet link to a :class:`SimHead` (the
+  :class:`gyrostar.transport.SerialLink` interface: ``send``, ``recv``, ``drain``).
+
+Not modelled in simulated time: the host's compute time (loop steps, rendering, decoding
+take none), so fast mode gives the loop's estimation figures at the achieved timing of the
+devices and the link; its CPU and latency are measured on the real-time path and by
+``gyrostar bench loop``.
+"""
+
+from __future__ import annotations
+
+import heapq
+import threading
+
+from ..errors import DeviceError
+
+IDLE, WANT, RUN, OUT, WAIT = range(5)
+
+
+class Lockstep:
+    """Turn-taking between the runner's thread and one device worker on a simulated clock.
+
+    ``clock`` is a :class:`gyrostar.clock.SimulatedClock`. The thread that creates the
+    object is the runner: its waits (set-up requests before the run) advance the clock
+    themselves; another thread's waits last until the runner moves the clock past them.
+    """
+
+    def __init__(self, clock):
+        self.clock = clock
+        self.runner = threading.current_thread()
+        self._cv = threading.Condition(threading.Lock())
+        self._state = IDLE
+        self._wake_t: float | None = None
+        self._running = False
+
+    # -- StepGate interface (called by the head port) ----------------------------------
+    def loop_enter(self) -> None:
+        """The runner steps only while the worker waits (see :meth:`settle`)."""
+
+    def loop_exit(self, next_wake: float) -> None:
+        """Nothing to do: the runner settles the worker after each step."""
+
+    def open(self) -> None:
+        """End of the run: the worker runs freely, its waits advance the clock."""
+        with self._cv:
+            self._running = False
+            self._cv.notify_all()
+
+    def worker_enter(self) -> None:
+        with self._cv:
+            if not self._running:
+                self._state = RUN
+                return
+            self._state = WANT
+            self._cv.notify_all()
+            while self._state != RUN and self._running:
+                self._cv.wait()
+            self._state = RUN
+
+    def worker_exit(self) -> None:
+        with self._cv:
+            self._state = OUT
+            self._cv.notify_all()
+
+    # -- the runner's side ---------------------------------------------------------------
+    def begin(self) -> None:
+        """Start the lock-step schedule (after the devices' set-up)."""
+        with self._cv:
+            self._running = True
+
+    @property
+    def wake_time(self) -> float | None:
+        """Simulated time the waiting worker wants to be woken at, or None."""
+        with self._cv:
+            return self._wake_t if self._state == WAIT else None
+
+    def wake(self) -> None:
+        """Move the clock to the worker's wake-up time and let it run (then :meth:`settle`)."""
+        with self._cv:
+            t = self._wake_t
+            if self._state != WAIT or t is None:
+                return
+            if t > self.clock.now():
+                self.clock.set(t)
+            self._wake_t = None
+            self._state = OUT
+            self._cv.notify_all()
+
+    def settle(self, port) -> None:
+        """Let the worker run until it waits for a reply or has no unfinished job.
+
+        ``port``: the head port (``busy`` — a job submitted and not yet polled;
+        ``job_done`` — its result is ready)."""
+        with self._cv:
+            while True:
+                if self._state == WANT:
+                    self._state = RUN
+                    self._cv.notify_all()
+                    continue
+                if self._state == RUN:
+                    self._cv.wait()
+                    continue
+                if self._state == WAIT:
+                    return
+                if not port.busy or port.job_done:
+                    return
+                # a job is queued but not yet entered, or its post-processing runs outside
+                # the gate: wait for the worker (it notifies on entering; done is polled)
+                self._cv.wait(timeout=0.0005)
+
+    # -- waits (called by the link) --------------------------------------------------------
+    def wait_until(self, t: float) -> None:
+        """Block the calling thread until simulated time ``t`` (the runner's own waits and
+        every wait outside the schedule move the clock instead)."""
+        with self._cv:
+            if not self._running or threading.current_thread() is self.runner:
+                if t > self.clock.now():
+                    self.clock.set(t)
+                return
+            self._wake_t = t
+            self._state = WAIT
+            self._cv.notify_all()
+            while self._state == WAIT and self._running:
+                self._cv.wait()
+            if not self._running and t > self.clock.now():
+                self.clock.set(t)
+
+
+class SimHead:
+    """The head emulator on a device clock behind a line-rate link model.
+
+    ``emulator`` is a :class:`gyrostar.mocks.head_emulator.HeadEmulator` built on
+    ``device_clock`` (a :class:`gyrostar.clock.SimulatedClock` this object sets to each
+    request's arrival time); ``preset`` a :class:`gyrostar.transport.linkrate.LinkPreset`.
+    """
+
+    def __init__(self, emulator, device_clock, preset, lockstep: Lockstep):
+        self.emu = emulator
+        self.dev = device_clock
+        self.preset = preset
+        self.lockstep = lockstep
+        self.connected = False
+        self.faults = None
+        self.url = f"sim://head ({preset.name})"
+        self._tx_free = -float("inf")     # host → head wire free from (s)
+        self._rx_free = -float("inf")     # head → host wire free from (s)
+        self._busy_until = -float("inf")  # the head serves requests one after the other
+        self.bytes_out = 0
+        self.bytes_in = 0
+        self.link = None
+
+    # -- faults / life cycle (the interface the fault plan drives) -------------------------
+    def start(self) -> str:
+        self.connected = True
+        return self.url
+
+    def disconnect(self) -> None:
+        self.connected = False
+        if self.link is not None:
+            self.link.lost = DeviceError(f"sim link {self.url} closed: head disconnected")
+
+    def stop(self) -> None:
+        self.disconnect()
+
+    def set_corruption(self, p: float | None) -> None:
+        from ..mocks.faults import ByteFaults
+
+        self.faults = None if p is None else ByteFaults(seed=7, corrupt_p=float(p))
+
+    def eclipse(self, on: bool) -> None:
+        self.emu.eclipse(bool(on))
+
+    def set_origin(self, t0: float) -> None:
+        """The scenario truth is shared in-process: nothing to forward."""
+
+    def open_link(self) -> SimLink:
+        if not self.connected:
+            raise DeviceError("head emulator is disconnected")
+        self.link = SimLink(self)
+        return self.link
+
+    # -- traffic -----------------------------------------------------------------------------
+    def transact(self, data: bytes, t_send: float) -> list[tuple[float, bytes]]:
+        """Bytes sent at ``t_send``: their frames served in order; returns the reply chunks
+        as ``(arrival time at the host, bytes)``."""
+        p = self.preset
+        start = max(t_send, self._tx_free)
+        self._tx_free = start + len(data) / p.bytes_per_s
+        t_arr = self._tx_free + p.latency_s
+        self.bytes_out += len(data)
+        chunks = []
+        for frame in bytes(data).split(b"\x00"):
+            if not frame:
+                continue
+            t_serve = max(t_arr, self._busy_until)
+            if t_serve > self.dev.now():
+                self.dev.set(t_serve)
+            try:
+                reply = self.emu.handle(frame, self.emu.mcu_us(t_serve))
+            except Exception:  # noqa: BLE001 - a malformed frame never stops the head (as on its pty)
+                self.emu.cnt["framing_errors"] += 1
+                reply = None
+            self._busy_until = self.dev.now()
+            if reply is None:
+                continue
+            out = []
+            if self.faults is not None:
+                self.faults.write_through(out.append, reply, sleep=self.dev.sleep)
+            else:
+                out.append(reply)
+            for b in out:
+                s = max(self.dev.now(), self._rx_free)
+                self._rx_free = s + len(b) / p.bytes_per_s
+                self.bytes_in += len(b)
+                chunks.append((self._rx_free + p.latency_s, b))
+        return chunks
+
+
+class SimLink:
+    """A packet link to a :class:`SimHead`: ``send`` returns the send time, ``recv`` the next
+    ``(arrival time, packet)`` split at 0x00, waiting in simulated time."""
+
+    def __init__(self, head: SimHead):
+        self.head = head
+        self.url = head.url
+        self.clock = head.lockstep.clock
+        self._arrivals: list = []       # heap of (t, n, bytes chunk)
+        self._n = 0
+        self._buf = bytearray()
+        self._ready: list = []          # complete packets (t, bytes) in arrival order
+        self.lost: Exception | None = None
+        self.overlong = 0
+        self.closed = False
+
+    def send(self, data: bytes) -> float:
+        if self.closed or self.lost is not None:
+            raise DeviceError(f"sim link {self.url} is down: {self.lost or 'closed'}")
+        t = self.clock.now()
+        for t_arr, chunk in self.head.transact(bytes(data), t):
+            heapq.heappush(self._arrivals, (t_arr, self._n, chunk))
+            self._n += 1
+        return t
+
+    def _deliver(self, now: float) -> None:
+        while self._arrivals and self._arrivals[0][0] <= now:
+            t, _, chunk = heapq.heappop(self._arrivals)
+            self._buf += chunk
+            while True:
+                end = self._buf.find(0)
+                if end < 0:
+                    break
+                packet, self._buf = bytes(self._buf[:end]), self._buf[end + 1:]
+                if packet:
+                    self._ready.append((t, packet))
+            if len(self._buf) > 1 << 20:
+                self.overlong += 1
+                self._buf.clear()
+
+    def recv(self, timeout: float):
+        now = self.clock.now()
+        deadline = now + max(timeout, 0.0)
+        self._deliver(now)
+        if not self._ready:
+            if self.lost is not None:
+                raise self.lost
+            nxt = self._arrivals[0][0] if self._arrivals else float("inf")
+            self.head.lockstep.wait_until(min(nxt, deadline))
+            self._deliver(self.clock.now())
+        if self._ready:
+            return self._ready.pop(0)
+        if self.lost is not None:
+            raise self.lost
+        return None
+
+    def drain(self) -> int:
+        self._deliver(self.clock.now())
+        n = len(self._ready)
+        self._ready.clear()
+        return n
+
+    def close(self) -> None:
+        self.closed = True
