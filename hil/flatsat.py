@@ -183,10 +183,23 @@ def make_gyro(cfg: hc.FlatsatConfig, regs, clock):
 
 
 def make_head(cfg: hc.FlatsatConfig, link, clock, reconnect=None, head_clock=None, poll_log=None,
-              replay_polls=None, replay_reconnects=None):
-    """The head port the loop drives (see :mod:`gyrostar.hil.headport`), on a packet link."""
+              replay_polls=None, replay_reconnects=None, fast: bool = False):
+    """The head port the loop drives (see :mod:`gyrostar.hil.headport`), on a packet link:
+    a streaming port (:mod:`gyrostar.hil.streamport`) with ``head.mode = "stream"`` (fast
+    mode's lock-step head serves request/response only)."""
     from .headport import HeadPort
 
+    if cfg.head.mode == "stream" and not fast:
+        from ..protocol.defs import PixelFormat
+        from ..transport.linkrate import PRESETS
+        from .streamport import StreamPort
+
+        return StreamPort(link, clock, pixel_format=int(PixelFormat[cfg.head.pixel_format.upper()]),
+                          frame_hz=cfg.loop.frame_hz, link_preset=PRESETS.get(cfg.head.link),
+                          timeout_s=cfg.head.timeout_s, retries=cfg.head.retries,
+                          exposure_s=cfg.head.exposure_ms * 1e-3, gain=cfg.head.gain, reconnect=reconnect,
+                          head_clock=head_clock, poll_log=poll_log, replay_polls=replay_polls,
+                          replay_reconnects=replay_reconnects)
     return HeadPort(link, clock, timeout_s=cfg.head.timeout_s, retries=cfg.head.retries,
                     exposure_s=cfg.head.exposure_ms * 1e-3, gain=cfg.head.gain, reconnect=reconnect,
                     head_clock=head_clock, poll_log=poll_log, replay_polls=replay_polls,
@@ -207,8 +220,14 @@ def make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock=None, e_per_dn=No
 
     idx = star_index(cfg, camera)
     ident = Pyramid(idx, camera)
+    budget = None
+    if getattr(head, "streaming", False) and cfg.head.link != "none":
+        from ..loop.linkbudget import LinkBudget
+        from ..transport.linkrate import preset
+
+        budget = LinkBudget(preset(cfg.head.link), cfg.loop.frame_hz)
     return CoupledLoop(loop_params(cfg, e_per_dn), clock, gyro, head, camera, idx, ident, sinks, lat_clock=lat_clock,
-                       irq=irq)
+                       irq=irq, link_budget=budget)
 
 
 # ---------------------------------------------------------------------------- flatsat
@@ -390,7 +409,7 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
         return taps.RecordingLink(link, writer, clock=rec_clock) if writer else link
 
     head = make_head(cfg, connect(), rec_clock, reconnect=connect, head_clock=head_clock,
-                     poll_log=writer)
+                     poll_log=writer, fast=fast)
     closers.insert(0, head.close)
     closers.append(lambda: current["link"].close())
     wiring["loop"] = ("gyrostar.loop.coupled: attitude MEKF (gyrostar.core.mekf) with star-vector updates, "

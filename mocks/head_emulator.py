@@ -445,13 +445,13 @@ class HeadEmulator:
         s = self.stream
         if s is None:
             return []
-        now = time.monotonic() if now is None else now
+        now = self.clock.now() if now is None else now
         t_end = s.t_start + s.exposure_us * 1e-6
         if now < t_end:
             return []
         out = self._read_stream_frame(s, t_end)
         s.next_frame(self)
-        now = time.monotonic()
+        now = self.clock.now()
         while s.t_start + (s.exposure_us + s.period_us) * 1e-6 <= now:
             s.dropped += 1        # more than a period overdue (the emulator was held up): never read
             s.next_frame(self)
@@ -542,7 +542,7 @@ class HeadEmulator:
                 for msg in self.poll_stream():
                     self._emit(msg)
                 due = self.next_due
-                wait = 0.05 if due is None else min(0.05, max(0.0, due - time.monotonic()))
+                wait = 0.05 if due is None else min(0.05, max(0.0, due - self.clock.now()))
                 r, _, _ = select.select([fd], [], [], wait)
                 if not r or self._stop.is_set():
                     continue

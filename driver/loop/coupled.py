@@ -89,6 +89,7 @@ class Counters:
     gyro_register_faults: int = 0  # gyro configuration found lost in flight and restored (silent reset)
     frames: int = 0
     frames_failed: int = 0
+    frames_unmatched: int = 0      # streamed frames whose window plan was gone (stream mode)
     full_frames: int = 0
     acquisitions: int = 0
     acquisition_failures: int = 0
@@ -105,7 +106,7 @@ class CoupledLoop:
     """The loop. ``sinks`` get each step's output records (``put(records, t_ns)``)."""
 
     def __init__(self, params: LoopParams, clock, gyro, head, camera, star_index, identifier, sinks=(),
-                 lat_clock=None, irq=None):
+                 lat_clock=None, irq=None, link_budget=None):
         from ..gyro import GyroSamples
 
         self.irq = irq           # FIFO-watermark interrupt line: irq.now() = host time of the last edge
@@ -164,6 +165,17 @@ class CoupledLoop:
         self.last_output = None
         self.measuring = None          # (pending, result, future) of the readout being centroided
         self._pool = None
+        # streaming head (gyrostar.hil.streamport): plans by stream frame, link budget,
+        # exposure → output latency (mid-exposure to the first output holding its update)
+        self.streaming = bool(getattr(head, "streaming", False))
+        self.budget = link_budget
+        self.plans: dict = {}
+        self.last_commanded = 0
+        self.stream_start_wait = -np.inf
+        self._mids: list = []
+        self.e2o = np.zeros(1 << 16)
+        self.n_e2o = 0
+        self.frame_t = [np.nan, np.nan]        # mid-exposure of the first and last frame used
 
     # ------------------------------------------------------------------ set-up
     def warm_identifier(self) -> float:
@@ -202,13 +214,20 @@ class CoupledLoop:
             self.overruns += 1
             self.flags_pending |= R.FLAG_OVERRUN
         self.t_step_prev = t_step
+        if self.streaming:
+            # a streamed frame arrives already measured: its update goes into this step's outputs
+            self._image_phase_guarded()
+            return self._gyro_phase()
         n_out = self._gyro_phase()
+        self._image_phase_guarded()
+        return n_out
+
+    def _image_phase_guarded(self) -> None:
         try:
             self._image_phase()
         except DeviceError as exc:
             self._count_head_error(exc)
             self._head_failed(exc)
-        return n_out
 
     def _gyro_phase(self) -> int:
         smp = self.samples
@@ -285,12 +304,20 @@ class CoupledLoop:
         for sink in self.sinks:
             sink.put(out, int(self.t_last * 1e9))
         self.last_output = out[n - 1].copy()
+        if self._mids:
+            for t_mid in self._mids:
+                self.e2o[self.n_e2o % len(self.e2o)] = t_out - t_mid
+                self.n_e2o += 1
+            self._mids.clear()
         self.c.outputs += n
         return n
 
     # ------------------------------------------------------------------ images
     def _image_phase(self) -> None:
         now = self.clock.now()
+        if self.streaming:
+            self._stream_phase(now)
+            return
         if self.measuring is not None:
             pend, res, fut = self.measuring
             self.measuring = None
@@ -352,6 +379,83 @@ class CoupledLoop:
             self.next_frame_t = max(self.next_frame_t + 1.0 / self.p.frame_hz, now)
             self._command_windows(now)
 
+    def _stream_phase(self, now: float) -> None:
+        """Streaming head: take in the frames the port has measured, command the windows of
+        the frame two ahead of the newest one (while the next one integrates)."""
+        head = self.head
+        while True:
+            res = head.poll()
+            if res is None:
+                break
+            if res.kind == "reconnect":
+                if res.error is None:
+                    self.c.head_reconnects += 1
+                    log.info("head link back after %.2f s", now - (self.head_down_since or now))
+                    self.head_down_since = None
+                    self.timeouts = 0
+                continue
+            if res.error is not None:
+                self.c.frames_failed += 1
+                self.last_image_flags |= R.FLAG_LINK_ERROR
+                self._count_head_error(res.error)
+                if res.kind == "frame" or _link_closed(res.error) or isinstance(res.error, HeadTimeoutError):
+                    self._head_failed(res.error)
+                    return
+                continue
+            if res.kind == "frame":
+                self.c.full_frames += 1
+                self._acquire(res, now)
+                continue
+            pend = self.plans.get(res.set_frame)
+            if pend is None or res.measured is None:
+                self.c.frames_unmatched += 1
+                continue
+            self._process_windows(pend, res, res.measured, now)
+            self._mids.append(res.t_mid)
+            if self.frame_t[0] != self.frame_t[0]:
+                self.frame_t[0] = res.t_mid
+            self.frame_t[1] = res.t_mid
+        if self.head_down_since is not None:
+            if not head.busy and now >= self.next_reconnect_t:
+                self.next_reconnect_t = now + 0.25
+                self.plans.clear()
+                self.last_commanded = 0
+                head.submit_reconnect()
+            return
+        if head.busy:
+            return
+        if self.mode == R.MODE_ACQUIRE and not self.q_valid:
+            if now >= self.next_acquire_t:
+                self.next_acquire_t = now + self.p.acquire_every_s
+                self.plans.clear()
+                self.last_commanded = 0
+                head.submit_frame(self._lost_in_space)
+            return
+        frame, t_exp = head.next_target(now)
+        if frame == 0:
+            if now >= self.stream_start_wait:              # the set that starts the stream
+                self.stream_start_wait = now + 0.2
+                self.last_commanded = 0
+                self._command_windows(now, 0, t_exp)
+        elif frame > self.last_commanded:
+            self.last_commanded = frame
+            self._command_windows(now, frame, t_exp)
+
+    def stream_summary(self) -> dict:
+        """Frame rate, exposure → output latency and the link budget's actions (streaming)."""
+        out: dict = {}
+        n = min(self.n_e2o, len(self.e2o))
+        if n:
+            lat = self.e2o[:n] * 1e3
+            out["exposure_to_output_ms_p50"] = float(np.median(lat))
+            out["exposure_to_output_ms_p99"] = float(np.percentile(lat, 99))
+        t0, t1 = self.frame_t
+        if self.c.frames > 1 and t1 > t0:
+            out["frame_rate_hz"] = (self.c.frames - 1) / (t1 - t0)
+        if self.budget is not None:
+            out["link_budget"] = self.budget.summary()
+        return out
+
     def _count_head_error(self, exc: Exception) -> None:
         self.c.head_errors += 1
         log.debug("head error: %s", exc)
@@ -409,7 +513,9 @@ class CoupledLoop:
         self.next_frame_t = now
 
     # -- TRACK / COAST --------------------------------------------------------------
-    def _command_windows(self, now: float) -> None:
+    def _command_windows(self, now: float, frame: int | None = None, t_exp: float | None = None) -> None:
+        """Plan and command windows: for the next CAPTURE, or (streaming) for stream frame
+        ``frame`` whose exposure starts at host time ``t_exp``."""
         from ..core.motion import substeps_for
         from .image_kernels import plan_windows
         from .kernels import project_refs
@@ -423,7 +529,8 @@ class CoupledLoop:
         uv, _ = project_refs(self.cam, self.q, self.ref[order])
         # the exposure starts when the head gets CAPTURE, ~lat s from now (measured)
         m = max(1, int(round(self.p.exposure_s * self.gyro.odr_hz)))
-        m_lat = int(round(self.exposure_lag * self.gyro.odr_hz))
+        lag = self.exposure_lag if t_exp is None else max(t_exp - now, 0.0)
+        m_lat = int(round(lag * self.gyro.odr_hz))
         rates = np.repeat((self.omega + self.bias)[None, :], m + m_lat, axis=0)
         dt = self.p.exposure_s / m
         sub = substeps_for(rates - self.bias, dt, self.f_px, 0.5)
@@ -431,16 +538,35 @@ class CoupledLoop:
         speed = math.sqrt(float(self.omega @ self.omega)) * self.f_px          # px/s near the boresight
         margin = 3.0 * sig_px + speed * self.lag_jitter
         k = min(self.p.window_k + 2 * int(math.ceil(margin)), 40)
+        pixel_budget, max_spans = self.p.pixel_budget, self.p.max_spans
+        if self.budget is not None:
+            if not self.budget.margin_allowed():
+                k = self.p.window_k                  # degrade step 2: tighter windows
+            px, sp = self.budget.limits(len(order))
+            pixel_budget, max_spans = min(pixel_budget, px), min(max_spans, sp)
         spans, wins, off, off_start, off_len = plan_windows(
             uv, order.astype(np.int64), rates, dt, self.bias, self.cam, MODEL, sub, m_lat * sub, k,
-            self.camera.height_px, self.camera.width_px, self.p.pixel_budget, self.p.max_window_pixels,
-            self.p.max_spans)
+            self.camera.height_px, self.camera.width_px, pixel_budget, self.p.max_window_pixels,
+            max_spans)
+        if self.budget is not None:
+            div = self.budget.after_plan(now, len(order), len(wins), int(np.sum(spans[:, 3] - spans[:, 2])),
+                                         len(spans))
+            if div is not None and self.streaming:
+                log.info("link %s: frame rate → %.1f Hz", self.budget.link.name, self.budget.frame_hz)
+                self.head.set_period(1.0 / self.budget.frame_hz)
         if not len(wins):
             self._after_image(now, updated=0)
             return
+        plan = {"spans": spans, "wins": wins, "nav": self.star_nav[wins].copy(), "off": off,
+                "off_start": off_start, "off_len": off_len, "t_submit": now}
+        if self.streaming:
+            self.plans[frame] = plan
+            for old in [f for f in self.plans if f < frame - 8]:
+                del self.plans[old]
+            self.head.submit_windows(spans, frame, lambda values, pl=plan: self._measure(pl, values))
+            return
         self.head.submit_windows(spans)
-        self.pending = {"spans": spans, "wins": wins, "nav": self.star_nav[wins].copy(), "off": off,
-                        "off_start": off_start, "off_len": off_len, "t_submit": now}
+        self.pending = plan
 
     def _measure_pool(self):
         if self._pool is None:
