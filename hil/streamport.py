@@ -58,6 +58,7 @@ class StreamPort(HeadPort):
         self._arrival = np.zeros(1 << 14)          # mid-exposure → frame received (s), ring
         self._n_arrival = 0
         self._initial = 0
+        self._holding = False
 
     # ------------------------------------------------------------------ loop side
     @property
@@ -158,17 +159,25 @@ class StreamPort(HeadPort):
                 self._stop_stream_quietly()
                 return
             kind, arg = job
+            if kind == "wake":
+                # not behind the step gate: a frame waits for no slot between steps (its decode
+                # and measurement hold the interpreter lock ~0.1 ms; the centroiding is nogil)
+                self._stream_turn()
+                continue
             gate = self.step_gate
             if gate is not None:
                 gate.worker_enter()
+                self._holding = True
             try:
-                if kind == "wake":
-                    self._stream_turn()
-                else:
-                    self._run_job(kind, arg)
+                self._run_job(kind, arg)
             finally:
                 if gate is not None:
+                    self._holding = False
                     gate.worker_exit()
+
+    def _gate_held(self) -> bool:
+        """The worker holds the step gate only inside a full-frame or reconnect job."""
+        return self._holding and threading.current_thread() is self._thread
 
     def _run_job(self, kind, arg) -> None:
         """Full frame / reconnect: the stream stops first (both are request/response)."""

@@ -9,9 +9,9 @@ fill: the head's back-pressure is real) and handed to the receiver when their wi
 and the transfer latency have passed. Bytes move in slices of ``SLICE_S`` of wire time; a
 slice is handed over when its last byte has arrived (so the last byte of a message arrives
 exactly on time, earlier ones up to a slice late: never earlier than on the wire). When the
-relay wakes a little late (≤ one slice) while the sender still has bytes queued, the wire is
-taken to have kept sending (it reads the bytes of the missed time too), so scheduling delays
-of the relay do not lower the line rate.
+relay wakes late while the sender's queue was not empty at its previous read (that read got a
+whole slice), the wire is taken to have kept sending: it reads the bytes of the missed time
+too, so the relay's own scheduling delays (a loaded host) do not lower the line rate.
 
 :func:`start_relay` runs it in a forked child process, away from the loop's interpreter
 lock; ``set_faults`` corrupts the head → client bytes (:class:`~gyrostar.mocks.faults.ByteFaults`).
@@ -39,6 +39,7 @@ class _Direction:
         self.chunk = max(1, int(link.bytes_per_s * SLICE_S))
         self.pending: deque = deque()       # (delivery time, bytes)
         self.mangle = None
+        self.full = False                    # the last read got all it asked: the sender had more
 
 
 class PacedRelay:
@@ -84,8 +85,8 @@ class PacedRelay:
                     t = time.monotonic()
                     late = t - d.wire.busy_until
                     n = d.chunk
-                    if 0.0 <= late <= SLICE_S:     # the line kept sending while we slept
-                        n += int(late * d.wire.link.bytes_per_s)
+                    if d.full and late >= 0.0:     # the line kept sending while we slept
+                        n += min(int(late * d.wire.link.bytes_per_s), 1 << 16)
                         t = d.wire.busy_until
                     try:
                         data = os.read(d.src, n)
@@ -93,6 +94,7 @@ class PacedRelay:
                         return
                     if not data:
                         return
+                    d.full = len(data) == n
                     d.pending.append((d.wire.transmit(len(data), t), data))
             if ctl and control in r:
                 try:

@@ -536,7 +536,8 @@ class CoupledLoop:
         sub = substeps_for(rates - self.bias, dt, self.f_px, 0.5)
         sig_px = math.sqrt(max(self.P[0, 0], self.P[1, 1])) * self.f_px
         speed = math.sqrt(float(self.omega @ self.omega)) * self.f_px          # px/s near the boresight
-        margin = 3.0 * sig_px + speed * self.lag_jitter
+        # a streaming head exposes on its own timer: no command-to-exposure jitter to cover
+        margin = 3.0 * sig_px + (0.0 if self.streaming else speed * self.lag_jitter)
         k = min(self.p.window_k + 2 * int(math.ceil(margin)), 40)
         pixel_budget, max_spans = self.p.pixel_budget, self.p.max_spans
         if self.budget is not None:
