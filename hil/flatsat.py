@@ -183,7 +183,7 @@ def make_gyro(cfg: hc.FlatsatConfig, regs, clock):
 
 
 def make_head(cfg: hc.FlatsatConfig, link, clock, reconnect=None, head_clock=None, poll_log=None,
-              replay_polls=None, replay_reconnects=None, fast: bool = False):
+              replay_polls=None, replay_reconnects=None, fast: bool = False, replay_records=None):
     """The head port the loop drives (see :mod:`gyrostar.hil.headport`), on a packet link:
     a streaming port (:mod:`gyrostar.hil.streamport`) with ``head.mode = "stream"`` (fast
     mode's lock-step head serves request/response only)."""
@@ -192,10 +192,11 @@ def make_head(cfg: hc.FlatsatConfig, link, clock, reconnect=None, head_clock=Non
     if cfg.head.mode == "stream" and not fast:
         from ..protocol.defs import PixelFormat
         from ..transport.linkrate import PRESETS
-        from .streamport import StreamPort
+        from .streamport import StreamPort, StreamReplay
 
+        replay = StreamReplay(replay_records) if replay_records is not None else None
         return StreamPort(link, clock, pixel_format=int(PixelFormat[cfg.head.pixel_format.upper()]),
-                          frame_hz=cfg.loop.frame_hz, link_preset=PRESETS.get(cfg.head.link),
+                          frame_hz=cfg.loop.frame_hz, link_preset=PRESETS.get(cfg.head.link), replay=replay,
                           timeout_s=cfg.head.timeout_s, retries=cfg.head.retries,
                           exposure_s=cfg.head.exposure_ms * 1e-3, gain=cfg.head.gain, reconnect=reconnect,
                           head_clock=head_clock, poll_log=poll_log, replay_polls=replay_polls,
@@ -626,7 +627,7 @@ def replay_loop(meta: dict, records, sinks):
     irq = taps.ReplayClock(irq_t) if irq_t else None
     gyro = make_gyro(cfg, regs, clock)
     head = make_head(cfg, link, clock, reconnect=None, head_clock=head_clock, replay_polls=polls,
-                     replay_reconnects=reconnects)
+                     replay_reconnects=reconnects, fast=bool(meta.get("fast")), replay_records=records)
     loop = make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock, e_per_dn, irq)
 
     def run_all():

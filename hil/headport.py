@@ -143,7 +143,10 @@ class HeadPort:
         if exposure_s:
             self.exposure_s = exposure_s
         link = _GatedLink(self.link, self) if self.step_gate is not None else self.link
-        self.client = HeadClient(link, timeout=1.0, retries=self.retries)   # set-up: be patient
+        # first sequence number from the (recorded) head clock: new on every start, so a late
+        # reply to an earlier client cannot match, and the same again when a log is replayed
+        first_seq = int(self.head_clock.now() * 1e6) % 0xFFFF + 1
+        self.client = HeadClient(link, timeout=1.0, retries=self.retries, first_seq=first_seq)   # set-up: patient
         self.info = self.client.get_info()
         self.client.set_exposure(int(round(self.exposure_s * 1e6)))
         self.client.sync(8)

@@ -14,26 +14,79 @@ Lost-in-space full frames stop the stream (full frames are request/response), as
 reconnects; the next ``submit_windows`` starts it again with that set. ``set_period``
 changes the frame period (the stream restarts with it): the loop lowers the frame rate this
 way when the link cannot carry its windows (:mod:`gyrostar.loop.linkbudget`).
-Recording/replay: polls are logged as on :class:`~gyrostar.hil.headport.HeadPort`.
+Recording/replay at the port's boundary: a stream's timing depends on threads, so the log
+holds what the loop saw — every ``poll()`` answer (results with their pixels; a full frame's
+lost-in-space outcome, not its image), every ``next_target`` answer and GET_INFO — and a
+replay serves them back without a link or a worker; the loop's measurement of each frame is
+recomputed from the logged pixels, and each window set the loop commands is checked against
+the logged one.
 """
 
 from __future__ import annotations
 
 import collections
+import json
+import pickle
 import queue
+import struct
 import threading
+import zlib
 
 import numpy as np
 
 from ..errors import DeviceError
-from .headport import HeadPort, ImageResult
+from .headport import POLL, HeadPort, ImageResult
+
+CH_STREAM_POLL = 7      # log channels of a streaming port (kind POLL)
+CH_STREAM_TARGET = 8
+CH_STREAM_INFO = 9
+CH_STREAM_SETS = 10
+_TARGET = struct.Struct("<Id")
+
+
+class StreamReplay:
+    """The logged answers of a streaming port (deques of record payloads per channel)."""
+
+    def __init__(self, records):
+        by = collections.defaultdict(collections.deque)
+        for r in records:
+            if r.kind == POLL and r.channel in (CH_STREAM_POLL, CH_STREAM_TARGET, CH_STREAM_INFO, CH_STREAM_SETS):
+                by[r.channel].append(bytes(r.payload))
+        self.polls, self.targets = by[CH_STREAM_POLL], by[CH_STREAM_TARGET]
+        self.info, self.sets = by[CH_STREAM_INFO], by[CH_STREAM_SETS]
+
+    def take(self, q: collections.deque, what: str) -> bytes:
+        if not q:
+            from ..recording.taps import ReplayExhausted
+
+            raise ReplayExhausted(what)
+        return q.popleft()
+
+
+def _pack_result(res: ImageResult) -> bytes:
+    values = b"" if res.values is None else np.ascontiguousarray(res.values, np.uint16).tobytes()
+    meta = (res.kind, res.t_start, res.t_end, res.t_mid, getattr(res, "frame", 0), getattr(res, "set_frame", 0),
+            res.error, res.measured if res.kind == "frame" else None)
+    blob = pickle.dumps(meta, protocol=4)
+    return b"\x01" + struct.pack("<I", len(blob)) + blob + values
+
+
+def _unpack_result(payload: bytes) -> ImageResult:
+    (n,) = struct.unpack_from("<I", payload, 1)
+    kind, t0, t1, tm, frame, set_frame, error, measured = pickle.loads(payload[5:5 + n])
+    values = np.frombuffer(payload[5 + n:], np.uint16).copy() if kind == "windows" and error is None else None
+    res = ImageResult(kind, t0, t1, tm, values=values, error=error, measured=measured)
+    res.frame, res.set_frame = frame, set_frame
+    return res
 
 
 class StreamPort(HeadPort):
     streaming = True
 
-    def __init__(self, link, clock, pixel_format: int = 1, frame_hz: float = 100.0, link_preset=None, **kw):
+    def __init__(self, link, clock, pixel_format: int = 1, frame_hz: float = 100.0, link_preset=None,
+                 replay: StreamReplay | None = None, **kw):
         super().__init__(link, clock, **kw)
+        self.replay = replay
         self.link_preset = link_preset             # gyrostar.transport.linkrate.LinkPreset (utilisation)
         self.pixel_format = pixel_format
         self.period_us = int(round(1e6 / frame_hz))
@@ -57,10 +110,23 @@ class StreamPort(HeadPort):
         self._t_rx = [float("nan"), float("nan")]  # first and last frame arrival (host s)
         self._arrival = np.zeros(1 << 14)          # mid-exposure → frame received (s), ring
         self._n_arrival = 0
-        self._initial = 0
+        self._start_key = 0
         self._holding = False
 
     # ------------------------------------------------------------------ loop side
+    def start(self, exposure_s: float | None = None) -> None:
+        if exposure_s:
+            self.exposure_s = exposure_s
+        if self.replay is not None:
+            self.info = json.loads(self.replay.take(self.replay.info, "head info"))
+            return
+        super().start(exposure_s)
+        self._log(CH_STREAM_INFO, json.dumps(self.info).encode())
+
+    def _log(self, channel: int, payload: bytes) -> None:
+        if self._poll_log is not None:
+            self._poll_log.append(POLL, payload, channel)
+
     @property
     def busy(self) -> bool:
         """A full frame or reconnect is in flight (window sets never make the port busy)."""
@@ -73,11 +139,16 @@ class StreamPort(HeadPort):
     def next_target(self, now: float) -> tuple[int, float]:
         """(frame to command, its exposure start in host s); frame 0: the stream is not
         running, the set starts it (its first exposure starts about now)."""
+        if self.replay is not None:
+            return _TARGET.unpack(self.replay.take(self.replay.targets, "stream targets"))
         with self._lock:
             if not self.on or self.t_first_host != self.t_first_host:
-                return 0, now + 0.002
-            k = self.last_frame + 2
-            return k, self.t_first_host + (k - self.first_frame) * self.period_s
+                k, t = 0, now + 0.002
+            else:
+                k = self.last_frame + 2
+                t = self.t_first_host + (k - self.first_frame) * self.period_s
+        self._log(CH_STREAM_TARGET, _TARGET.pack(k, t))
+        return k, t
 
     def submit_windows(self, spans: np.ndarray, frame: int = 0, post=None) -> int:
         """Send ``spans`` for stream frame ``frame`` (0: start the stream with them); ``post(values)``
@@ -89,6 +160,14 @@ class StreamPort(HeadPort):
                 del self._sets[old]
         from ..loop.linkbudget import windows_bytes
 
+        digest = struct.pack("<II", frame, zlib.crc32(np.ascontiguousarray(spans, np.int32).tobytes()))
+        if self.replay is not None:
+            if self.replay.take(self.replay.sets, "window sets") != digest:
+                from ..recording.taps import ReplayDivergence
+
+                raise ReplayDivergence(f"replay: the loop commanded other windows for frame {frame} than logged")
+            return frame
+        self._log(CH_STREAM_SETS, digest)
         self.sent_bytes += windows_bytes(len(spans))
         self._sends.put((spans, frame))
         self._start_worker()
@@ -98,29 +177,36 @@ class StreamPort(HeadPort):
     def set_period(self, period_s: float) -> None:
         """New frame period (s): the stream restarts with it at the next window set."""
         self._want_period = int(round(period_s * 1e6))
-        self._jobs.put(("wake", None))
+        if self.replay is None:
+            self._jobs.put(("wake", None))
+
+    def _submit(self, kind, arg) -> None:
+        if self.replay is not None:           # full frame / reconnect: its result is in the log
+            self._job = (kind, arg)
+            return
+        super()._submit(kind, arg)
 
     def poll(self) -> ImageResult | None:
-        if self._replay_polls is not None:
-            if not self._replay_polls:
-                from ..recording.taps import ReplayExhausted
-
-                raise ReplayExhausted("head polls")
-            if not self._replay_polls.popleft():
+        if self.replay is not None:
+            payload = self.replay.take(self.replay.polls, "head polls")
+            if payload[:1] != b"\x01":
                 return None
-            while not self._results and self._thread is not None and self._thread.is_alive():
-                self._done.wait(0.01)
+            res = _unpack_result(payload)
+            if res.kind != "windows":
+                self._job = None
+            elif res.error is None:
+                got = self._sets.get(res.set_frame)
+                if got is not None and got[1] is not None:
+                    res.measured = got[1](res.values)       # the loop's measurement, recomputed
+            return res
+        res = None
         if self._job is not None and self._done.is_set() and not self._results:
-            res = super().poll()
-            if res is not None:
-                return res
-        if not self._results:
-            if self._replay_polls is None:
-                self._log_poll(0)
-            return None
-        if self._replay_polls is None:
-            self._log_poll(1)
-        return self._results.popleft()
+            res = self._result
+            self._job = self._result = None
+        elif self._results:
+            res = self._results.popleft()
+        self._log(CH_STREAM_POLL, b"\x00" if res is None else _pack_result(res))
+        return res
 
     def stats(self) -> dict:
         """What the stream did (for the run summary)."""
@@ -241,8 +327,7 @@ class StreamPort(HeadPort):
         stream that stopped meanwhile): its frames report set_frame 0."""
         c = self.client
         with self._lock:
-            if frame:
-                self._sets[0] = self._sets.get(frame, (spans, None))
+            self._start_key = frame       # frames read with the starting set report set_frame 0
         c.set_windows(spans)
         rep = c.start_stream(self.period_us, int(round(self.exposure_s * 1e6)), self.pixel_format)
         with self._lock:
@@ -258,7 +343,7 @@ class StreamPort(HeadPort):
         """A received frame → result (pixels in the span order of the set it used, measured)."""
         with self._lock:
             self.last_frame = max(self.last_frame, fr.frame)
-            key = fr.set_frame            # 0: the set the stream started with
+            key = fr.set_frame or self._start_key
             got = self._sets.get(key)
         self.frames_received += 1
         self.wire_bytes += fr.wire_bytes
