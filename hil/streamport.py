@@ -310,7 +310,7 @@ class StreamPort(HeadPort):
                     c.send_windows(spans, frame)
             if not self.on:
                 return
-            fr = c.next_frame(min(0.004, self.period_s))
+            fr = c.next_frame(min(0.001, self.period_s))   # short: a window set waits at most 1 ms
             while fr is not None:
                 self._take(fr)
                 if not self._sends.empty():

@@ -176,6 +176,7 @@ class CoupledLoop:
         self.e2o = np.zeros(1 << 16)
         self.n_e2o = 0
         self.frame_t = [np.nan, np.nan]        # mid-exposure of the first and last frame used
+        self.few_run = 0                       # consecutive images that updated too few stars
 
     # ------------------------------------------------------------------ set-up
     def warm_identifier(self) -> float:
@@ -648,9 +649,11 @@ class CoupledLoop:
             return
         few = updated < self.p.min_stars
         self.last_image_flags = R.FLAG_IMAGE_UPDATE if updated else 0
+        self.few_run = self.few_run + 1 if few else 0
         if few:
             self.last_image_flags |= R.FLAG_FEW_STARS
-            if self.mode == R.MODE_TRACK:
+            # streaming at 100 Hz: one frame read with a late window set is no reason to coast
+            if self.mode == R.MODE_TRACK and self.few_run >= (STREAM_FEW_FRAMES if self.streaming else 1):
                 self._set_mode(R.MODE_COAST, now)
             elif self.mode == R.MODE_COAST and self.coast_since is not None \
                     and now - self.coast_since > self.p.coast_timeout_s:
@@ -752,6 +755,9 @@ class CoupledLoop:
         c = self.c
         return {k: getattr(c, k) for k in c.__dataclass_fields__ if k != "mode_changes"} | {
             "mode_changes": list(c.mode_changes)}
+
+
+STREAM_FEW_FRAMES = 3       # streaming: consecutive images with too few stars before COAST (30 ms)
 
 
 def _link_closed(exc: Exception) -> bool:
