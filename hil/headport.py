@@ -148,6 +148,8 @@ class HeadPort:
         first_seq = int(self.head_clock.now() * 1e6) % 0xFFFF + 1
         self.client = HeadClient(link, timeout=1.0, retries=self.retries, first_seq=first_seq)   # set-up: patient
         self.info = self.client.get_info()
+        if getattr(self, "streaming", False):
+            self.client.stop_stream()     # a head that kept streaming for an earlier client stops
         self.client.set_exposure(int(round(self.exposure_s * 1e6)))
         self.client.sync(8)
         self.client.timeout = self.timeout_s + 0.2

@@ -394,6 +394,8 @@ class CoupledLoop:
                     log.info("head link back after %.2f s", now - (self.head_down_since or now))
                     self.head_down_since = None
                     self.timeouts = 0
+                else:
+                    log.debug("head still away: %s", res.error)
                 continue
             if res.error is not None:
                 self.c.frames_failed += 1
