@@ -1,9 +1,11 @@
 """Star-identification speed, each figure against a baseline measured in the same run.
 
-* ``pyramid_10deg_vs_cedar`` — Pyramid lost-in-space on 10°, 1024 px fields (Hipparcos
-  V ≤ 6.5, 0.5 px noise, 2 false stars) against cedar-solve (``tetra3``
-  ``solve_from_centroids`` with its shipped 10–30° database) on the same centroid sets;
-  median per field. Skipped with the reason when cedar-solve is missing or unusable.
+* ``pyramid_<case>_vs_tetra3rs`` — Pyramid lost-in-space against tetra3rs (Rust) on the
+  same centroid sets in this process, its database generated for the same field: 10° and
+  20° fields (1024 px, Hipparcos V ≤ 6.5, 0.5 px noise, 2 false stars) and 10° with 1 px
+  noise and 5 false stars at random brightness ranks; median per field (``ratio``) and
+  p99 (``p99_ratio``). ``pyramid_10deg_vs_cedar``: the 10° case against cedar-solve with its
+  shipped 10–30° database. A missing peer is skipped with the reason.
 * ``extended_grid_track_vs_pyramid`` — tracking identification per frame (extended grid,
   qian2015 4° field, 1 px noise, 0.2 mag, gyro-predicted attitude after 1 s) against
   identifying the same frames lost-in-space with Pyramid.
@@ -22,24 +24,20 @@ import numpy as np
 from numba import njit
 
 
-def _fields(method, n, seed):
+def _fields(n, seed):
+    """Tracking frames (qian2015, 1 px, 0.2 mag) with their gyro-predicted attitudes."""
     from gyrostar.attitude import quat_propagate, random_attitudes
     from gyrostar.starid import eval_starid as ev
 
-    cfg = (ev.TrialConfig(method="pyramid", fov_deg=10.0, pixels=1024, mag_limit=6.5, pos_noise_px=0.5,
-                          mag_noise=0.0, cat_pos_noise_px=0.0, cat_mag_noise=0.0, false_stars=2)
-           if method == "pyramid" else ev.TrialConfig(method="extended-grid"))
+    cfg = ev.TrialConfig(method="extended-grid")
     s = ev.setup(cfg)
     rng = np.random.default_rng(seed)
     out = []
     for q in random_attitudes(n, rng):
-        if method == "pyramid":
-            out.append((s["sky"].observe(s["camera"], q, cfg.mag_limit, 0.5, 0.0, 2, rng), None))
-        else:
-            omega = np.radians(rng.uniform(-0.3, 0.3, 3))
-            q1 = quat_propagate(q, omega, 1.0)
-            q_pred = ev._gyro_prediction(q, omega, cfg, rng)
-            out.append((s["sky"].observe(s["camera"], q1, 7.5, 1.0, 0.2, 0, rng), q_pred))
+        omega = np.radians(rng.uniform(-0.3, 0.3, 3))
+        q1 = quat_propagate(q, omega, 1.0)
+        q_pred = ev._gyro_prediction(q, omega, cfg, rng)
+        out.append((s["sky"].observe(s["camera"], q1, 7.5, 1.0, 0.2, 0, rng), q_pred))
     return s, out
 
 
@@ -52,31 +50,41 @@ def _time(fn, items):
     return statistics.median(ts) * 1e6
 
 
-def _pyramid_vs_cedar(n):
-    from gyrostar.starid import eval_starid as ev
-    from gyrostar.starid.synth import score
+# lost-in-space cases against the peers: the issue-19 fields (Hipparcos, ideal pinhole)
+_LIS = {
+    "10deg": dict(fov_deg=10.0, mag_limit=6.5, pos_noise_px=0.5, false_stars=2),
+    "20deg": dict(fov_deg=20.0, mag_limit=6.5, pos_noise_px=0.5, false_stars=2),
+    "10deg_5false_1px": dict(fov_deg=10.0, mag_limit=6.5, pos_noise_px=1.0, false_stars=5),
+}
 
-    s, fields = _fields("pyramid", n, 7)
-    pyr = s["ident"]
-    t3 = ev._cedar()
-    ours = [score(pyr.identify(f.uv).ids, f.truth, f.alt) for f, _ in fields]
-    ok = sum(c >= 2 and w == 0 for c, w in ours) / n
-    us = _time(lambda f: pyr.identify(f[0].uv), fields)
-    if isinstance(t3, str):
-        return {"us": us, "baseline_us": None, "ratio": None, "note": f"peer skipped: {t3}; ours {100 * ok:.1f} % ok"}
-    cam = s["camera"]
-    peer = [ev.cedar_solve(t3, f.uv, cam, f.truth, f.alt) for f, _ in fields]
-    pok = sum(p[1] for p in peer) / n
-    base = statistics.median(p[2] for p in peer) * 1e3
-    return {"us": us, "baseline_us": base, "ratio": base / us,
-            "note": f"success ours {100 * ok:.1f} % vs cedar-solve {100 * pok:.1f} % ({n} fields)"}
+
+def _pyramid_vs_peer(case, peer, n):
+    """Ours and the peer on the same fields in this process (``eval_starid.run_chunk``)."""
+    from gyrostar.starid import eval_starid as ev
+
+    cfg = ev.TrialConfig(method="pyramid", pixels=1024, mag_noise=0.0, cat_pos_noise_px=0.0, cat_mag_noise=0.0,
+                         peer=peer, **_LIS[case])
+    r = ev.run_chunk(cfg, 7, n)
+    ms = r["ms"]
+    ours = (f"ours {100 * r['success'].mean():.1f} % solved, {int(r['wrong'].sum())} with a wrong label, "
+            f"p99 {np.percentile(ms, 99) * 1e3:.0f} µs")
+    if "peer_reason" in r:
+        return {"us": float(np.median(ms)) * 1e3, "baseline_us": None, "ratio": None,
+                "note": f"peer skipped: {r['peer_reason']}; {ours}"}
+    pm = r["peer_ms"]
+    us, base = float(np.median(ms)) * 1e3, float(np.median(pm)) * 1e3
+    p99, bp99 = float(np.percentile(ms, 99)) * 1e3, float(np.percentile(pm, 99)) * 1e3
+    return {"us": us, "baseline_us": base, "ratio": base / us, "p99_us": p99, "baseline_p99_us": bp99,
+            "p99_ratio": bp99 / p99,
+            "note": f"{n} fields; {ours}; {r['peer_name']} {100 * r['peer_correct'].mean():.1f} % right, "
+                    f"{100 * np.mean(r['peer_solved'] & ~r['peer_correct']):.1f} % wrong, p99 {bp99:.0f} µs"}
 
 
 def _track_vs_pyramid(n):
     from gyrostar.starid.pyramid import Pyramid
     from gyrostar.starid.synth import score
 
-    s, fields = _fields("extended", n, 8)
+    s, fields = _fields(n, 8)
     ext = s["ident"]
     from gyrostar.starid.index import load_index
 
@@ -132,7 +140,8 @@ def _kvector(n):
 def run(quick: bool) -> dict:
     n = 60 if quick else 300
     return {
-        "pyramid_10deg_vs_cedar": _pyramid_vs_cedar(n),
+        **{f"pyramid_{case}_vs_tetra3rs": _pyramid_vs_peer(case, "tetra3rs", 4 * n) for case in _LIS},
+        "pyramid_10deg_vs_cedar": _pyramid_vs_peer("10deg", "cedar-solve", n),
         "extended_grid_track_vs_pyramid": _track_vs_pyramid(n),
         "kvector_vs_searchsorted": _kvector(20000 if quick else 200000),
     }

@@ -71,7 +71,9 @@ def from_dict(raw: dict, schema: type[T], source: str = "<dict>", prefix: str = 
         try:
             check()
         except ValueError as exc:
-            raise ConfigError(f"{source}: '{prefix or '<root>'}': {exc}") from exc
+            text = str(exc)
+            where = "" if not prefix or text.startswith(prefix + ".") else f"[{prefix}] "
+            raise ConfigError(f"{source}: {where}{text}") from exc
     return obj
 
 

@@ -23,6 +23,10 @@ class DeviceError(GyrostarError, IOError):
     exit_code = 3
 
 
+class LinkLostError(DeviceError):
+    """The link itself is gone (port closed, device unplugged, write failed): reconnect."""
+
+
 class NotAvailableError(GyrostarError, RuntimeError):
     """A feature needs something this machine lacks (optional package, tool, device)."""
 

@@ -1,18 +1,24 @@
-"""Logging set-up for the CLI: one stdlib logger per module, level from -v/-q."""
+"""Logging set-up for the CLI: one stdlib logger per module, level from -v/-q.
+
+On a terminal the records go through rich; otherwise (a pipe, a file, a test capturing
+stderr) each record is one plain line, never wrapped at the console width.
+"""
 
 import logging
-
-from rich.logging import RichHandler
+import sys
 
 
 def setup(verbosity: int) -> None:
     """verbosity: -1 quiet (errors), 0 warnings, 1 info, 2+ debug. Logs go to stderr."""
     level = {-1: logging.ERROR, 0: logging.WARNING, 1: logging.INFO}.get(verbosity, logging.DEBUG)
-    from rich.console import Console
+    if sys.stderr.isatty():
+        from rich.console import Console
+        from rich.logging import RichHandler
 
-    logging.basicConfig(
-        level=level,
-        format="%(name)s: %(message)s",
-        handlers=[RichHandler(console=Console(stderr=True), show_path=False, show_time=False)],
-        force=True,
-    )
+        handler = RichHandler(console=Console(stderr=True, soft_wrap=True), show_path=False, show_time=False)
+        fmt = "%(name)s: %(message)s"
+    else:
+        handler = logging.StreamHandler(sys.stderr)
+        fmt = "%(name)s: %(levelname)s: %(message)s"
+    handler.setFormatter(logging.Formatter(fmt))
+    logging.basicConfig(level=level, handlers=[handler], force=True)

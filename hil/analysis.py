@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..loop.record import FLAG_ATTITUDE_VALID, MODE_NAMES, MODE_TRACK
+from ..loop.record import FLAG_ATTITUDE_VALID, FLAG_UPDATE_APPLIED, MODE_NAMES, MODE_TRACK
 
 ARCSEC = 180.0 / np.pi * 3600.0
 
@@ -65,3 +65,56 @@ def summarize(out: np.ndarray, truth: np.ndarray | None, gyro_hz: float) -> dict
         res["bias_error_dps_final"] = [float(v) for v in b_err]
         res["track_fraction"] = float(np.mean(m))
     return res
+
+
+def nees_at_updates(out: np.ndarray, truth: np.ndarray) -> dict:
+    """Normalised estimation error squared per cross-boresight axis (x, y), err²/cov, on the
+    first output after each image update (``nees_after_update``) and on the output just
+    before it (``nees_before_update``, the last prior), TRACK outputs only. A covariance
+    that means what it says gives 1 on each axis."""
+    m = tracking_mask(out)
+    after = np.flatnonzero(m & ((out["flags"] & FLAG_UPDATE_APPLIED) != 0))
+    after = after[after > 0]
+    before = after - 1
+    before = before[m[before]]
+    res = {}
+    for key, idx in (("nees_after_update", after), ("nees_before_update", before)):
+        if len(idx) < 10:
+            res[key] = None
+            continue
+        err = attitude_errors(out[idx], truth[idx])
+        cov = out["cov"][idx]
+        res[key] = [float(np.mean(err[:, a] ** 2 / cov[:, a, a])) for a in (0, 1)]
+    return res
+
+
+def mid_exposure_errors(out: np.ndarray, truth_at) -> dict:
+    """The mid-exposure products against truth at their own timestamps, once per frame
+    (TRACK): filtered (``t_mid``/``q_mid``/``cov_mid``) and smoothed with the next frame
+    (``*_mid_s``): cross-boresight 1σ (arcsec), the same at rest, NEES per axis.
+    ``truth_at(t)`` → TRUTH_DTYPE rows."""
+    res: dict = {}
+    for tag, suffix in (("mid_exposure", ""), ("mid_exposure_smoothed", "_s")):
+        tcol = out["t_mid" + suffix]
+        m = tracking_mask(out) & np.isfinite(tcol)
+        if not np.any(m):
+            res[f"{tag}_error_arcsec_1sigma"] = None
+            continue
+        tm = tcol[m]
+        first = np.flatnonzero(np.r_[True, tm[1:] != tm[:-1]])
+        rec = out[m][first]
+        tr = truth_at(rec["t_mid" + suffix])
+        err = quat_error_angles_many(rec["q_mid" + suffix], tr["q"])
+        e = err * ARCSEC
+        cov = rec["cov_mid" + suffix]
+        rest = np.linalg.norm(tr["omega"], axis=1) < REST_RAD_S
+        cross = (e[:, 0] ** 2 + e[:, 1] ** 2) / 2
+        res[f"{tag}_error_arcsec_1sigma"] = float(np.sqrt(np.mean(cross)))
+        res[f"{tag}_error_arcsec_1sigma_at_rest"] = float(np.sqrt(np.mean(cross[rest]))) if rest.any() else None
+        res[f"{tag}_frames"] = int(len(rec))
+        res[f"{tag}_frames_at_rest"] = int(rest.sum())
+        res[f"nees_{tag}"] = [float(np.mean(err[:, a] ** 2 / cov[:, a, a])) for a in (0, 1)]
+    return res
+
+
+REST_RAD_S = 0.01 * np.pi / 180.0    # "at rest": true body rate below 0.01 °/s

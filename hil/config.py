@@ -53,6 +53,9 @@ class HeadConfig:
             raise ValueError(f"head.link {self.link!r} is not a link preset ({', '.join(PRESETS)}, or none)")
         if not 0 < self.exposure_ms <= 100:
             raise ValueError(f"head.exposure_ms {self.exposure_ms} outside (0, 100]")
+        if self.baudrate <= 0 or self.timeout_s <= 0 or self.retries < 0:
+            raise ValueError(f"head.baudrate ({self.baudrate}) and head.timeout_s ({self.timeout_s}) must be > 0, "
+                             f"head.retries ({self.retries}) ≥ 0")
 
 
 @dataclass
@@ -69,10 +72,50 @@ class GyroConfig:
     fifo_watermark: int = 1
 
     def validate(self):
-        if self.odr_hz not in (100, 200, 400, 800, 1000, 2000):
-            raise ValueError(f"gyro.odr_hz {self.odr_hz} is not an ODR the drivers support")
+        """Every value the chosen part accepts, from its driver's own tables."""
+        part = gyro_part(self.model)
+        if self.odr_hz not in part.odrs_hz:
+            raise ValueError(f"gyro.odr_hz = {self.odr_hz}: the {part.name} supports {list(part.odrs_hz)} Hz")
+        if self.range_dps not in part.ranges_dps:
+            raise ValueError(f"gyro.range_dps = {self.range_dps}: the {part.name} supports "
+                             f"±{list(part.ranges_dps)} °/s")
+        if not 1 <= self.fifo_watermark <= part.max_watermark:
+            raise ValueError(f"gyro.fifo_watermark = {self.fifo_watermark}: the {part.name} FIFO takes "
+                             f"1..{part.max_watermark} frames")
+        if self.kind == "i2c" and self.i2c_address not in part.i2c_addresses:
+            raise ValueError(f"gyro.i2c_address = 0x{self.i2c_address:02x}: the {part.name} answers at "
+                             f"{', '.join(f'0x{a:02x}' for a in part.i2c_addresses)}")
         if not 0x03 <= self.i2c_address <= 0x77:
             raise ValueError(f"gyro.i2c_address 0x{self.i2c_address:x} outside 0x03..0x77")
+        if self.spi_hz <= 0:
+            raise ValueError(f"gyro.spi_hz = {self.spi_hz} must be > 0")
+
+
+@dataclass(frozen=True)
+class GyroPart:
+    """The settings a gyro part accepts, as its driver declares them."""
+
+    name: str
+    odrs_hz: tuple[int, ...]
+    ranges_dps: tuple[int, ...]
+    max_watermark: int
+    i2c_addresses: tuple[int, ...]
+
+
+def gyro_part(model: str) -> GyroPart:
+    """The legal ODRs, ranges, FIFO watermarks and I2C addresses of ``model``, read from the
+    driver module's tables (:mod:`gyrostar.gyro.bmi088`, :mod:`gyrostar.gyro.l3gd20h`)."""
+    if model == "bmi088":
+        from ..gyro import bmi088 as m
+
+        return GyroPart("BMI088", tuple(sorted({odr for odr, _ in m.BANDWIDTHS.values()})),
+                        tuple(sorted(m.RANGES_DPS)), m.FIFO_CAPACITY - 1, tuple(m.I2C_ADDRESSES))
+    if model == "l3gd20h":
+        from ..gyro import l3gd20h as m
+
+        return GyroPart("L3GD20H", tuple(sorted(m.ODR_BITS)), tuple(sorted(m.FULL_SCALE)), m.FIFO_LEVELS - 1,
+                        tuple(m.I2C_ADDRESSES))
+    raise ValueError(f"gyro.model {model!r} has no driver")
 
 
 @dataclass
@@ -92,9 +135,42 @@ class LoopConfig:
     coast_timeout_s: float = 5.0       # COAST longer than this → ACQUIRE (full frame)
     acquire_every_s: float = 0.5       # full-frame attempt period while ACQUIRE
     mag_limit: float = 6.5             # stars predicted into the field brighter than this are tracked
+    confirm_images: int = 20           # ACQUIRE: images that may fail to confirm an identification
+    wrong_id_rejects: int = 5          # filter-gate rejections in a row that drop a star
+    neighbour_sep_px: float = 12.0     # skip a catalog star closer than this (px, per axis) to a tracked one
+    reconnect_every_s: float = 0.25    # s between reconnection attempts while the head is away
+    head_timeouts_lost: int = 3        # head jobs in a row without an answer that mean the link is lost
+    # gyro angle random walk N (IEEE, deg/sqrt(s)) for the filter's process noise; a simulated
+    # flatsat uses its gyro model's (one-sided noise density / sqrt(2)); 0.0099 = BMI088 class
+    gyro_arw_deg_rts: float = 0.0099
+    # group delay of the gyro's low-pass filter (ms) for the loop to compensate (0: off). The
+    # xing2012/bmi088 models' is 4.78 ms, but carrying each output over it with the latest
+    # (noisy) rate sample costs more than the delay (fast demo: 4.44 -> 4.83 arcsec): off
+    gyro_delay_ms: float = 0.0
+    # cut-off of the gyro's 2nd-order low-pass (Hz; 0: none): it takes the rate noise above
+    # it out of short windows (BMI088 at 400 Hz ODR: 47 Hz); the simulated flatsat uses its model's
+    gyro_lowpass_hz: float = 47.0
 
     def validate(self):
         from ..loop.record import MAX_STARS
+
+        for key in ("confirm_images", "wrong_id_rejects", "head_timeouts_lost"):
+            if getattr(self, key) < 1:
+                raise ValueError(f"loop.{key} must be at least 1")
+        if not 0.0 <= self.gyro_lowpass_hz < 10000.0:
+            raise ValueError("loop.gyro_lowpass_hz must be in [0, 10000)")
+        if not 0.0 <= self.gyro_delay_ms < 100.0:
+            raise ValueError("loop.gyro_delay_ms must be in [0, 100)")
+        for key in ("neighbour_sep_px", "reconnect_every_s", "gyro_arw_deg_rts"):
+            if not getattr(self, key) > 0:
+                raise ValueError(f"loop.{key} must be positive")
+        if self.frame_hz <= 0:
+            raise ValueError(f"loop.frame_hz = {self.frame_hz} must be > 0 (images per second)")
+        for key in ("coast_timeout_s", "acquire_every_s"):
+            if getattr(self, key) <= 0:
+                raise ValueError(f"loop.{key} = {getattr(self, key)} must be > 0")
+        if not 1 <= self.min_stars <= self.max_stars:
+            raise ValueError(f"loop.min_stars = {self.min_stars} outside 1..loop.max_stars ({self.max_stars})")
 
         if not 1 <= self.max_stars <= MAX_STARS:
             raise ValueError(f"loop.max_stars {self.max_stars} outside 1..{MAX_STARS}")
@@ -126,6 +202,15 @@ class FlatsatConfig:
     outputs: OutputsConfig = field(default_factory=OutputsConfig)
     realtime: RealtimeConfig = field(default_factory=RealtimeConfig)
     calibration: str = ""
+
+    def validate(self):
+        if self.loop.frame_hz > self.gyro.odr_hz:
+            raise ValueError(f"loop.frame_hz = {self.loop.frame_hz:g} exceeds gyro.odr_hz = {self.gyro.odr_hz} "
+                             "(the loop steps once per gyro period)")
+        period_ms = 1000.0 / self.loop.frame_hz
+        if self.head.exposure_ms > period_ms + 1e-9:
+            raise ValueError(f"head.exposure_ms = {self.head.exposure_ms:g} is longer than the frame period of "
+                             f"loop.frame_hz = {self.loop.frame_hz:g} ({period_ms:g} ms)")
 
     @property
     def simulated(self) -> bool:
@@ -170,6 +255,8 @@ class Scenario:
     preset: str = ""                   # overrides sim.preset when set
     gyro_errors: str = ""              # overrides sim.gyro_errors when set
     mag_limit: float = 0.0             # overrides sim.mag_limit when > 0
+    gyro_overrides: dict[str, float] = field(default_factory=dict)  # fields of the gyro error set replaced
+    false_spots: list[tuple[float, float, float]] = field(default_factory=list)  # [col, row, vmag] glints
     # acceptance of the scenario in the HIL suite
     max_error_arcsec_1sigma: float = 0.0   # 0 = not checked
     min_track_fraction: float = 0.0
@@ -198,8 +285,19 @@ def scenario_names() -> list[str]:
 
 
 def load_scenario(name_or_path: str | None) -> Scenario:
-    """A built-in scenario by name (default ``demo``) or a scenario TOML file by path."""
+    """A built-in scenario by name (default ``demo``), a scenario TOML file by path, or a
+    Monte Carlo case ``mc:SEED@DURATION`` (``gyrostar eval loop``; run it with ``--seed SEED``)."""
     name_or_path = name_or_path or "demo"
+    if name_or_path.startswith("mc:"):
+        from .montecarlo.cases import case_scenario, draw_case
+
+        try:
+            seed_s, dur_s = name_or_path[3:].split("@")
+            seed, dur = int(seed_s), float(dur_s)
+            return case_scenario(draw_case(seed, dur), dur)
+        except ValueError as exc:
+            raise ConfigError(f"--scenario {name_or_path}: a Monte Carlo case is mc:SEED@DURATION, "
+                              f"e.g. mc:100007@30 ({exc})") from None
     path = Path(name_or_path)
     if not path.suffix == ".toml":
         path = Path(str(resources.files("gyrostar.hil") / "scenarios" / f"{name_or_path}.toml"))

@@ -12,10 +12,12 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 
+from ..cli.interrupt import ignore_in_child, sigint_blocked
 from ..errors import DeviceError
 
 
 def _child(conn, make, parent_pid):
+    ignore_in_child()        # a terminal's Ctrl-C reaches us too: the parent stops us, no traceback
     emu, truth = make()
     saved = None
     while True:
@@ -83,7 +85,8 @@ class EmulatorProcess:
         ctx = mp.get_context("fork")
         self.conn, child = ctx.Pipe()
         self.proc = ctx.Process(target=_child, args=(child, make, os.getpid()), name="head-emulator", daemon=True)
-        self.proc.start()
+        with sigint_blocked():   # the child ignores SIGINT before any can reach it
+            self.proc.start()
         self.path = None
         self.emulator_path = None
         self.link = link

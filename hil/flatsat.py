@@ -140,7 +140,8 @@ def simulated_gyro(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int):
     sampling (the register model quantises at the range the driver sets)."""
     from ..mocks.gyro_truth import GyroStream, gyro_params
 
-    gp = gyro_params(scen.gyro_errors or cfg.sim.gyro_errors, range_dps=0.0, odr_hz=float(cfg.gyro.odr_hz))
+    gp = gyro_params(scen.gyro_errors or cfg.sim.gyro_errors, range_dps=0.0, odr_hz=float(cfg.gyro.odr_hz),
+                     **scen.gyro_overrides)
     return GyroStream(scenario_profile(scen), gp, seed=seed)
 
 
@@ -159,13 +160,32 @@ class ScenarioScene:
 
 
 # ---------------------------------------------------------------------------- driver
-def loop_params(cfg: hc.FlatsatConfig, e_per_dn: float | None = None):
+def loop_params(cfg: hc.FlatsatConfig, e_per_dn: float | None = None, scen: hc.Scenario | None = None):
+    """The loop's parameters from the config; a simulated flatsat's detector gain, gyro
+    angle random walk and gyro low-pass cut-off come from its simulator models (what a
+    calibration or the datasheet would give)."""
     from ..loop.coupled import LoopParams
 
     lc = cfg.loop
+    arw = lc.gyro_arw_deg_rts * DEG
+    delay = lc.gyro_delay_ms * 1e-3
+    lowpass = lc.gyro_lowpass_hz
+    if cfg.simulated:
+        from ..mocks.gyro_truth import gyro_params
+
+        gp = gyro_params((scen.gyro_errors if scen is not None else "") or cfg.sim.gyro_errors)
+        # white rate noise of one-sided density n → angle random walk N = n/√2; the per-sample
+        # white term (°/h per sample at the ODR) adds σ²/ODR to N²
+        n2 = (gp.noise_density_dps_rthz * DEG) ** 2 / 2.0 + (gp.white_sigma_dph * DEG / 3600.0) ** 2 / gp.odr_hz
+        if n2 > 0:
+            arw = math.sqrt(n2)
+        lowpass = gp.filter_hz
     p = LoopParams(frame_hz=lc.frame_hz, exposure_s=cfg.head.exposure_ms * 1e-3, window_k=lc.window_k,
                    max_stars=lc.max_stars, min_stars=lc.min_stars, coast_timeout_s=lc.coast_timeout_s,
-                   acquire_every_s=lc.acquire_every_s, mag_limit=lc.mag_limit)
+                   acquire_every_s=lc.acquire_every_s, mag_limit=lc.mag_limit, confirm_images=lc.confirm_images,
+                   wrong_id_rejects=lc.wrong_id_rejects, neighbour_sep_px=lc.neighbour_sep_px,
+                   reconnect_every_s=lc.reconnect_every_s, head_timeouts_lost=lc.head_timeouts_lost, gyro_arw=arw,
+                   gyro_delay_s=delay, gyro_lowpass_hz=lowpass)
     if e_per_dn:
         p.e_per_dn = e_per_dn
     return p
@@ -215,7 +235,7 @@ def star_index(cfg: hc.FlatsatConfig, camera):
     return load_index(cfg.sim.catalog, cfg.loop.mag_limit, max_sep_deg=math.ceil(diag * 10 + 1) / 10)
 
 
-def make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock=None, e_per_dn=None, irq=None):
+def make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock=None, e_per_dn=None, irq=None, scen=None):
     from ..loop.coupled import CoupledLoop
     from ..starid.pyramid import Pyramid
 
@@ -227,8 +247,8 @@ def make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock=None, e_per_dn=No
         from ..transport.linkrate import preset
 
         budget = LinkBudget(preset(cfg.head.link), cfg.loop.frame_hz)
-    return CoupledLoop(loop_params(cfg, e_per_dn), clock, gyro, head, camera, idx, ident, sinks, lat_clock=lat_clock,
-                       irq=irq, link_budget=budget)
+    return CoupledLoop(loop_params(cfg, e_per_dn, scen), clock, gyro, head, camera, idx, ident, sinks,
+                       lat_clock=lat_clock, irq=irq, link_budget=budget)
 
 
 # ---------------------------------------------------------------------------- flatsat
@@ -253,7 +273,7 @@ class Flatsat:
 
     def make_loop(self, sinks):
         return make_loop(self.cfg, self.clock, self.gyro, self.head, self.camera, sinks, self.lat_clock,
-                         self.e_per_dn, self.irq)
+                         self.e_per_dn, self.irq, self.scen)
 
     def clock_now(self) -> float:
         return self.base_clock.now()
@@ -455,7 +475,8 @@ def _sim_head(cfg, scen, sim, truth, seed, faults, lockstep):
 
     cat = load_catalog(cfg.sim.catalog, scen.mag_limit or cfg.sim.mag_limit)
     dev_clock = SimulatedClock(lockstep.clock.now())
-    emu = HeadEmulator(Sky(cat, sim, seed=seed), ScenarioScene(truth, sim.detector.exposure_s), noise=True,
+    sky = Sky(cat, sim, seed=seed, false_spots=scen.false_spots or None)
+    emu = HeadEmulator(sky, ScenarioScene(truth, sim.detector.exposure_s), noise=True,
                        clock=dev_clock)
     head = SimHead(emu, dev_clock, link_preset(cfg.head.link), lockstep)
     head.start()
@@ -481,7 +502,8 @@ def _head_devices(cfg, scen, sim, truth, seed, faults, lockstep=None):
             from ..mocks.sky import Sky
 
             cat = load_catalog(cfg.sim.catalog, scen.mag_limit or cfg.sim.mag_limit)
-            emu = HeadEmulator(Sky(cat, sim, seed=seed), ScenarioScene(truth, sim.detector.exposure_s), noise=True)
+            sky = Sky(cat, sim, seed=seed, false_spots=scen.false_spots or None)
+            emu = HeadEmulator(sky, ScenarioScene(truth, sim.detector.exposure_s), noise=True)
             # render once up front (numba load, fixed-pattern noise)
             warm = emu._sky_for(emu.exposure_us)
             warm.render_frame(truth.q0, np.zeros(3), frame=0)
@@ -500,6 +522,9 @@ def _head_devices(cfg, scen, sim, truth, seed, faults, lockstep=None):
 
         return open_link, (f"Python head emulator (mocks) in a child process, on pty {emu.path} "
                            f"(link {h.link})"), [emu.stop]
+    if scen.false_spots:
+        raise ConfigError(f"scenario '{scen.name}': false_spots are rendered by the head emulator only "
+                          f"(head.kind = 'emulator'), not by head.kind = '{h.kind}'")
     if h.kind == "firmware-host":
         from .fwhead import FirmwareHead
 
@@ -628,7 +653,7 @@ def replay_loop(meta: dict, records, sinks):
     gyro = make_gyro(cfg, regs, clock)
     head = make_head(cfg, link, clock, reconnect=None, head_clock=head_clock, replay_polls=polls,
                      replay_reconnects=reconnects, fast=bool(meta.get("fast")), replay_records=records)
-    loop = make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock, e_per_dn, irq)
+    loop = make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock, e_per_dn, irq, scen)
 
     def run_all():
         steps = 0

@@ -32,6 +32,7 @@ from multiprocessing.connection import wait as mp_wait
 
 import numpy as np
 
+from ..cli.interrupt import ignore_in_child, sigint_blocked
 from ..errors import DeviceError
 
 BOX = 16
@@ -87,6 +88,7 @@ class _Sensor:
 
 
 def _sensor_child(conn, pixels, exposures, sim, truth, seed, catalog_name, mag_limit, parent_pid):
+    ignore_in_child()        # a terminal's Ctrl-C reaches us too: the parent stops us, no traceback
     from ..catalog import load_catalog
 
     sensor = _Sensor(load_catalog(catalog_name, mag_limit), sim, truth, seed)
@@ -198,7 +200,8 @@ class FirmwareHead:
                                 args=(child, self.host.pixels, self.host.exposures, sim, truth, seed, simcfg.catalog,
                                       mag_limit, os.getpid()),
                                 daemon=True)
-        self.proc.start()
+        with sigint_blocked():   # the child ignores SIGINT before any can reach it
+            self.proc.start()
         if not self.conn.poll(120.0):
             self.stop()
             raise DeviceError("the sensor process did not start (catalog load and first render)")

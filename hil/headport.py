@@ -6,11 +6,10 @@ period (2.5 ms), so the loop never calls the head client itself: it submits a jo
 gyro path keeps running. The worker uses :class:`gyrostar.head.HeadClient` unchanged.
 
 Replay: the worker's link traffic is recorded on the head channel, the client's reads of
-the host clock on channel ``CH_HEAD_CLOCK`` (the client times its timeouts and time-sync
-schedule with ``time.monotonic``; while a port is open that name is routed through the
-port's clock), and every poll's answer on ``CH_POLL``; a replayed poll that was "done"
-waits for the replayed worker to finish the same job, so the loop sees the same results
-at the same steps.
+the host clock on channel ``CH_HEAD_CLOCK`` (the port gives the client ``head_clock``; it
+times its timeouts and time-sync schedule with it), and every poll's answer on
+``CH_POLL``; a replayed poll that was "done" waits for the replayed worker to finish the
+same job, so the loop sees the same results at the same steps.
 """
 
 from __future__ import annotations
@@ -53,20 +52,6 @@ def _exposure_times(cap) -> tuple[float, float, float]:
     t_start = cap.t_mid_host - 0.5 * (cap.t_end_us - cap.t_start_us) * 1e-6
     t_end = t_start + cap.exposure_us * 1e-6
     return t_start, t_end, 0.5 * (t_start + t_end)
-
-
-class _TimeShim:
-    """Stands in for the ``time`` module inside gyrostar.head.client: monotonic() → clock."""
-
-    def __init__(self, clock, real):
-        self._clock = clock
-        self._real = real
-
-    def monotonic(self) -> float:
-        return self._clock.now()
-
-    def __getattr__(self, name):
-        return getattr(self._real, name)
 
 
 class _GatedLink:
@@ -115,38 +100,21 @@ class HeadPort:
         self._done = threading.Event()
         self._jobs: queue.SimpleQueue = queue.SimpleQueue()
         self._result: ImageResult | None = None
-        self._patched = None
         # real-time runs: the loop's StepGate (gyrostar.loop.scheduler; see _GatedLink); None: off
         self.step_gate = None
 
     # ------------------------------------------------------------------ set-up
-    def _patch_time(self) -> None:
-        import time as real_time
-
-        from ..head import client as client_mod
-
-        if self._patched is None:
-            self._patched = client_mod.time
-            client_mod.time = _TimeShim(self.head_clock, real_time)
-
-    def _unpatch_time(self) -> None:
-        from ..head import client as client_mod
-
-        if self._patched is not None:
-            client_mod.time = self._patched
-            self._patched = None
-
     def start(self, exposure_s: float | None = None) -> None:
         from ..head import HeadClient
 
-        self._patch_time()
         if exposure_s:
             self.exposure_s = exposure_s
         link = _GatedLink(self.link, self) if self.step_gate is not None else self.link
-        # first sequence number from the (recorded) head clock: new on every start, so a late
-        # reply to an earlier client cannot match, and the same again when a log is replayed
-        first_seq = int(self.head_clock.now() * 1e6) % 0xFFFF + 1
-        self.client = HeadClient(link, timeout=1.0, retries=self.retries, first_seq=first_seq)   # set-up: patient
+        # first sequence number from the (recorded) clock, not a random draw: a new client
+        # still differs from the last one, and a replay sends the same bytes
+        first = (int(self.head_clock.now() * 1e6) & 0xFFFF) or 1
+        self.client = HeadClient(link, timeout=1.0, retries=self.retries, clock=self.head_clock,   # set-up: patient
+                                 first_seq=first)
         self.info = self.client.get_info()
         if getattr(self, "streaming", False):
             self.client.stop_stream()     # a head that kept streaming for an earlier client stops
@@ -203,7 +171,6 @@ class HeadPort:
             self._wait_idle(2.0)
             self._jobs.put(None)
             t.join(timeout=2.0)
-        self._unpatch_time()
 
     # ------------------------------------------------------------------ jobs
     @property

@@ -28,7 +28,7 @@ from __future__ import annotations
 import heapq
 import threading
 
-from ..errors import DeviceError
+from ..errors import DeviceError, LinkLostError
 
 IDLE, WANT, RUN, OUT, WAIT = range(5)
 
@@ -48,6 +48,9 @@ class Lockstep:
         self._state = IDLE
         self._wake_t: float | None = None
         self._running = False
+        # the runner's next event (its next step): a worker wait that ends no later than
+        # this moves the clock itself, as the runner would at once (no hand-over)
+        self.horizon = -float("inf")
 
     # -- StepGate interface (called by the head port) ----------------------------------
     def loop_enter(self) -> None:
@@ -129,7 +132,7 @@ class Lockstep:
         """Block the calling thread until simulated time ``t`` (the runner's own waits and
         every wait outside the schedule move the clock instead)."""
         with self._cv:
-            if not self._running or threading.current_thread() is self.runner:
+            if not self._running or threading.current_thread() is self.runner or t <= self.horizon:
                 if t > self.clock.now():
                     self.clock.set(t)
                 return
@@ -173,7 +176,7 @@ class SimHead:
     def disconnect(self) -> None:
         self.connected = False
         if self.link is not None:
-            self.link.lost = DeviceError(f"sim link {self.url} closed: head disconnected")
+            self.link.lost = LinkLostError(f"sim link {self.url} closed: head disconnected")
 
     def stop(self) -> None:
         self.disconnect()
@@ -250,7 +253,7 @@ class SimLink:
 
     def send(self, data: bytes) -> float:
         if self.closed or self.lost is not None:
-            raise DeviceError(f"sim link {self.url} is down: {self.lost or 'closed'}")
+            raise LinkLostError(f"sim link {self.url} is down: {self.lost or 'closed'}")
         t = self.clock.now()
         for t_arr, chunk in self.head.transact(bytes(data), t):
             heapq.heappush(self._arrivals, (t_arr, self._n, chunk))

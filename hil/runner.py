@@ -30,17 +30,34 @@ import numpy as np
 from ..cli.output import emit
 from ..errors import ConfigError
 from ..paths import runs_dir
+from . import acceptance
 from . import config as hc
 
 log = logging.getLogger(__name__)
 
 
 def make_run_folder(out: str | None, scenario: str) -> Path:
+    """The run folder: ``--out`` (created), or a fresh ``runs/<UTC time>_<scenario>``.
+
+    An ``--out`` that holds a finished run (``summary.json``) is refused. One that holds only
+    an unfinished run's log (no summary: the run failed or was killed) is reused, the old log
+    moved aside to ``flatsat.failed-N.gslog`` (never deleted), and a warning says so."""
     if out:
         folder = Path(out)
-        folder.mkdir(parents=True, exist_ok=True)
-        if (folder / "flatsat.gslog").exists():
-            raise ConfigError(f"run folder {folder} already holds a log; choose another --out")
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise ConfigError(f"--out {folder}: cannot create the run folder: {exc.strerror or exc}") from exc
+        if (folder / "summary.json").exists():
+            raise ConfigError(f"--out {folder} already holds a finished run (summary.json); choose another --out")
+        old = folder / "flatsat.gslog"
+        if old.exists():
+            n = 1
+            while (folder / f"flatsat.failed-{n}.gslog").exists():
+                n += 1
+            kept = folder / f"flatsat.failed-{n}.gslog"
+            old.rename(kept)
+            log.warning("--out %s held an unfinished run's log (no summary.json): kept as %s", folder, kept.name)
         return folder
     stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%S")
     base = runs_dir() / f"{stamp}_{scenario}"
@@ -56,22 +73,37 @@ def make_run_folder(out: str | None, scenario: str) -> Path:
 def run(args) -> int:
     cfg = hc.load_flatsat(getattr(args, "config", None))
     scen = hc.load_scenario(getattr(args, "scenario", None))
-    duration = float(args.duration) if getattr(args, "duration", None) else scen.duration_s
-    if duration <= 0:
-        raise ConfigError(f"--duration must be positive, got {duration}")
+    duration = scen.duration_s if getattr(args, "duration", None) is None else float(args.duration)
+    if not (duration > 0 and np.isfinite(duration)):
+        raise ConfigError(f"--duration must be a finite number of seconds > 0, got {duration}")
     folder = make_run_folder(getattr(args, "out", None), scen.name)
     result = run_flatsat(cfg, scen, duration=duration, seed=int(getattr(args, "seed", 1) or 0), folder=folder,
                          realtime=bool(getattr(args, "realtime", False)),
                          plots=not getattr(args, "no_plots", False),
                          status=getattr(args, "verbose", 0) >= 0,
                          config_path=getattr(args, "config", None), fast=bool(getattr(args, "fast", False)))
+    if result.get("interrupted"):
+        result["exit_code"] = 130
+        emit(args, result, human_summary(result))
+        log.error("interrupted at %.1f s of %.1f s: the summary and plots of the part that ran are in %s",
+                  result.get("ran_s") or 0.0, duration, folder)
+        return 130
+    acc = acceptance.evaluate(scen, result, duration)
+    result["acceptance"] = acc
+    failed = acceptance.failures(acc)
+    result["exit_code"] = 1 if failed else 0
+    (folder / "summary.json").write_text(json.dumps(_jsonable(result), indent=2))
     emit(args, result, human_summary(result))
+    if failed:
+        log.error("scenario acceptance failed: %s", "; ".join(failed))
+        return 1
     return 0
 
 
 def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed: int, folder: Path,
                 realtime: bool = False, plots: bool = True, status: bool = True, config_path=None,
-                record: bool | None = None, on_output=None, probe=None, fast: bool = False) -> dict:
+                record: bool | None = None, on_output=None, probe=None, fast: bool = False,
+                keep_arrays: bool = False) -> dict:
     """Run one flatsat session and return its summary (also written to summary.json).
 
     ``fast``: the emulated devices on a simulated clock in lock-step with the loop
@@ -81,23 +113,52 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
     summary's ``host_wakeups`` then says how often the host itself woke a real-time task
     late and how many overruns coincided with that."""
     from ..loop.record import describe
+    from ..recording import logfile as lf
+
+    record = cfg.outputs.record if record is None else record
+    if fast and (realtime or probe is not None):
+        raise ConfigError("--fast runs on a simulated clock: it cannot be combined with --realtime or a probe")
+    folder = Path(folder)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        writer = lf.LogWriter(folder / "flatsat.gslog", background=True) if record else None
+    except FileExistsError as exc:
+        raise ConfigError(f"{folder} already holds a log (flatsat.gslog): choose another run folder") from exc
+    except OSError as exc:
+        raise ConfigError(f"run folder {folder}: {exc.strerror or exc}") from exc
+    meta = {"format": "gyrostar flatsat log 1", "config": _cfg_dict(cfg), "scenario": _cfg_dict(scen),
+            "duration_s": duration, "seed": seed, "realtime": realtime, "fast": fast, "output": describe(),
+            "started_utc": datetime.now(UTC).isoformat()}
+    if writer:
+        writer.meta(meta)
+        writer.flush()          # on disk before anything can fail: a failed run's log still says what it was
+    try:
+        return _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer, on_output, probe,
+                        fast, keep_arrays)
+    except BaseException as exc:
+        if writer:
+            try:
+                writer.event({"aborted": "interrupted" if isinstance(exc, KeyboardInterrupt) else
+                              f"{type(exc).__name__}: {exc}"[:500]})
+            except ValueError:      # already closed: the failure came after the run's end
+                pass
+        raise
+    finally:
+        if writer:
+            writer.close()
+
+
+def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer, on_output, probe, fast,
+             keep_arrays=False) -> dict:
+    """The body of :func:`run_flatsat` once its log holds the META record."""
+    import sys
+
     from ..loop.scheduler import PeriodicScheduler, StepGate, realtime_setup
     from ..loop.sinks import CallbackSink, RecorderSink, UdpSink
     from ..recording import logfile as lf
     from . import flatsat
     from .analysis import summarize
     from .status import StatusLine
-
-    record = cfg.outputs.record if record is None else record
-    writer = lf.LogWriter(folder / "flatsat.gslog", background=True) if record else None
-    if fast and (realtime or probe is not None):
-        raise ConfigError("--fast runs on a simulated clock: it cannot be combined with --realtime or a probe")
-    meta = {"format": "gyrostar flatsat log 1", "config": _cfg_dict(cfg), "scenario": _cfg_dict(scen),
-            "duration_s": duration, "seed": seed, "realtime": realtime, "fast": fast, "output": describe(),
-            "started_utc": datetime.now(UTC).isoformat()}
-    if writer:
-        writer.meta(meta)
-    import sys
 
     # the loop shares the interpreter with the link reader and head worker threads (and
     # in-process emulators): switch threads often so the 400 Hz path is not held off
@@ -142,6 +203,7 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
     # the head worker's Python work stays out of the steps (it shares the interpreter lock)
     gate = fs.lockstep if fs.lockstep is not None else StepGate()
     sched = None
+    interrupted = False
     if hasattr(loop.head, "step_gate"):
         loop.head.step_gate = gate
     try:
@@ -152,11 +214,17 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
         loop.start()
         fs.start_faults(t_start_of(fs))
         period = 1.0 / loop.gyro.odr_hz
-        if fs.lockstep is not None:
-            cpu_loop = _run_lockstep(fs, loop, duration, period, step_wall, line if status else None)
-        else:
-            sched = PeriodicScheduler(period)
-            cpu_loop = _run_realtime(fs, loop, gate, sched, duration, step_wall, line if status else None, probe)
+        try:
+            if fs.lockstep is not None:
+                loop.image.threaded = False      # centroid in the step: same result, no hand-over per frame
+                cpu_loop = _run_lockstep(fs, loop, duration, period, step_wall, line if status else None)
+            else:
+                sched = PeriodicScheduler(period)
+                cpu_loop = _run_realtime(fs, loop, gate, sched, duration, step_wall, line if status else None,
+                                         probe)
+        except KeyboardInterrupt:       # Ctrl-C: stop here, keep and report the part that ran
+            interrupted = True
+            cpu_loop = None
     finally:
         gate.open()
         line.close()
@@ -168,6 +236,9 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
             leave_realtime()
         for s in sinks:
             s.close()
+        # the run's start-up heap goes back to the collector: a process that runs many
+        # sessions (a Monte Carlo worker) must not keep every run's objects frozen forever
+        gc.unfreeze()
     wall = time.perf_counter() - t_wall0
     cpu_proc = time.process_time() - cpu0
     out = np.concatenate(chunks) if chunks else np.zeros(0, loop.out_buf.dtype)
@@ -175,22 +246,41 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
     if writer and truth is not None:
         writer.append(lf.TRUTH, truth.tobytes(), t_ns=0)
     res = summarize(out, truth, loop.gyro.odr_hz)
+    floor = loop.floor_summary()
+    if truth is not None and len(out):
+        from .analysis import mid_exposure_errors, nees_at_updates
+
+        res.update(nees_at_updates(out, truth))
+        res.update(mid_exposure_errors(out, fs.truth_rows))
     counters = loop.counters()
     res_top = {
         "scenario": scen.name,
         "flatsat": cfg.name,
         "duration_s": duration,
         "attitude_error_arcsec_1sigma": res.get("attitude_error_arcsec_1sigma"),
+        "floor_arcsec": floor.get("floor_arcsec"),
+        "measured_over_floor": (res["attitude_error_arcsec_1sigma"] / floor["floor_arcsec"]
+                                if res.get("attitude_error_arcsec_1sigma") and floor.get("floor_arcsec") else None),
+        "mid_exposure_error_arcsec_1sigma": res.get("mid_exposure_error_arcsec_1sigma"),
+        "mid_exposure_error_arcsec_1sigma_at_rest": res.get("mid_exposure_error_arcsec_1sigma_at_rest"),
+        "mid_exposure_smoothed_error_arcsec_1sigma": res.get("mid_exposure_smoothed_error_arcsec_1sigma"),
+        "floor_mid_exposure_arcsec": floor.get("floor_mid_exposure_arcsec"),
+        "nees_after_update": res.get("nees_after_update"),
+        "nees_before_update": res.get("nees_before_update"),
         "latency_p99_ms": res.get("latency_p99_ms"),
         # fast mode: loop CPU per second of flatsat time (the share of a core it needs in real time)
-        "cpu_percent": (100.0 * cpu_loop / (duration if fast else wall)) if wall > 0 else None,
+        "cpu_percent": (100.0 * cpu_loop / (duration if fast else wall)) if wall > 0 and cpu_loop is not None
+        else None,
         "overruns": sched.overruns if sched is not None else 0,
         "mode_seconds": res["mode_seconds"],
         "frames": counters["frames"],
         "gyro_samples": counters["gyro_samples"],
         "samples_lost": counters["samples_lost"],
+        "host_us_per_gyro_sample": loop.host_us_per_gyro_sample(),
     }
     res_top.update({k: v for k, v in res.items() if k not in res_top})
+    if floor.get("floor_inputs"):
+        res_top["floor_inputs"] = floor["floor_inputs"]
     res_top["step_wall_p99_ms"] = float(np.percentile(step_wall, 99)) * 1e3 if step_wall else None
     res_top["process_cpu_percent"] = 100.0 * cpu_proc / wall if wall > 0 else None
     res_top["wall_s"] = wall
@@ -226,7 +316,13 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
             f"late_over_{LATE_S * 1e3:.0f}ms": len(pr["late_s"]), "max_late_ms": pr["max_s"] * 1e3,
             "overrun_events": len(sched.overrun_t),
             "overrun_events_during_host_stalls": coincident(np.array(sched.overrun_t), pr["late_t"], pr["late_s"])}
+    from ..loop.record import MODE_TRACK
+
+    res_top["track_regained"] = acceptance.track_regained(out["mode"], MODE_TRACK)
     res_top["run_folder"] = str(folder)
+    if interrupted:
+        res_top["interrupted"] = True
+        res_top["ran_s"] = float(out["t"][-1] - t_start_of(fs)) if len(out) else 0.0
     if writer:
         writer.event({"summary": _jsonable(res_top)})
         writer.close()
@@ -239,6 +335,9 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
             res_top["centroid_error_px_rms"] = float(np.sqrt(np.mean(cerr[:, 1:] ** 2)))
         res_top["plots"] = [str(p) for p in write_plots(folder, out, truth, cerr)]
     (folder / "summary.json").write_text(json.dumps(_jsonable(res_top), indent=2))
+    if keep_arrays:
+        # for evaluations (gyrostar eval loop): the outputs, the truth at each, the scenario start, the camera
+        res_top["arrays"] = {"out": out, "truth": truth, "t0": t_start_of(fs), "camera": fs.camera}
     return res_top
 
 
@@ -276,16 +375,17 @@ def _run_realtime(fs, loop, gate, sched, duration: float, step_wall: list, line,
 def _run_lockstep(fs, loop, duration: float, period: float, step_wall: list, line) -> float:
     """Fast mode: step the loop every gyro period of simulated time; between steps let the
     head worker run at the simulated times its replies (or timeouts) are due. Returns the
-    loop's CPU seconds."""
+    CPU seconds of this thread (the loop's steps and the few µs of scheduling per step)."""
     lk = fs.lockstep
     clock = fs.base_clock
     head = loop.head
     lk.begin()
     t_start = t_start_of(fs)
     t_next = clock.now() + period
-    cpu = 0.0
+    cpu0 = time.thread_time()      # this thread runs only the loop and the schedule: one reading
     shown = time.perf_counter()
     while True:
+        lk.horizon = t_next
         while True:
             w = lk.wake_time
             if w is None or w > t_next:
@@ -301,17 +401,15 @@ def _run_lockstep(fs, loop, duration: float, period: float, step_wall: list, lin
         fs.apply_faults(t)
         if fs.loop_stalled(t):        # injected "loop does not read the FIFO" fault
             continue
-        c0 = time.thread_time()
         w0 = time.perf_counter()
         loop.step()
         step_wall.append(time.perf_counter() - w0)
-        cpu += time.thread_time() - c0
         lk.settle(head)
         if line is not None and loop.last_output is not None and w0 - shown > 0.2:
             shown = w0
             line.update(loop.last_output, fs.truth_at(loop.last_output["t"]), step_wall[-1] * 1e6, 0, duration,
                         t0=t_start)
-    return cpu
+    return time.thread_time() - cpu0
 
 
 def t_start_of(fs) -> float:
@@ -336,13 +434,21 @@ def human_summary(r: dict) -> str:
 
     modes = ", ".join(f"{k} {v:.1f} s" for k, v in r["mode_seconds"].items())
     lines = [
-        f"[bold]gyrostar run[/] — {r['scenario']} on {r['flatsat']}, {r['duration_s']:.1f} s of flatsat time "
+        f"[bold]gyrostar run[/] — {r['scenario']} on {r['flatsat']}, "
+        + (f"{r['ran_s']:.1f} s (interrupted) of {r['duration_s']:.1f} s" if r.get("interrupted")
+           else f"{r['duration_s']:.1f} s") + " of flatsat time "
         f"({r['wall_s']:.1f} s wall{', real time' if r['realtime'] else ''})",
-        f"  attitude error (cross-boresight, 1σ, TRACK): {f(r['attitude_error_arcsec_1sigma'], '.2f')}″",
+        "  attitude error (cross-boresight, 1σ, TRACK): " + (
+            f"{r['attitude_error_arcsec_1sigma']:.2f}″" if r.get("attitude_error_arcsec_1sigma") is not None
+            else "never in TRACK" if "track_fraction" in r else "n/a (no simulator truth)")
+        + f" (floor {f(r.get('floor_arcsec'), '.2f')}″); mid-exposure "
+        f"{f(r.get('mid_exposure_error_arcsec_1sigma'), '.2f')}″ "
+        f"(floor {f(r.get('floor_mid_exposure_arcsec'), '.2f')}″)",
         f"  modes: {modes}",
         f"  frames {r['frames']}, gyro samples {r['gyro_samples']}, samples lost {r['samples_lost']}",
         f"  latency p99 {f(r['latency_p99_ms'], '.3f')} ms ({r['latency_clock']}), loop CPU "
-        f"{f(r['cpu_percent'], '.1f')} % of a core, overruns {r['overruns']}",
+        f"{f(r['cpu_percent'], '.1f')}{' %' if r['cpu_percent'] is not None else ''} of a core, "
+        f"overruns {r['overruns']}",
         f"  numba start-up {r['numba_startup']['seconds']:.2f} s ({r['numba_startup']['cache_hits']} cached, "
         f"{r['numba_startup']['compiled']} compiled)",
     ]
@@ -353,5 +459,19 @@ def human_summary(r: dict) -> str:
     not_wired = [k for k, v in r.get("wiring", {}).items() if str(v).startswith("NOT WIRED")]
     for k in not_wired:
         lines.append(f"  [red]{k}: {r['wiring'][k]}[/]")
+    if r.get("interrupted"):
+        lines.append(f"  [yellow]interrupted after {r.get('ran_s', 0.0):.1f} s: figures cover the part that ran[/]")
+    acc = r.get("acceptance")
+    if acc:
+        from .acceptance import failures
+
+        if not acc["applied"]:
+            lines.append(f"  scenario acceptance not applied: {acc['note']}")
+        else:
+            bad = failures(acc)
+            ok = [k for k, c in acc["checks"].items() if c["pass"]]
+            lines.append("  scenario acceptance: " + ("[red]FAIL " + "; ".join(bad) + "[/]" if bad else "PASS")
+                         + (f" (passed: {', '.join(ok)})" if ok and bad else "")
+                         + (f" ({acc['note']})" if acc["note"] else ""))
     lines.append(f"  run folder: {r['run_folder']}")
     return "\n".join(lines)

@@ -121,6 +121,11 @@ class StreamPort(HeadPort):
             self.info = json.loads(self.replay.take(self.replay.info, "head info"))
             return
         super().start(exposure_s)
+        # the stream's own timing stays off the recorded head clock: a replay serves the
+        # port's answers, not the client's clock readings (1000 a second while streaming)
+        from ..clock import MONOTONIC
+
+        self.client.clock = MONOTONIC
         self._log(CH_STREAM_INFO, json.dumps(self.info).encode())
 
     def _log(self, channel: int, payload: bytes) -> None:

@@ -151,7 +151,7 @@ def butterworth2(fc: float, fs: float) -> tuple[np.ndarray, np.ndarray]:
     return b, a
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _sensor_chain(omega_in, b0, gm_sigma, gm_phi, rrw_step, white_int, white_out, filt_b, filt_a, use_filter,
                   decim, seed, state):
     """Internal-rate chain: add biases and noise, filter, decimate. Returns (meas, bias) at ODR.
@@ -274,7 +274,8 @@ class GyroStream:
     the requests. Output sample ``i`` (0, 1, …) is taken at ``t = (i + 1) / odr_hz`` s from the
     profile's start. Memory stays bounded: the chain state at every chunk start is kept
     (168 bytes per chunk) and the last ``cache_chunks`` chunks; an older chunk asked for again
-    is regenerated from its start state. Thread-safe.
+    is regenerated from its start state. The next chunk is generated ahead in a worker thread.
+    Thread-safe.
     """
 
     def __init__(self, profile: RateProfile, params: GyroErrorParams | str = "bmi088", seed: int = 0,
@@ -292,6 +293,8 @@ class GyroStream:
         self._starts = [np.zeros((7, 3))]   # chain state before chunk c
         self._cache: OrderedDict = OrderedDict()   # c -> (meas, bias)
         self.generated = 0                  # chunks generated (regenerations included)
+        self._ahead = None                  # (chunk, future, its state) being generated ahead
+        self._worker = None
         self._lock = threading.Lock()
 
     @property
@@ -304,23 +307,47 @@ class GyroStream:
         return int(np.random.SeedSequence([self.seed, c]).generate_state(1)[0] & 0x7FFFFFFF)
 
     def _chunk(self, c: int):
-        """(meas, bias) of chunk ``c`` (lock held)."""
+        """(meas, bias) of chunk ``c`` (lock held). The chunk after the newest one is generated
+        ahead in a worker thread (the chain releases the GIL), so a caller moving forward in
+        time (the register model, 10 s per chunk at 400 Hz) does not wait for it."""
         hit = self._cache.get(c)
         if hit is not None:
             self._cache.move_to_end(c)
             return hit
         first = min(c, len(self._starts) - 1)   # generate on from the nearest known start state
         for cc in range(first, c + 1):
-            state = self._starts[cc].copy()
-            got = self._chain.run(self.profile, cc * self.chunk, self.chunk, self._chunk_seed(cc), state)
+            if self._ahead is not None and self._ahead[0] == cc:
+                _, future, state = self._ahead
+                self._ahead = None
+                got = future.result()
+            else:
+                state = self._starts[cc].copy()
+                got = self._chain.run(self.profile, cc * self.chunk, self.chunk, self._chunk_seed(cc), state)
             self.generated += 1
             if cc + 1 == len(self._starts):
                 self._starts.append(state)
-            self._cache[cc] = got
-            self._cache.move_to_end(cc)
-            while len(self._cache) > self.cache_chunks:
-                self._cache.popitem(last=False)
+            self._remember(cc, got)
+        self._generate_ahead(c + 1)
         return got
+
+    def _remember(self, c: int, got) -> None:
+        self._cache[c] = got
+        self._cache.move_to_end(c)
+        while len(self._cache) > self.cache_chunks:
+            self._cache.popitem(last=False)
+
+    def _generate_ahead(self, c: int) -> None:
+        """Start generating chunk ``c`` in the worker if it is the next new one (lock held)."""
+        if self._ahead is not None or c != len(self._starts) - 1 or c in self._cache:
+            return
+        if self._worker is None:
+            from concurrent.futures import ThreadPoolExecutor
+
+            self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="gyro-stream")
+        state = self._starts[c].copy()
+        future = self._worker.submit(self._chain.run, self.profile, c * self.chunk, self.chunk,
+                                     self._chunk_seed(c), state)
+        self._ahead = (c, future, state)
 
     def _rows(self, which: int, i) -> np.ndarray:
         i = np.atleast_1d(np.asarray(i, np.int64))
@@ -330,6 +357,10 @@ class GyroStream:
         if i.min() < 0:
             raise ValueError(f"gyro sample index must be >= 0, got {int(i.min())}")
         c = i // self.chunk
+        c0 = int(c[0])
+        if c0 == c.min() == c.max():   # the usual request: a few samples of one chunk
+            with self._lock:
+                return self._chunk(c0)[which][i - c0 * self.chunk]
         order = np.argsort(c, kind="stable")
         cuts = np.flatnonzero(np.diff(c[order])) + 1
         with self._lock:

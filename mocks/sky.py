@@ -21,6 +21,10 @@ Entry points:
 * ``expose(q_start, omega) -> Exposure``: the geometry only (star paths and truth), which
   both renderers use, for callers that render several readouts of one exposure.
 
+``false_spots`` (k, 3) ``[col, row, vmag]`` adds stray-light glints: point sources fixed on
+the sensor (they do not move with the attitude), rendered like stars and listed after the
+stars in the truth with ids ``-1 … -k``.
+
 ``truth`` is a :class:`StarTruth`: per star near the field (catalog order, brightest
 first) its exposure-averaged true centroid ``uv`` [col, row] (px), ``vmag``, catalog
 ``ids``, signal ``electrons``, and ``in_field`` (the averaged centroid lies on the sensor),
@@ -93,7 +97,8 @@ def _as_rates(q_start, omega, quats, exposure_s) -> np.ndarray:
 class Sky:
     """A catalog seen through a simulator preset; see the module docstring."""
 
-    def __init__(self, catalog: StarCatalog, preset: SimPreset | str = "xing2012", seed: int = 0):
+    def __init__(self, catalog: StarCatalog, preset: SimPreset | str = "xing2012", seed: int = 0,
+                 false_spots=None):
         self.catalog = catalog
         self.preset = load_preset(preset) if isinstance(preset, str) else preset
         self.camera = self.preset.camera
@@ -107,6 +112,12 @@ class Sky:
         f = self.camera.focal_length_px
         half_diag = math.hypot(self.camera.width_px, self.camera.height_px) / 2.0 + 20.0
         self._field_radius = math.atan(half_diag / f)
+        # stray-light glints: point sources fixed on the sensor, [col, row, V magnitude] each
+        spots = np.zeros((0, 3)) if false_spots is None else np.asarray(false_spots, dtype=np.float64).reshape(-1, 3)
+        if not np.isfinite(spots).all():
+            raise ConfigError("false_spots must be finite [col, row, vmag] triples")
+        self.false_spots = spots
+        self._spot_electrons = np.asarray(self.preset.star_electrons(spots[:, 2]), dtype=np.float64).reshape(-1)
 
     @property
     def fixed_pattern(self) -> tuple[np.ndarray, np.ndarray]:
@@ -148,10 +159,22 @@ class Sky:
         boxes = render.star_boxes(paths, self.preset.optics.psf_sigma_px, self.camera.width_px,
                                   self.camera.height_px)
         uv = _simpson_mean(grid_paths)
+        ids, vmag, electrons = self.catalog.ids[sel], self.catalog.vmag[sel], self.electrons[sel]
+        k = len(self.false_spots)
+        if k:
+            # glints do not move with the attitude: the same position at every sub-step
+            spot_paths = np.repeat(self.false_spots[:, None, :2], paths.shape[1], axis=1)
+            paths = np.ascontiguousarray(np.concatenate([paths, spot_paths]))
+            boxes = np.concatenate([boxes, render.star_boxes(np.ascontiguousarray(spot_paths),
+                                                             self.preset.optics.psf_sigma_px,
+                                                             self.camera.width_px, self.camera.height_px)])
+            uv = np.concatenate([uv, self.false_spots[:, :2]])
+            ids = np.concatenate([ids, -1 - np.arange(k, dtype=ids.dtype)])
+            vmag = np.concatenate([vmag, self.false_spots[:, 2]])
+            electrons = np.concatenate([electrons, self._spot_electrons])
         w, h = self.camera.width_px, self.camera.height_px
         in_field = (uv[:, 0] >= -0.5) & (uv[:, 0] < w - 0.5) & (uv[:, 1] >= -0.5) & (uv[:, 1] < h - 0.5)
-        truth = StarTruth(self.catalog.ids[sel], self.catalog.vmag[sel], uv, in_field, self.electrons[sel],
-                          q_start.copy(), q_mid, q_fin, t_exp)
+        truth = StarTruth(ids, vmag, uv, in_field, electrons, q_start.copy(), q_mid, q_fin, t_exp)
         return Exposure(paths, boxes, truth)
 
     def _near(self, bore: np.ndarray, reach: float) -> np.ndarray:

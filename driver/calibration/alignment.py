@@ -89,11 +89,8 @@ def run(args) -> int:
     if source == "simulate":
         t_g, rate, t_cam, q_cam, truth = simulate(args)
     else:
-        with np.load(args.input) as z:
-            missing = {"t", "rate", "t_cam", "q_cam"} - set(z.files)
-            if missing:
-                raise ConfigError(f"{args.input} lacks arrays {sorted(missing)}")
-            t_g, rate, t_cam, q_cam = z["t"], z["rate"], z["t_cam"], z["q_cam"]
+        z = report.read_npz(args.input, ("t", "rate", "t_cam", "q_cam"))
+        t_g, rate, t_cam, q_cam = z["t"], z["rate"], z["t_cam"], z["q_cam"]
     if args.gyro_cal:
         gs = calfile.load(args.gyro_cal).gyro_scale
         if gs is None:

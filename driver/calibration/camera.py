@@ -30,11 +30,12 @@ TRUE_OFFSETS = {"dcx_px": 3.2, "dcy_px": -2.1, "f_scale": 1.0008, "k1": 0.3, "k2
 
 
 def configure(parser) -> None:
+    from ..cli.argtypes import positive_int
     from .report import add_common_args
 
     add_common_args(parser, "identified-star table (.npz: field, uv, ref; or .csv: field,u,v,ra_deg,dec_deg)")
     parser.add_argument("--camera", default="xing2012", help="nominal camera preset (default xing2012)")
-    parser.add_argument("--fields", type=int, default=2000, help="--simulate: star fields (default 2000)")
+    parser.add_argument("--fields", type=positive_int, default=2000, help="--simulate: star fields (default 2000)")
     parser.add_argument("--mag-limit", type=float, default=7.0, help="--simulate: faintest V used (default 7.0)")
     parser.add_argument("--centroid-noise", type=float, default=0.02,
                         help="--simulate: centroid noise per axis, px (default 0.02)")
@@ -52,11 +53,10 @@ def load_table(path):
 
     path = Path(path)
     if path.suffix == ".npz":
-        with np.load(path) as z:
-            missing = {"field", "uv", "ref"} - set(z.files)
-            if missing:
-                raise ConfigError(f"{path} lacks arrays {sorted(missing)}")
-            return StarFields(z["field"], z["uv"], z["ref"])
+        from .report import read_npz
+
+        z = read_npz(path, ("field", "uv", "ref"))
+        return StarFields(z["field"], z["uv"], z["ref"])
     if path.suffix == ".csv":
         try:
             tab = np.genfromtxt(path, delimiter=",", names=True)
@@ -64,7 +64,14 @@ def load_table(path):
             raise ConfigError(f"{path}: not a readable CSV table: {exc}") from exc
         need = ("field", "u", "v", "ra_deg", "dec_deg")
         if tab.dtype.names is None or any(n not in tab.dtype.names for n in need):
-            raise ConfigError(f"{path}: CSV header must hold {','.join(need)}")
+            raise ConfigError(f"INPUT {path}: CSV header must hold {','.join(need)}")
+        tab = np.atleast_1d(tab)
+        if len(tab) == 0:
+            raise ConfigError(f"INPUT {path}: CSV table has no rows")
+        for name in need:
+            bad = np.flatnonzero(~np.isfinite(tab[name]))
+            if len(bad):
+                raise ConfigError(f"INPUT {path}: line {bad[0] + 2}, column '{name}' is not a number")
         ref = np.array([radec_to_vec(np.radians(a), np.radians(d)) for a, d in zip(tab["ra_deg"], tab["dec_deg"])])
         return StarFields(tab["field"].astype(np.int64), np.column_stack([tab["u"], tab["v"]]), ref)
     raise ConfigError(f"camera input must be .npz or .csv, got {path}")

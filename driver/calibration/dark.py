@@ -25,13 +25,14 @@ HELP = "dark frames at several exposures -> dark-current map, hot pixels, read n
 
 
 def configure(parser) -> None:
+    from ..cli.argtypes import positive_float_list, positive_int
     from .report import add_common_args
 
     add_common_args(parser, "folder of FITS dark frames (EXPTIME header) or .npz (frames, exposure)")
     parser.add_argument("--preset", default="xing2012", help="--simulate: simulator preset (default xing2012)")
-    parser.add_argument("--exposures", default="0.005,0.03,0.055,0.08",
+    parser.add_argument("--exposures", type=positive_float_list, default=[0.005, 0.03, 0.055, 0.08],
                         help="--simulate: exposure times, s, comma separated")
-    parser.add_argument("--frames", type=int, default=8, help="--simulate: frames per exposure (default 8)")
+    parser.add_argument("--frames", type=positive_int, default=8, help="--simulate: frames per exposure (default 8)")
     parser.add_argument("--k-sigma", type=float, default=8.0,
                         help="hot pixel: dark current above median + K robust sigma (default 8)")
     parser.add_argument("--hot-factor", type=float, default=5.0,
@@ -77,15 +78,11 @@ def simulate(args):
 
     from ..catalog import StarCatalog
     from ..cli.output import progress
-    from ..errors import ConfigError
     from ..mocks.sim_preset import load_preset
     from ..mocks.sky import Sky
     from .dark_frames import stack
 
-    try:
-        exposures = [float(x) for x in args.exposures.split(",")]
-    except ValueError as exc:
-        raise ConfigError(f"--exposures must be comma-separated seconds: {exc}") from exc
+    exposures = list(args.exposures)
     base = load_preset(args.preset)
     empty = StarCatalog("none", np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0), 2025.0)
     stacks = []
@@ -171,7 +168,7 @@ def _live(args, folder):
 
     if not args.port:
         raise ConfigError("--live needs --port (the camera head's serial port or URL)")
-    exposures = [float(x) for x in args.exposures.split(",")]
+    exposures = list(args.exposures)
     keep: dict = {}
     with SerialLink(args.port) as link, progress(args, "capturing dark frames", len(exposures) * args.frames) as step:
         stacks = capture_stacks(HeadClient(link, timeout=args.head_timeout), exposures, args.frames, step, keep)

@@ -152,16 +152,30 @@ def load_frames(path: Path) -> list[DarkStack]:
         files = sorted(path.glob("*.fits")) + sorted(path.glob("*.fit"))
         if not files:
             raise ConfigError(f"no FITS frames in {path}")
+        import warnings
+
         for f in files:
-            with fits.open(f) as hdul:
-                if "EXPTIME" not in hdul[0].header:
-                    raise ConfigError(f"{f} has no EXPTIME header")
-                groups.setdefault(float(hdul[0].header["EXPTIME"]), []).append(np.asarray(hdul[0].data))
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")     # a corrupt file is reported below, in one line
+                    with fits.open(f) as hdul:
+                        head, data = hdul[0].header, hdul[0].data
+                        if "EXPTIME" not in head:
+                            raise ConfigError(f"INPUT {path}: {f.name} has no EXPTIME header")
+                        if data is None or np.asarray(data).ndim != 2:
+                            raise ConfigError(f"INPUT {path}: {f.name} holds no 2-D image in its primary HDU")
+                        groups.setdefault(float(head["EXPTIME"]), []).append(np.array(data))
+            except ConfigError:
+                raise
+            except (OSError, ValueError, TypeError, IndexError) as exc:
+                raise ConfigError(f"INPUT {path}: {f.name} is not a readable FITS file ({exc})"[:300]) from exc
     elif path.suffix == ".npz":
-        with np.load(path) as z:
-            if "frames" not in z or "exposure" not in z:
-                raise ConfigError(f"{path} must hold 'frames' (M,H,W) and 'exposure' (M,)")
-            frames, exp = z["frames"], z["exposure"]
+        from .report import read_npz
+
+        z = read_npz(path, ("frames", "exposure"))
+        frames, exp = z["frames"], z["exposure"]
+        if frames.ndim != 3:
+            raise ConfigError(f"INPUT {path}: 'frames' must be (M, H, W), got shape {frames.shape}")
         if len(frames) != len(exp):
             raise ConfigError(f"{path}: {len(frames)} frames but {len(exp)} exposure times")
         for f, e in zip(frames, exp):

@@ -53,11 +53,15 @@ def load(path: Path) -> GyroRecord:
     path = Path(path)
     if path.suffix != ".npz":
         raise ConfigError(f"gyro log must be an .npz (t, rate[, temperature, run]); got {path}")
-    with np.load(path) as z:
-        if "t" not in z or "rate" not in z:
-            raise ConfigError(f"{path} must hold arrays 't' (s) and 'rate' (rad/s, N×3)")
-        return GyroRecord(z["t"], z["rate"], z["temperature"] if "temperature" in z else None,
-                          z["run"] if "run" in z else None)
+    from .report import read_npz
+
+    z = read_npz(path, ("t", "rate"))
+    if z["t"].ndim != 1 or z["rate"].shape != (len(z["t"]), 3) or len(z["t"]) < 3:
+        raise ConfigError(f"INPUT {path}: 't' must be (N,) s and 'rate' (N, 3) rad/s with N ≥ 3, got "
+                          f"{z['t'].shape} and {z['rate'].shape}")
+    if not (np.all(np.isfinite(z["t"])) and np.all(np.diff(z["t"]) > 0)):
+        raise ConfigError(f"INPUT {path}: 't' must be finite and increasing")
+    return GyroRecord(z["t"], z["rate"], z.get("temperature"), z.get("run"))
 
 
 def add_live_args(parser) -> None:

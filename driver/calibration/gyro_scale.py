@@ -111,11 +111,8 @@ def run(args) -> int:
             t, rate, truth = gyro_sim.measure_profile(profile, length, p, args.seed)
             run_id = run_ids(t - truth["delay_s"], len(table), args.run_seconds)
         else:
-            with np.load(args.input) as z:
-                missing = {"t", "rate", "run", "table_rate"} - set(z.files)
-                if missing:
-                    raise ConfigError(f"{args.input} lacks arrays {sorted(missing)}")
-                t, rate, run_id, table = z["t"], z["rate"], z["run"], z["table_rate"]
+            z = report.read_npz(args.input, ("t", "rate", "run", "table_rate"))
+            t, rate, run_id, table = z["t"], z["rate"], z["run"], z["table_rate"]
         fit = _from_rate_table(t, rate, run_id, table, args.trim)
     else:
         if source == "simulate":
@@ -127,11 +124,8 @@ def run(args) -> int:
             t_g = t - truth["delay_s"]  # the alignment calibration's time offset, applied
             t_cam, q_cam = sl.t_cam, sl.q_cam
         else:
-            with np.load(args.input) as z:
-                missing = {"t", "rate", "t_cam", "q_cam"} - set(z.files)
-                if missing:
-                    raise ConfigError(f"{args.input} lacks arrays {sorted(missing)}")
-                t_g, rate, t_cam, q_cam = z["t"], z["rate"], z["t_cam"], z["q_cam"]
+            z = report.read_npz(args.input, ("t", "rate", "t_cam", "q_cam"))
+            t_g, rate, t_cam, q_cam = z["t"], z["rate"], z["t_cam"], z["q_cam"]
             if args.alignment:
                 al = calfile.load(args.alignment).alignment
                 if al is None:

@@ -31,6 +31,7 @@ RAD2DEG = 180.0 / np.pi
 
 
 def configure(parser) -> None:
+    from ..cli.argtypes import positive_float
     from .gyro_log import add_live_args
     from .report import add_common_args
 
@@ -40,15 +41,16 @@ def configure(parser) -> None:
     parser.add_argument("--set", action="append", default=None, metavar="KEY=VALUE",
                         help="--simulate: override a gyro parameter (repeatable; default "
                              "bias_instability_dph=20 bias_tau_s=10, see the module docstring)")
-    parser.add_argument("--hours", type=float, default=3.0, help="--simulate: record length, h (default 3)")
+    parser.add_argument("--hours", type=positive_float, default=3.0, help="--simulate: record length, h (default 3)")
     parser.add_argument("--bias-model", choices=("auto", "flicker", "markov"), default="auto",
                         help="bias-instability term: flicker floor, Gauss-Markov, or the better fit")
-    parser.add_argument("--tau-min", type=float, default=0.1,
+    parser.add_argument("--tau-min", type=positive_float, default=0.1,
                         help="shortest cluster time used in the fit, s (default 0.1: above the 47 Hz filter)")
 
 
-def analyse(rec, tau_min: float = 0.1, bias_model: str = "auto"):
-    """Bias, temperature coefficient, Allan curves and noise terms of a static record."""
+def analyse(rec, tau_min: float = 0.1, bias_model: str = "auto", step=None):
+    """Bias, temperature coefficient, Allan curves and noise terms of a static record
+    (``step()`` is called after each axis)."""
     from .allan import allan_deviation, fit_noise_terms, slope_readings
 
     fs = rec.fs
@@ -69,6 +71,8 @@ def analyse(rec, tau_min: float = 0.1, bias_model: str = "auto"):
         curves.append(c)
         terms.append(fit_noise_terms(c, tau_min=tau_min, model=bias_model))
         slopes.append(slope_readings(c))
+        if step is not None:
+            step()
     return {"bias": bias, "temp_coeff": tc, "curves": curves, "terms": terms, "slopes": slopes, "fs": fs,
             "duration": float(rec.t[-1] - rec.t[0])}
 
@@ -105,19 +109,22 @@ def simulate(args):
 
 
 def run(args) -> int:
+    from ..cli.output import progress
     from . import calfile, report
     from .gyro_log import load, record_live
 
     source = report.check_source(args)
+    rec = load(args.input) if source == "file" else None
     folder = report.report_dir(args, "gyro-static")
     truth = None
-    if source == "simulate":
-        rec, truth = simulate(args)
-    elif source == "live":
-        rec = record_live(args, folder)
-    else:
-        rec = load(args.input)
-    a = analyse(rec, args.tau_min, args.bias_model)
+    # stages: the record (simulated or live), then the Allan deviation and fit of each axis
+    with progress(args, "gyro-static: record, Allan deviation per axis", 4) as step:
+        if source == "simulate":
+            rec, truth = simulate(args)
+        elif source == "live":
+            rec = record_live(args, folder)
+        step()
+        a = analyse(rec, args.tau_min, args.bias_model, step)
     table = report.ParamTable()
     t = truth or {}
     table.add("bias_dps", a["bias"] * RAD2DEG, "deg/s", None if "bias" not in t else np.asarray(t["bias"]) * RAD2DEG)

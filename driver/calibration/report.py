@@ -36,8 +36,39 @@ def check_source(args) -> str:
     if sum(chosen) != 1:
         raise ConfigError("give exactly one of: an input file, --live, or --simulate")
     if args.input is not None and not Path(args.input).exists():
-        raise ConfigError(f"input file {args.input} does not exist")
+        raise ConfigError(f"INPUT {args.input} does not exist")
     return "simulate" if args.simulate else "live" if args.live else "file"
+
+
+def read_npz(path, needed: set[str] | tuple[str, ...], what: str = "INPUT") -> dict:
+    """The arrays of an ``.npz`` input, every one of ``needed`` present and non-empty; a file
+    that is not an ``.npz`` archive, an empty archive or a missing/empty array is a
+    :class:`ConfigError` naming ``what`` (the argument) and the file."""
+    import pickle
+    import zipfile
+
+    path = Path(path)
+    if path.is_dir():
+        raise ConfigError(f"{what} {path} is a folder, not an .npz file")
+    try:
+        loaded = np.load(path, allow_pickle=False)
+        if not hasattr(loaded, "files"):
+            raise ConfigError(f"{what} {path} is a single .npy array, not an .npz archive of named arrays")
+        with loaded as z:
+            arrays = {k: z[k] for k in z.files}
+    except ConfigError:
+        raise
+    except (ValueError, OSError, EOFError, zipfile.BadZipFile, pickle.UnpicklingError) as exc:
+        raise ConfigError(f"{what} {path} is not a readable .npz archive ({type(exc).__name__}: {exc})"[:300]) from exc
+    if not arrays:
+        raise ConfigError(f"{what} {path} is an empty .npz archive (needs arrays {', '.join(sorted(needed))})")
+    missing = sorted(set(needed) - set(arrays))
+    if missing:
+        raise ConfigError(f"{what} {path} lacks arrays {missing} (has {sorted(arrays)})")
+    empty = sorted(k for k in needed if arrays[k].size == 0)
+    if empty:
+        raise ConfigError(f"{what} {path}: arrays {empty} are empty")
+    return arrays
 
 
 def report_dir(args, name: str) -> Path:
@@ -49,8 +80,23 @@ def report_dir(args, name: str) -> Path:
     else:
         stamp = _dt.datetime.now(_dt.UTC).strftime("%Y%m%dT%H%M%S")
         path = runs_dir() / "calibrate" / f"{name}-{stamp}"
+    new = [p for p in (path, *path.parents) if not p.exists()]
+    CREATED.extend(reversed(new))          # outermost first: removed deepest first
     path.mkdir(parents=True, exist_ok=True)
     return path
+
+
+CREATED: list[Path] = []     # report folders made by this process (removed again if a command fails empty)
+
+
+def remove_empty_reports() -> None:
+    """After a failed command: remove the report folders it created and left empty."""
+    while CREATED:
+        path = CREATED.pop()
+        try:
+            path.rmdir()             # only an empty folder: never loses anything
+        except OSError:
+            pass
 
 
 @dataclass

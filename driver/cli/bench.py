@@ -10,6 +10,7 @@ from __future__ import annotations
 import importlib
 import sys
 import time
+from contextlib import contextmanager
 
 from ..errors import ConfigError, NotAvailableError
 from ..paths import repo_root
@@ -55,19 +56,46 @@ def run(args) -> int:
     table = Table(title="gyrostar bench")
     for col in ("suite", "case", "µs", "baseline µs", "ratio", "note"):
         table.add_column(col)
-    for name in chosen:
-        t0 = time.perf_counter()
-        cases = _load(suites[name]).run(quick=args.quick)
-        result[name] = cases
-        for case, fig in cases.items():
-            table.add_row(name, case, _f(fig.get("us")), _f(fig.get("baseline_us")),
-                          _f(fig.get("ratio")), str(fig.get("note", "")))
-        result[name]["_suite_seconds"] = round(time.perf_counter() - t0, 2)
+    with suite_progress(args, len(chosen)) as next_suite:
+        for name in chosen:
+            next_suite(name)
+            t0 = time.perf_counter()
+            cases = _load(suites[name]).run(quick=args.quick)
+            result[name] = cases
+            for case, fig in cases.items():
+                table.add_row(name, case, _f(fig.get("us")), _f(fig.get("baseline_us")),
+                              _f(fig.get("ratio")), str(fig.get("note", "")))
+            result[name]["_suite_seconds"] = round(time.perf_counter() - t0, 2)
     from rich.console import Console
 
     Console(stderr=args.json).print(table)
     emit(args, result)
     return 0
+
+
+@contextmanager
+def suite_progress(args, n_suites: int):
+    """Progress across suites on stderr (suite k of n, its name, time elapsed); silent with -q
+    or off a terminal. Yields ``next_suite(name)``."""
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+
+    console = Console(stderr=True)
+    bar = Progress(SpinnerColumn(), TextColumn("[bold]bench[/] {task.description}"), BarColumn(),
+                   MofNCompleteColumn(), TimeElapsedColumn(), console=console, transient=True,
+                   disable=getattr(args, "verbose", 0) < 0 or not console.is_terminal)
+    with bar:
+        task = bar.add_task("", total=n_suites)
+        started = [False]
+
+        def next_suite(name: str) -> None:
+            if started[0]:
+                bar.advance(task)
+            started[0] = True
+            bar.update(task, description=name)
+
+        yield next_suite
+        bar.advance(task)
 
 
 def _f(value) -> str:

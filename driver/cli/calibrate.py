@@ -15,4 +15,12 @@ def configure(parser) -> None:
     group.add_targets(parser, TARGETS, dest="target")
 
 
-run = group.run_target
+def run(args) -> int:
+    """Run the target; a failure leaves no empty report folder behind."""
+    try:
+        return group.run_target(args)
+    except BaseException:
+        from ..calibration.report import remove_empty_reports
+
+        remove_empty_reports()
+        raise

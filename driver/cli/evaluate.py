@@ -7,6 +7,7 @@ TARGETS = {
     "starcount": "gyrostar.mocks.starcount",
     "centroid": "gyrostar.core.eval_centroid",
     "starid": "gyrostar.starid.eval_starid",
+    "loop": "gyrostar.hil.eval_loop",
 }
 
 

@@ -11,6 +11,8 @@ Sub-commands (each has ``--help``):
     sim        the physical simulator (frame rendering)
 
 Exit codes: see :data:`gyrostar.errors.EXIT_CODES` (also printed by ``gyrostar --help``).
+Every failure is one line on stderr (``gyrostar COMMAND: error: ...``) and, with
+``--json``, one object ``{"error": ..., "exit_code": N}`` on stdout; no traceback.
 """
 
 from __future__ import annotations
@@ -22,7 +24,8 @@ import sys
 
 from .. import __version__
 from ..errors import EXIT_CODES, GyrostarError
-from . import group
+from . import group, interrupt
+from .output import emit_error
 
 log = logging.getLogger("gyrostar")
 
@@ -37,10 +40,27 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "sim": ("physical simulator: render frames", "gyrostar.cli.sim"),
 }
 
+# OS errors on paths the user named are usage errors; any other OS error is a device/link one
+_PATH_ERRORS = (FileNotFoundError, FileExistsError, IsADirectoryError, NotADirectoryError, PermissionError)
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (exit 2) and a JSON error object when --json was given."""
+
+    def error(self, message: str):
+        text = f"{self.prog}: error: {message} (see {self.prog} --help)"
+        sys.stderr.write(text + "\n")
+        emit_error(_argv_has_json(), text, 2)
+        sys.exit(2)
+
+
+def _argv_has_json(argv: list[str] | None = None) -> bool:
+    return "--json" in (sys.argv[1:] if argv is None else argv)
+
 
 def build_parser() -> argparse.ArgumentParser:
     codes = "\n".join(f"  {code:>3}  {text}" for code, text in EXIT_CODES.items())
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="gyrostar",
         description="gyrostar — gyro-coupled star tracker software.",
         epilog=f"exit codes:\n{codes}",
@@ -51,7 +71,7 @@ def build_parser() -> argparse.ArgumentParser:
     common.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv debug)")
     common.add_argument("-q", "--quiet", action="store_const", const=-1, dest="verbose",
                         help="errors only, no progress bars")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=Parser)
     for name, (text, module_path) in COMMANDS.items():
         p = sub.add_parser(name, help=text, description=text, parents=[common],
                            epilog=f"exit codes:\n{codes}",
@@ -63,19 +83,46 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    from .. import logs
+    with interrupt.watch():
+        try:
+            parser = build_parser()
+            args = parser.parse_args(argv)
+        except KeyboardInterrupt:
+            sys.stderr.write("gyrostar: interrupted\n")
+            emit_error(_argv_has_json(argv), "interrupted", 130)
+            return 130
+        from .. import logs
 
-    logs.setup(args.verbose)
-    try:
-        return int(args._run(args) or 0)
-    except GyrostarError as exc:
-        log.error("%s", exc)
-        return exc.exit_code
-    except KeyboardInterrupt:
-        log.error("interrupted")
-        return 130
+        logs.setup(args.verbose)
+        as_json = bool(getattr(args, "json", False))
+        try:
+            return int(args._run(args) or 0)
+        except GyrostarError as exc:
+            return _fail(as_json, str(exc), exc.exit_code)
+        except KeyboardInterrupt:
+            return _fail(as_json, "interrupted", 130)
+        except Exception as exc:  # noqa: BLE001 - every failure is one line, never a traceback
+            if interrupt.seen():     # a Ctrl-C surfacing from native code (SystemError, EOFError...)
+                return _fail(as_json, "interrupted", 130)
+            if isinstance(exc, _PATH_ERRORS):
+                return _fail(as_json, _os_text(exc), 2)
+            if isinstance(exc, OSError):
+                return _fail(as_json, _os_text(exc), 3)
+            log.debug("unexpected error", exc_info=True)
+            return _fail(as_json, f"internal error: {type(exc).__name__}: {exc} (run with -vv for the traceback)",
+                         1)
+
+
+def _os_text(exc: OSError) -> str:
+    if exc.strerror and exc.filename:
+        return f"{exc.filename}: {exc.strerror}"
+    return exc.strerror or str(exc)
+
+
+def _fail(as_json: bool, message: str, code: int) -> int:
+    log.error("%s", message)
+    emit_error(as_json, message, code)
+    return code
 
 
 def add_json(parser: argparse.ArgumentParser) -> None:

@@ -18,7 +18,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 
 def human_console(args) -> Console:
     """Console for human-readable text: stderr in --json mode, stdout otherwise."""
-    return Console(stderr=bool(getattr(args, "json", False)), highlight=False)
+    return Console(stderr=bool(getattr(args, "json", False)), highlight=False, soft_wrap=True)
 
 
 def _clean(obj: Any) -> Any:
@@ -45,11 +45,26 @@ def emit(args, result: dict, human: str | None = None) -> None:
 
 @contextmanager
 def progress(args, description: str, total: int | None):
-    """A rich progress bar on stderr (silent with -q); yields ``advance(n=1)``."""
+    """A rich progress bar on stderr (silent with -q, and when stderr is not a terminal);
+    yields ``advance(n=1, total=None)`` (``total`` re-sets the bar's length)."""
     quiet = getattr(args, "verbose", 0) < 0
+    console = Console(stderr=True)
     bar = Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
-                   TimeRemainingColumn(), console=Console(stderr=True), transient=True,
-                   disable=quiet)
+                   TimeRemainingColumn(), console=console, transient=True,
+                   disable=quiet or not console.is_terminal)
     with bar:
         task = bar.add_task(description, total=total)
-        yield lambda n=1: bar.advance(task, n)
+
+        def advance(n=1, total=None):
+            if total is not None:
+                bar.update(task, total=total)
+            bar.advance(task, n)
+
+        yield advance
+
+
+def emit_error(as_json: bool, message: str, exit_code: int) -> None:
+    """With --json: the error object ``{"error": message, "exit_code": N}`` on stdout."""
+    if as_json:
+        sys.stdout.write(json.dumps({"error": message, "exit_code": int(exit_code)}) + "\n")
+        sys.stdout.flush()

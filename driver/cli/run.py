@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import importlib
 
+from .argtypes import positive_float
 from .main import add_json
 
 RUNNER = "gyrostar.hil.runner"
@@ -14,7 +15,7 @@ RUNNER = "gyrostar.hil.runner"
 
 def configure(parser) -> None:
     parser.add_argument("--config", metavar="TOML", help="flatsat config (default: built-in simulated flatsat)")
-    parser.add_argument("--duration", type=float, default=None, metavar="S",
+    parser.add_argument("--duration", type=positive_float, default=None, metavar="S",
                         help="run length in seconds of flatsat time (default: the scenario's, ~30 s)")
     parser.add_argument("--scenario", default=None, help="built-in scenario name (default: demo)")
     parser.add_argument("--seed", type=int, default=1, help="simulator seed")

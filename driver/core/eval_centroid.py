@@ -58,6 +58,11 @@ def _fmt(v) -> str:
     return "lost" if v != v else f"{v:.3f}"
 
 
+def _after(seconds) -> str:
+    """'after N s', or 'never' for a convergence that did not happen (nan/None)."""
+    return "never" if seconds is None or seconds != seconds else f"after {seconds:g} s"
+
+
 def _human(r: dict) -> str:
     ax = r["rms_px_axes"]
     lines = [f"paper 000 {r['scenario']}: {r['frames']} frames, peak rate {r['max_rate_dps_profile']:.2f} °/s"]
@@ -69,7 +74,7 @@ def _human(r: dict) -> str:
     lines.append(f"  C EKF 400 Hz output just before each image RMS x {_fmt(g[0])} y {_fmt(g[1])} px")
     b = r["bias_error_dps"]
     lines.append(f"  drift error (final) [{b[0]:+.4f}, {b[1]:+.4f}, {b[2]:+.4f}] °/s "
-                 f"(true {r['bias_true_dps']}); x,y within 10 % after {r['bias_xy_within_10pct_after_s']} s")
+                 f"(true {r['bias_true_dps']}); x,y within 10 % " + _after(r["bias_xy_within_10pct_after_s"]))
     lines.append(f"  CRLB {r['crlb_px']:.3f} px; EKF / CRLB = {r['ekf_to_crlb']:.2f}")
     return "\n".join(lines)
 

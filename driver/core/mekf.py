@@ -70,6 +70,60 @@ def mekf_predict(q, b, P, omega_m, dt, sigma_v, sigma_u):
 
 
 @njit(cache=True)
+def mekf_predict_blocks(q, b, P, omega_m, dt, sigma_v, sigma_u, E, T):
+    """:func:`mekf_predict` by blocks, for the 400 Hz path: Φ = [[E, −Δt I], [0, I]] is
+    applied to P = [[A, B], [Bᵀ, C]] 3×3 block by block (A' = (E A − Δt Bᵀ) Eᵀ − Δt (E B − Δt C),
+    B' = E B − Δt C, C' = C), no 6×6 products and no temporaries; ``E``, ``T`` (3, 3) scratch."""
+    w0 = omega_m[0] - b[0]
+    w1 = omega_m[1] - b[1]
+    w2 = omega_m[2] - b[2]
+    w = np.empty(3)
+    w[0] = w0 * dt
+    w[1] = w1 * dt
+    w[2] = w2 * dt
+    q[:] = quat_normalize(quat_mult(rotvec_to_quat(w), q))
+    th = np.sqrt(w0 * w0 + w1 * w1 + w2 * w2) * dt
+    # k = [ω×]Δt/θ; E = I − sin θ k + (1 − cos θ) k²  (small θ: I − [ω×]Δt)
+    k01, k02, k12 = -w2 * dt, w1 * dt, -w0 * dt      # [ω×]Δt off-diagonals (k10 = −k01 ...)
+    s1, s2 = 1.0, 0.0
+    if th >= 1e-8:
+        s1, s2 = np.sin(th), 1.0 - np.cos(th)
+        k01 /= th
+        k02 /= th
+        k12 /= th
+    K = ((0.0, k01, k02), (-k01, 0.0, k12), (-k02, -k12, 0.0))
+    for i in range(3):
+        for j in range(3):
+            kk = K[i][0] * K[0][j] + K[i][1] * K[1][j] + K[i][2] * K[2][j]
+            E[i, j] = (1.0 if i == j else 0.0) - s1 * K[i][j] + s2 * kk
+    # T = E B − Δt C  (new cross block), then A' = (E A − Δt Bᵀ) Eᵀ − Δt T
+    for i in range(3):
+        for j in range(3):
+            T[i, j] = E[i, 0] * P[0, 3 + j] + E[i, 1] * P[1, 3 + j] + E[i, 2] * P[2, 3 + j] - dt * P[3 + i, 3 + j]
+    M = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            M[i, j] = E[i, 0] * P[0, j] + E[i, 1] * P[1, j] + E[i, 2] * P[2, j] - dt * P[3 + i, j]
+    qv = sigma_v * sigma_v * dt + sigma_u * sigma_u * dt ** 3 / 3.0
+    qc = -sigma_u * sigma_u * dt * dt / 2.0
+    qb = sigma_u * sigma_u * dt
+    for i in range(3):
+        for j in range(i, 3):
+            a = M[i, 0] * E[j, 0] + M[i, 1] * E[j, 1] + M[i, 2] * E[j, 2] - dt * T[i, j]
+            a2 = M[j, 0] * E[i, 0] + M[j, 1] * E[i, 1] + M[j, 2] * E[i, 2] - dt * T[j, i]
+            v = 0.5 * (a + a2)
+            if i == j:
+                v += qv
+            P[i, j] = v
+            P[j, i] = v
+    for i in range(3):
+        for j in range(3):
+            P[i, 3 + j] = T[i, j] + (qc if i == j else 0.0)
+            P[3 + j, i] = P[i, 3 + j]
+        P[3 + i, 3 + i] += qb
+
+
+@njit(cache=True)
 def mekf_update(q, b, P, body_vecs, ref_vecs, sigmas, gate, accepted):
     """Update with identified stars: measured body unit vectors (n, 3), catalog ICRS
     vectors (n, 3), per-star σ (rad). Stars failing the χ² gate (2 dof on the tangent-plane

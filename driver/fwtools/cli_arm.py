@@ -20,6 +20,7 @@ def run(args) -> int:
     from ..cli.output import emit
     from ..errors import ConfigError
     from . import build, qemu
+    from .interrupt import sigterm_as_interrupt
 
     sizes = build.arm_sizes(build.build("arm"))
     ok = sizes["flash_bytes"] <= sizes["flash_limit"] and sizes["static_ram_bytes"] <= sizes["ram_limit"]
@@ -31,11 +32,8 @@ def run(args) -> int:
         return 0 if ok else 1
     if not args.sensor:
         raise ConfigError("--run needs --sensor FILE (a GSPX pixel file, see firmware/README.md)")
-    with qemu.QemuHead(args.sensor, elf=build.arm_elf_path(), port=args.port or None) as q:
+    with sigterm_as_interrupt(), qemu.QemuHead(args.sensor, elf=build.arm_elf_path(), port=args.port or None) as q:
         print(f"gyrostar-head (mps2-an385 under QEMU): {q.url}", flush=True)
-        try:
-            while q.proc.poll() is None:
-                time.sleep(0.5)
-        except KeyboardInterrupt:
-            return 130
+        while q.proc.poll() is None:   # Ctrl-C or SIGTERM: QEMU is stopped on the way out, exit 130
+            time.sleep(0.5)
     return 1

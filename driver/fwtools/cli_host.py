@@ -14,16 +14,22 @@ def configure(parser) -> None:
 
 
 def run(args) -> int:
+    """Run the host program until it ends, Ctrl-C or SIGTERM; on either signal it is stopped
+    (SIGTERM, then SIGKILL after 2 s) before this returns, and ``--exit-with-parent`` makes it
+    follow a launcher that was killed outright (SIGKILL)."""
     import subprocess
 
     from . import build
+    from .interrupt import sigterm_as_interrupt, stop_child
 
     build.build("host")
     cmd = [str(build.host_binary_path()), "--sensor", args.sensor, "--width", str(args.width),
-           "--height", str(args.height), "--planes", str(args.planes)]
+           "--height", str(args.height), "--planes", str(args.planes), "--exit-with-parent"]
     if args.link:
         cmd += ["--link", args.link]
-    try:
-        return subprocess.call(cmd)
-    except KeyboardInterrupt:
-        return 130
+    with sigterm_as_interrupt():
+        proc = subprocess.Popen(cmd)
+        try:
+            return proc.wait()
+        finally:   # Ctrl-C or SIGTERM (KeyboardInterrupt): the CLI reports it, exit 130
+            stop_child(proc)

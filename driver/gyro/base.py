@@ -19,8 +19,8 @@ in the FIFO is the newest the part sampled), the jump is counted and flagged
 
 Configuration is one register table (:mod:`.regtable`, after PX4's BMI088 driver):
 ``configure()`` applies and verifies it, and ``read()`` re-checks one entry every
-``check_every`` reads (and the whole table when the FIFO stays empty for longer than a
-watermark's worth of frames). A part that reset silently is counted
+``check_every`` reads, at most one per 25 ms (and the whole table when the FIFO stays
+empty for longer than a watermark's worth of frames). A part that reset silently is counted
 (``register_faults``, and ``GyroSamples.register_faults`` of the read that found it),
 reconfigured and its FIFO restarted; the frames it did not keep are a flagged gap.
 """
@@ -79,7 +79,7 @@ class FifoGyro(GyroDevice):
 
     fifo_capacity: int = 32
     name = "gyro"
-    check_every = 4   # FIFO reads between two in-flight checks (one table entry each)
+    check_every = 4   # FIFO reads between two in-flight checks (one table entry each), and ≥ 25 ms
 
     def __init__(self, regs, clock=MONOTONIC, mounting=None):
         self.regs = regs
@@ -147,11 +147,14 @@ class FifoGyro(GyroDevice):
         self._prev[:] = 0
         self._restart_fifo(0)
 
-    def _restart_fifo(self, anchor_k: int) -> None:
-        """(Re)start the FIFO; the first frame sampled after now gets index ``anchor_k``.
-        The time base starts over from the assumption that it comes half a period later."""
+    def _restart_fifo(self, anchor_k: int | None) -> None:
+        """(Re)start the FIFO; the first frame sampled after now gets index ``anchor_k`` (None:
+        the index the running time base gives it). The time base starts over from the
+        assumption that it comes half a period later."""
         tb = self.timebase
         self._t_restart = self.clock.now()
+        if anchor_k is None:
+            anchor_k = max(tb.latest_index_at(self._t_restart) + 1, self._k_next)
         self._fifo_restart()
         tb.reset()
         tb.assume(anchor_k, self._t_restart + 0.5 * tb.nominal)
@@ -171,10 +174,8 @@ class FifoGyro(GyroDevice):
     def _reconfigure(self) -> None:
         """Apply the register table again and restart the FIFO; the frames the part did not
         keep meanwhile become a flagged gap. Retried on the next read if the bus fails."""
-        t = self.clock.now()
-        anchor = max(self.timebase.latest_index_at(t) + 1, self._k_next)
         self._configure_table(self.register_table)
-        self._restart_fifo(anchor)
+        self._restart_fifo(None)
 
     def _check_config(self, out: GyroSamples, t_poll: float, empty: bool) -> None:
         """The in-flight register check, after the FIFO read (as PX4 does): one entry every
@@ -188,7 +189,7 @@ class FifoGyro(GyroDevice):
             if empty and not self._silence_checked and t_poll - self._t_data >= (self.watermark + 2) / self.odr_hz:
                 self._silence_checked = True
                 bad = next(iter(verify(self.regs, self.register_table)), None)
-            elif self._check.due():
+            elif self._check.due(t_poll):
                 bad = self._check.check_next(self.regs)
             else:
                 return

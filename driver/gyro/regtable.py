@@ -10,6 +10,7 @@ reserved, bits that read back differently) and are never looked at.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 
@@ -60,20 +61,29 @@ def verify(regs, table) -> list[str]:
 
 
 class RegisterCheck:
-    """Round-robin in-flight check: :meth:`due` every ``every`` calls, :meth:`check_next`
-    reads one entry and returns the mismatch text or None."""
+    """Round-robin in-flight check. :meth:`due` turns true every ``every`` calls, but not
+    sooner than ``min_interval_s`` after the last check (a loop polling at the full ODR pays
+    one register read per ~10 frames, not per 4); :meth:`check_next` reads one entry and
+    returns the mismatch text or None."""
 
-    def __init__(self, table, every: int = 4):
+    def __init__(self, table, every: int = 4, min_interval_s: float = 0.025):
         if every < 1:
             raise ValueError(f"register check interval must be >= 1 read, got {every}")
         self.table = tuple(table)
         self.every = every
+        self.min_interval_s = min_interval_s
         self._calls = 0
+        self._t_last = -math.inf
         self._pos = 0
 
-    def due(self) -> bool:
+    def due(self, now: float) -> bool:
+        """``now``: host time (s) of the read."""
         self._calls += 1
-        return bool(self.table) and self._calls % self.every == 0
+        if not self.table or self._calls < self.every or now - self._t_last < self.min_interval_s:
+            return False
+        self._calls = 0
+        self._t_last = now
+        return True
 
     def check_next(self, regs) -> str | None:
         entry = self.table[self._pos]

@@ -13,7 +13,9 @@ the replies matched by sequence number, so the link is never idle between chunks
 Window pixels default to U16 on the wire: 1.6× the bytes of PACKED10, but decoding a
 10-window reply is ~10× cheaper (``bench/bench_driver.py``), and the link has room.
 
-Times: captures report MCU microseconds; the client keeps a :class:`~.timesync.ClockSync`
+Times: every reading of the host clock goes through the injected ``clock`` (``now()`` s;
+default the monotonic clock), so a simulated or recorded clock drives timeouts and sync.
+Captures report MCU microseconds; the client keeps a :class:`~.timesync.ClockSync`
 fed by TIME_SYNC exchanges (``sync()``, and automatically every ``sync_every_s``), and
 gives each capture's exposure mid-time in host monotonic seconds.
 
@@ -32,10 +34,10 @@ from __future__ import annotations
 
 import dataclasses
 import secrets
-import time
 
 import numpy as np
 
+from ..clock import MONOTONIC
 from ..errors import DeviceError
 from ..protocol import MsgType, PixelFormat, Plane
 from ..protocol.defs import LIMITS, REPLY_FLAG
@@ -69,14 +71,18 @@ class Capture:
 
 class HeadClient:
     def __init__(self, link, timeout: float = 0.5, retries: int = 2, sync: ClockSync | None = None,
-                 sync_every_s: float = 1.0, depth: int = 4, first_seq: int | None = None):
+                 sync_every_s: float = 1.0, depth: int = 4, first_seq: int | None = None, clock=None):
         self.link = link
+        self.clock = MONOTONIC if clock is None else clock
         self.timeout = timeout
         self.retries = retries
         self.sync_state = sync or ClockSync()
         self.sync_every_s = sync_every_s
         self.depth = depth
-        # not 1 after every start: replies to an earlier client must not match ours
+        # not 1 after every start: replies to an earlier client must not match ours. A replay
+        # link knows the sequence the recorded client drew (recorded_first_seq)
+        if first_seq is None:
+            first_seq = getattr(link, "recorded_first_seq", lambda: None)()
         self._seq = (secrets.randbits(16) if first_seq is None else int(first_seq) - 1) & 0xFFFF
         self._last_sync = -1e300
         self.info: dict | None = None
@@ -134,7 +140,7 @@ class HeadClient:
     def _await(self, pending: dict, deadline: float):
         """Next reply matching one of ``pending`` {seq: type} before ``deadline``: (frame, t_rx) or None."""
         while True:
-            left = deadline - time.monotonic()
+            left = deadline - self.clock.now()
             if left <= 0:
                 return None
             got = self.link.recv(left)
@@ -166,7 +172,7 @@ class HeadClient:
             if attempt:
                 self.stats["retries"] += 1
             seq, t_send = self._send(msg_type, payload)
-            got = self._await({seq: int(msg_type)}, time.monotonic() + timeout)
+            got = self._await({seq: int(msg_type)}, self.clock.now() + timeout)
             if got is not None:
                 frame, t_rx = got
                 return decode_reply(frame, expect=msg_type), t_send, t_rx
@@ -212,7 +218,7 @@ class HeadClient:
             seq, _ = self._send(MsgType.START_STREAM, payload)
             self._stream_seq = seq            # its pushed frames may come before the reply
             self._assembler = FrameAssembler()
-            got = self._await({seq: int(MsgType.START_STREAM)}, time.monotonic() + self.timeout)
+            got = self._await({seq: int(MsgType.START_STREAM)}, self.clock.now() + self.timeout)
             if got is not None:
                 f = decode_reply(got[0], expect=MsgType.START_STREAM)
                 self._exposure_s = f["exposure_us"] * 1e-6
@@ -241,7 +247,7 @@ class HeadClient:
         fr = self._frames.get()
         if fr is not None:
             return fr
-        self._await({}, time.monotonic() + timeout)   # takes in pushed parts and async replies
+        self._await({}, self.clock.now() + timeout)   # takes in pushed parts and async replies
         return self._frames.get()
 
     @property
@@ -257,9 +263,9 @@ class HeadClient:
         return self.sync_state
 
     def _sync_once(self) -> None:
-        host_us = int(time.monotonic() * 1e6) & 0xFFFFFFFFFFFFFFFF
+        host_us = int(self.clock.now() * 1e6) & 0xFFFFFFFFFFFFFFFF
         seq, t1 = self._send(MsgType.TIME_SYNC, encode_request(MsgType.TIME_SYNC, host_us=host_us))
-        deadline = time.monotonic() + self.timeout
+        deadline = self.clock.now() + self.timeout
         while True:
             got = self._await({seq: int(MsgType.TIME_SYNC)}, deadline)
             if got is None:
@@ -272,10 +278,10 @@ class HeadClient:
             self.stats["sync_echo_mismatch"] += 1
             self.stats["stale"] += 1
         self.sync_state.add(t1, f["mcu_rx_us"], f["mcu_tx_us"], t4)
-        self._last_sync = time.monotonic()
+        self._last_sync = self.clock.now()
 
     def maybe_sync(self, n: int = 2) -> None:
-        if time.monotonic() - self._last_sync >= self.sync_every_s:
+        if self.clock.now() - self._last_sync >= self.sync_every_s:
             self.sync(n)
 
     def capture(self, fetch: bool = True, pixel_format: int = PixelFormat.U16, dark: bool = False) -> Capture:
@@ -302,7 +308,7 @@ class HeadClient:
             seqs[self._send(msg, payload)[0]] = int(msg)
         pending = dict(seqs)
         replies = {}
-        deadline = time.monotonic() + self.timeout + self._exposure_s
+        deadline = self.clock.now() + self.timeout + self._exposure_s
         while pending:
             got = self._await(pending, deadline)
             if got is None:
@@ -381,7 +387,7 @@ class HeadClient:
                                          plane=plane)
                 seq, _ = self._send(MsgType.FULL_FRAME, payload)
                 inflight[seq] = off
-            got = self._await(dict.fromkeys(inflight, int(MsgType.FULL_FRAME)), time.monotonic() + self.timeout)
+            got = self._await(dict.fromkeys(inflight, int(MsgType.FULL_FRAME)), self.clock.now() + self.timeout)
             if got is None:  # every chunk still in flight is re-requested (bounded)
                 for off in inflight.values():
                     attempts[off] += 1

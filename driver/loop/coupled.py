@@ -1,55 +1,55 @@
 """The coupled 400/100 Hz loop: gyro FIFO → predict; windows → head → centroid → update.
 
-One :meth:`CoupledLoop.step` (called every gyro period by a scheduler, or as fast as
-possible on a simulated clock):
+The loop composes one stage per job:
 
-1. read the gyro FIFO (:class:`gyrostar.gyro.GyroDevice`); for every new sample predict
-   the attitude MEKF (quaternion + gyro drift, :mod:`gyrostar.core.mekf`) and every tracked
-   star's centroid (its catalog vector through the predicted attitude and the camera),
-   and emit one output record (:mod:`gyrostar.loop.record`) to the sinks — before any image
-   work, so the sample-to-output latency is the predict cost only;
-2. image cycle at ``frame_hz`` (through :class:`gyrostar.hil.headport.HeadPort`, a worker
-   thread, so the gyro path never waits for an exposure): when the windows' pixels of the
-   last exposure arrive, centroid each window (CoG to find the spot, then the smeared-PSF
-   fit of :mod:`gyrostar.core.centroid` along the predicted trajectory), carry the
-   measured direction from exposure mid-time to now with the gyro-propagated attitude,
-   update the MEKF with all stars at once (χ² gated per star), drop stars that keep failing
-   the gate (wrong or lost identification); then predict each star's trajectory over the
-   next exposure from the latest bias-corrected rate (:mod:`gyrostar.core.motion`, the
-   spot motion of paper 000), build its window (union of k×k squares,
-   :mod:`gyrostar.core.windows`), command the windows and the next exposure.
+* :mod:`~gyrostar.loop.attitude_filter` — MEKF state and attitude history; every FIFO batch
+  in one numba call (:func:`gyrostar.loop.kernels.predict_batch`) that predicts each sample
+  and writes each output record;
+* :mod:`~gyrostar.loop.outputs` — latency stamp and the sinks;
+* :mod:`~gyrostar.loop.tracks` — tracked stars and the next exposure's windows;
+* :mod:`~gyrostar.loop.image` — centroiding on a measuring thread, lost-in-space;
+* :mod:`~gyrostar.loop.modes` — the pure mode machine (ACQUIRE → TRACK ⇄ COAST → ACQUIRE).
 
-Modes: ACQUIRE (full frame → spot detection → Pyramid, :mod:`gyrostar.starid.pyramid`) →
-TRACK (≥ ``min_stars`` spots updated by the last image) → COAST (fewer: the spots and the
-attitude run on the bias-corrected gyro alone) → TRACK when stars come back, or ACQUIRE
-after ``coast_timeout_s``. Stars entering the field are predicted from the catalog with
-the current attitude (the gyro-extended field) and tracked from their first window.
+One :meth:`CoupledLoop.step` (every gyro period, from a real-time scheduler or the
+lock-step runner of ``gyrostar run --fast``):
+
+1. apply the readout centroided on the measuring thread since the last step (at its
+   mid-exposure time, carried to now along the gyro history): the first gyro step after
+   the pixels arrived updates the filter before its samples are predicted;
+2. read the gyro FIFO and push the batch through the filter's kernel, emit the outputs;
+3. image cycle through the head port (a worker thread, so the gyro path never waits for
+   an exposure): command the next exposure's windows at once when a readout arrives and
+   hand the readout to the measuring thread; in ACQUIRE take full frames whose
+   identification runs on the head worker; a lost link (:class:`gyrostar.errors.LinkLostError`,
+   or ``head_timeouts_lost`` timeouts in a row) coasts and reconnects.
 
 Everything the loop depends on is passed in (gyro device, head port, clock, camera, star
-index, identifier), so the same code runs on real devices, on mocks, and on the replay
-taps of :mod:`gyrostar.recording`.
+index, identifier), so the same code runs on real devices, on mocks, in lock-step, and on
+the replay taps of :mod:`gyrostar.recording`.
 """
 
 from __future__ import annotations
 
 import logging
 import math
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..core.mekf import mekf_predict
-from ..errors import DeviceError, GyrostarError
-from ..gyro.convert import FLAG_GAP, FLAG_SATURATED, FLAG_STUCK_AXIS
+from ..errors import DeviceError, GyrostarError, LinkLostError
 from ..head.client import HeadTimeoutError
+from . import modes
 from . import record as R
-from .kernels import project_refs
+from .attitude_filter import GATE, AttitudeFilter
+from .floor import FloorInputs
+from .image import ImagePipeline
+from .outputs import OutputStage
+from .tracks import MODEL, StarTracks
 
 log = logging.getLogger(__name__)
 
-HIST = 2048              # gyro samples of history (5 s at 400 Hz) for delayed measurements
-GATE = 13.815510557964274  # χ² 2 dof, P = 0.001
-MODEL = 1                # core.motion.MODEL_PINHOLE
+ARCSEC = math.pi / 180.0 / 3600.0
 
 
 @dataclass
@@ -65,7 +65,9 @@ class LoopParams:
     acquire_every_s: float = 0.5
     mag_limit: float = 6.5
     e_per_dn: float = 5.0             # detector gain, e⁻ per DN (shot noise in centroid variances)
-    gyro_noise_density: float = 2.44e-4  # gyro rate noise density, rad/s/√Hz (BMI088: 0.014 °/s/√Hz)
+    gyro_arw: float = 1.7277e-4       # gyro angle random walk N, rad/√s (BMI088: 0.014 °/s/√Hz one-sided / √2)
+    gyro_delay_s: float = 0.0         # group delay of the gyro's low-pass filter, s (compensated)
+    gyro_lowpass_hz: float = 47.0     # the gyro's 2nd-order low-pass cut-off, Hz (BMI088 at 400 Hz ODR: 47)
     sigma_bias_rw: float = 1e-6       # drift random walk, rad/s/√s
     psf_sigma_px: float = 0.85        # PSF σ of the optics (px), for the smeared-spot fit
     bias_prior: float = 0.02          # initial drift uncertainty, rad/s (≈ 1.1 °/s: BMI088 offset ±1 °/s)
@@ -76,6 +78,15 @@ class LoopParams:
     max_window_pixels: int = 2048
     max_spans: int = 512
     pyramid_sigma_px: float = 0.5
+    confirm_images: int = 20          # ACQUIRE: images that may fail to confirm an identification
+    wrong_id_rejects: int = 5         # gate rejections in a row that drop a star (wrong or lost id)
+    neighbour_sep_px: float = 12.0    # a catalog star closer than this (px, per axis) to a tracked one is skipped
+    reconnect_every_s: float = 0.25   # s between reconnection attempts while the head is away
+    head_timeouts_lost: int = 3       # head jobs in a row without an answer that mean the link is lost
+
+    def mode_params(self) -> modes.ModeParams:
+        return modes.ModeParams(min_stars=self.min_stars, confirm_images=self.confirm_images,
+                                coast_timeout_s=self.coast_timeout_s)
 
 
 @dataclass
@@ -111,6 +122,7 @@ class CoupledLoop:
 
         self.irq = irq           # FIFO-watermark interrupt line: irq.now() = host time of the last edge
         self.p = params
+        self.mp = params.mode_params()
         self.clock = clock
         self.lat_clock = clock if lat_clock is None else lat_clock
         self.t_step_prev: float | None = None
@@ -121,50 +133,33 @@ class CoupledLoop:
         self.cam = camera.as_array()
         self.f_px = camera.focal_length_px
         self.index = star_index
-        self.identifier = identifier
-        self.sinks = list(sinks)
         self.c = Counters()
         self.samples = GyroSamples(256)
-        S = R.MAX_STARS
-        self.active = np.zeros(S, np.bool_)
-        self.ref = np.zeros((S, 3))
-        self.star_nav = -np.ones(S, np.int64)      # navigation-star index of each slot
-        self.star_id = -np.ones(S, np.int32)       # catalog id
-        self.misses = np.zeros(S, np.int64)
-        self.rejects = np.zeros(S, np.int64)
-        self.seen = np.zeros(S, np.bool_)          # accepted by the filter at least once
-        self.uv = np.zeros((S, 2))                 # predicted centroid (col, row) px
-        self.hist_t = np.full(HIST, -np.inf)
-        self.hist_q = np.zeros((HIST, 4))          # attitude estimate at each gyro sample
-        self.h = -1
-        self.q = np.array([0.0, 0.0, 0.0, 1.0])   # ACQUIRE: gyro-relative attitude from the start
-        self.q_valid = False
-        self.bias = np.zeros(3)
-        self.P = np.zeros((6, 6))
-        self.P[:3, :3] = np.eye(3) * 1e-2
-        self.P[3:, 3:] = np.eye(3) * params.bias_prior ** 2
-        self.omega = np.zeros(3)
-        self.mode = R.MODE_ACQUIRE
-        self.t_last: float | None = None
-        self.seq = 0
+        self.filter = AttitudeFilter(params.gyro_arw, params.sigma_bias_rw, params.bias_prior,
+                                     1.0 / gyro.odr_hz if gyro.odr_hz else 0.0025, params.gyro_delay_s,
+                                     params.gyro_lowpass_hz)
+        self.tracks = StarTracks(params, camera, star_index)
+        self.image = ImagePipeline(params, camera, identifier)
+        self.outputs = OutputStage(sinks, self.lat_clock)
+        self.state = modes.ModeState()
         self.flags_pending = 0
         self.last_image_flags = R.FLAG_FEW_STARS
         self.id_verified = False
-        self.coast_since: float | None = None
-        self.confirm_failures = 0
         self.next_frame_t = -np.inf
         self.next_acquire_t = -np.inf
-        self.pending = None            # the windows in flight: spans and slots
+        self.pending = None            # the windows in flight: plan + time commanded
         self.head_down_since: float | None = None
         self.timeouts = 0              # consecutive head jobs without an answer
         self.exposure_lag = 0.002      # s from commanding windows to the exposure start (EMA)
         self.lag_jitter = 0.001        # s, mean deviation of that lag
         self.next_reconnect_t = -np.inf
-        self.out_buf = R.empty(256)
-        self._blank = R.empty(1)[0]
-        self.last_output = None
-        self.measuring = None          # (pending, result, future) of the readout being centroided
-        self._pool = None
+        self._refs = np.zeros((0, 3))  # tracked stars' catalog vectors / ids in slot order (kernel inputs)
+        self._ids = np.zeros(0, np.int32)
+        self._slots = np.zeros(0, np.int64)
+        self._uv = np.zeros((0, 2))
+        self._tracks_version = -1
+        self.gyro_path_s = 0.0         # host s in the 400 Hz path after the FIFO read (filter, outputs, sinks)
+        self.floor = FloorInputs()     # what the run's attitude floor depends on (per update)
         # streaming head (gyrostar.hil.streamport): plans by stream frame, link budget,
         # exposure → output latency (mid-exposure to the first output holding its update)
         self.streaming = bool(getattr(head, "streaming", False))
@@ -176,7 +171,20 @@ class CoupledLoop:
         self.e2o = np.zeros(1 << 16)
         self.n_e2o = 0
         self.frame_t = [np.nan, np.nan]        # mid-exposure of the first and last frame used
-        self.few_run = 0                       # consecutive images that updated too few stars
+        self.few_run = 0                       # consecutive streamed images that updated too few stars
+
+    # ------------------------------------------------------------------ views
+    @property
+    def mode(self) -> int:
+        return self.state.mode
+
+    @property
+    def last_output(self):
+        return self.outputs.last
+
+    @property
+    def out_buf(self):
+        return self.outputs.buf
 
     # ------------------------------------------------------------------ set-up
     def warm_identifier(self) -> float:
@@ -193,14 +201,17 @@ class CoupledLoop:
         cand = self.index.cone(bore, radius, self.p.mag_limit)
         if len(cand) >= 3:
             uv, ok = project_refs(self.cam, q, np.ascontiguousarray(self.index.vectors[cand]))
-            self.identifier.identify(np.ascontiguousarray(uv[ok][:30]))   # > max_stars: labelling too
+            self.image.identifier.identify(np.ascontiguousarray(uv[ok][:30]))   # > max_stars: labelling too
         return time.perf_counter() - t0
 
     def start(self) -> None:
         """Configure and start the devices (head exposure, gyro FIFO)."""
         self.head.start(self.p.exposure_s)
         self.gyro.start()
-        self.t_last = None
+
+    def close(self) -> None:
+        """Stop the measuring thread (the devices belong to the caller)."""
+        self.image.close()
 
     # ------------------------------------------------------------------ the step
     def step(self) -> int:
@@ -216,19 +227,37 @@ class CoupledLoop:
             self.flags_pending |= R.FLAG_OVERRUN
         self.t_step_prev = t_step
         if self.streaming:
-            # a streamed frame arrives already measured: its update goes into this step's outputs
-            self._image_phase_guarded()
+            # frames the stream port already measured update the filter before this step's samples
+            self._guarded(self._stream_phase, t_step)
             return self._gyro_phase()
+        done = self.image.result()       # the readout handed over last step: apply it before this
+        if done is not None:             # step's samples, so their outputs are the first to carry it
+            self._process_windows(*done, t_step)
         n_out = self._gyro_phase()
-        self._image_phase_guarded()
-        return n_out
-
-    def _image_phase_guarded(self) -> None:
         try:
             self._image_phase()
         except DeviceError as exc:
             self._count_head_error(exc)
             self._head_failed(exc)
+        return n_out
+
+    def _guarded(self, phase, now: float) -> None:
+        try:
+            phase(now)
+        except DeviceError as exc:
+            self._count_head_error(exc)
+            self._head_failed(exc)
+
+    def _kernel_stars(self):
+        """Tracked stars as the kernel wants them (rebuilt only when the set changes)."""
+        tr = self.tracks
+        if tr.version != self._tracks_version:
+            self._tracks_version = tr.version
+            self._slots = tr.tracked()
+            self._refs = np.ascontiguousarray(tr.ref[self._slots])
+            self._ids = np.ascontiguousarray(tr.ids[self._slots])
+            self._uv = np.zeros((len(self._slots), 2))
+        return self._refs, self._ids, self._uv
 
     def _gyro_phase(self) -> int:
         smp = self.samples
@@ -248,81 +277,40 @@ class CoupledLoop:
         if smp.gap_frames:
             self.c.samples_lost += int(smp.gap_frames)
             self.c.gyro_gaps += int(smp.gaps)
-        out = self.out_buf[:n]
-        out[:] = self._blank
-        period = 1.0 / self.gyro.odr_hz
-        act = np.flatnonzero(self.active)
-        for i in range(n):
-            t = smp.t[i]
-            w = smp.rate[i]
-            dt = period if self.t_last is None else t - self.t_last
-            if not 0.0 < dt < 2.0:      # across a FIFO gap: propagate over it (P grows accordingly)
-                dt = period
-            self.t_last = t
-            mekf_predict(self.q, self.bias, self.P, w, dt, self.p.gyro_noise_density, self.p.sigma_bias_rw)
-            self.h = (self.h + 1) % HIST
-            self.hist_t[self.h] = t
-            self.hist_q[self.h] = self.q
-            self.omega = w - self.bias
-            flags = self.flags_pending | self.last_image_flags
-            self.flags_pending = 0
-            if smp.flags[i] & FLAG_GAP:
-                flags |= R.FLAG_GYRO_GAP
-            if smp.flags[i] & FLAG_SATURATED:
-                flags |= R.FLAG_GYRO_SATURATED
-            if smp.flags[i] & FLAG_STUCK_AXIS:
-                flags |= R.FLAG_GYRO_STUCK
-                self.c.gyro_stuck += 1
-            if self.q_valid and self.mode != R.MODE_ACQUIRE:
-                flags |= R.FLAG_ATTITUDE_VALID
-            if self.id_verified:
-                flags |= R.FLAG_ID_VERIFIED
-            if max(self.P[3, 3], self.P[4, 4], self.P[5, 5]) < (1e-4) ** 2:
-                flags |= R.FLAG_BIAS_CONVERGED
-            if self.head_down_since is not None:
-                flags |= R.FLAG_HEAD_LOST
-            o = out[i]
-            o["t"] = t
-            o["seq"] = self.seq
-            self.seq += 1
-            o["mode"] = self.mode
-            o["flags"] = flags
-            o["q"] = self.q
-            o["omega"] = self.omega
-            o["bias"] = self.bias
-            o["cov"] = self.P
-            if len(act) and self.q_valid:
-                uv, _ = project_refs(self.cam, self.q, self.ref[act])
-                self.uv[act] = uv
-                k = len(act)
-                o["star_id"][:k] = self.star_id[act]
-                o["centroid_px"][:k] = uv
-                o["n_stars"] = k
+        w0 = time.perf_counter()
+        f = self.filter
+        base = self.last_image_flags
+        if f.valid and self.state.mode != R.MODE_ACQUIRE:
+            base |= R.FLAG_ATTITUDE_VALID
+        if self.id_verified:
+            base |= R.FLAG_ID_VERIFIED
+        if self.head_down_since is not None:
+            base |= R.FLAG_HEAD_LOST
+        if f.valid:
+            refs, ids, uv = self._kernel_stars()
+        else:
+            refs, ids, uv = _NO_REFS, _NO_IDS, _NO_UV
+        out = self.outputs.batch(n)
+        self.c.gyro_stuck += f.predict(smp, self.flags_pending, base, self.state.mode, refs, ids, self.cam, uv, out)
+        self.flags_pending = 0
+        if len(uv):
+            self.tracks.uv[self._slots] = uv
         self.c.gyro_samples += n
         self.c.gyro_saturated += int(smp.saturated)
-        t_out = self.lat_clock.now()
-        out["latency_us"] = (t_out - t_read) * 1e6
-        for sink in self.sinks:
-            sink.put(out, int(self.t_last * 1e9))
-        self.last_output = out[n - 1].copy()
-        if self._mids:
+        self.outputs.emit(out, t_read, float(smp.t[n - 1]))
+        self.c.outputs += n
+        if self._mids:                   # streamed frames whose update these outputs are the first to hold
+            t_out = self.lat_clock.now()
             for t_mid in self._mids:
                 self.e2o[self.n_e2o % len(self.e2o)] = t_out - t_mid
                 self.n_e2o += 1
             self._mids.clear()
-        self.c.outputs += n
+        self.gyro_path_s += time.perf_counter() - w0
         return n
 
     # ------------------------------------------------------------------ images
     def _image_phase(self) -> None:
         now = self.clock.now()
-        if self.streaming:
-            self._stream_phase(now)
-            return
-        if self.measuring is not None:
-            pend, res, fut = self.measuring
-            self.measuring = None
-            self._process_windows(pend, res, fut.result(), now)
         res = self.head.poll()
         if res is not None and res.kind == "reconnect":
             if res.error is None:
@@ -335,19 +323,19 @@ class CoupledLoop:
             res = None
         if self.head_down_since is not None:
             if not self.head.busy and now >= self.next_reconnect_t:
-                self.next_reconnect_t = now + 0.25
+                self.next_reconnect_t = now + self.p.reconnect_every_s
                 self.pending = None
                 self.head.submit_reconnect()
             return
         pend = None
         if res is not None:
             pend, self.pending = self.pending, None
-        if res is not None and res.error is None and res.kind == "windows" and pend is not None:
+        ok_windows = res is not None and res.error is None and res.kind == "windows"
+        if ok_windows and pend is not None:
             # centroid the readout on the measuring thread (nogil kernel) while this step
             # plans the next exposure; the update is applied at the next step
-            self.measuring = (pend, res, self._measure_pool().submit(self._measure, pend, res.values))
-        if res is not None and res.error is None and res.kind == "windows" and self.mode != R.MODE_ACQUIRE \
-                and now >= self.next_frame_t - 0.5 / self.p.frame_hz:
+            self.image.submit(pend, res)
+        if ok_windows and self.state.mode != R.MODE_ACQUIRE and now >= self.next_frame_t - 0.5 / self.p.frame_hz:
             # next exposure first (windows from the prediction), then this image's update:
             # the head exposes while the loop centroids
             self.next_frame_t = max(self.next_frame_t + 1.0 / self.p.frame_hz, now)
@@ -358,7 +346,7 @@ class CoupledLoop:
                 self.last_image_flags |= R.FLAG_LINK_ERROR
                 self._count_head_error(res.error)
                 self.timeouts = self.timeouts + 1 if isinstance(res.error, HeadTimeoutError) else 0
-                if _link_closed(res.error) or self.timeouts >= 3:
+                if isinstance(res.error, LinkLostError) or self.timeouts >= self.p.head_timeouts_lost:
                     self._head_failed(res.error)
                     return
                 if res.kind == "windows":
@@ -371,10 +359,10 @@ class CoupledLoop:
                 self.timeouts = 0
         if self.head.busy:
             return
-        if self.mode == R.MODE_ACQUIRE and not self.q_valid:
+        if self.state.mode == R.MODE_ACQUIRE and not self.filter.valid:
             if now >= self.next_acquire_t:
                 self.next_acquire_t = now + self.p.acquire_every_s
-                self.head.submit_frame(self._lost_in_space)
+                self.head.submit_frame(self.image.lost_in_space)
             return
         if now >= self.next_frame_t:
             self.next_frame_t = max(self.next_frame_t + 1.0 / self.p.frame_hz, now)
@@ -401,11 +389,12 @@ class CoupledLoop:
                 self.c.frames_failed += 1
                 self.last_image_flags |= R.FLAG_LINK_ERROR
                 self._count_head_error(res.error)
-                if res.kind == "frame" or _link_closed(res.error) or isinstance(res.error, HeadTimeoutError):
+                if res.kind == "frame" or isinstance(res.error, (LinkLostError, HeadTimeoutError)):
                     self._head_failed(res.error)
                     return
                 continue
             if res.kind == "frame":
+                self.timeouts = 0
                 self.c.full_frames += 1
                 self._acquire(res, now)
                 continue
@@ -420,19 +409,19 @@ class CoupledLoop:
             self.frame_t[1] = res.t_mid
         if self.head_down_since is not None:
             if not head.busy and now >= self.next_reconnect_t:
-                self.next_reconnect_t = now + 0.25
+                self.next_reconnect_t = now + self.p.reconnect_every_s
                 self.plans.clear()
                 self.last_commanded = 0
                 head.submit_reconnect()
             return
         if head.busy:
             return
-        if self.mode == R.MODE_ACQUIRE and not self.q_valid:
+        if self.state.mode == R.MODE_ACQUIRE and not self.filter.valid:
             if now >= self.next_acquire_t:
                 self.next_acquire_t = now + self.p.acquire_every_s
                 self.plans.clear()
                 self.last_commanded = 0
-                head.submit_frame(self._lost_in_space)
+                head.submit_frame(self.image.lost_in_space)
             return
         frame, t_exp = head.next_target(now)
         if frame == 0:
@@ -464,29 +453,18 @@ class CoupledLoop:
         log.debug("head error: %s", exc)
 
     def _head_failed(self, exc: Exception) -> None:
-        """The link is down (closed, no answer after retries): COAST and reconnect."""
+        """The link is down (lost, no answer after retries): COAST and reconnect."""
         self.pending = None
         if self.head_down_since is None:
             self.head_down_since = self.clock.now()
-            self.next_reconnect_t = self.head_down_since + 0.25
+            self.next_reconnect_t = self.head_down_since + self.p.reconnect_every_s
             log.info("head link lost: %s", exc)
         self.last_image_flags |= R.FLAG_LINK_ERROR | R.FLAG_FEW_STARS
-        if self.mode == R.MODE_TRACK:
-            self._set_mode(R.MODE_COAST, self.head_down_since)
+        self._set_state(modes.on_head_lost(self.state, self.head_down_since), self.head_down_since)
 
     # -- ACQUIRE ----------------------------------------------------------------
-    def _lost_in_space(self, image: np.ndarray):
-        """Spots of a full frame and their identification: ``(spots, ident or None)``.
-        Runs on the head port's worker, off the loop's steps; reads no loop state."""
-        from .acquire import detect_spots
-
-        spots = detect_spots(image.astype(np.float64), 6.0, 40, 7)
-        if len(spots) < 3:
-            return spots, None
-        return spots, self.identifier.identify(np.ascontiguousarray(spots[:, :2]))
-
     def _acquire(self, res, now: float) -> None:
-        spots, ident = res.measured          # _lost_in_space ran on the head worker
+        spots, ident = res.measured          # ImagePipeline.lost_in_space ran on the head worker
         self.c.acquisitions += 1
         if ident is None:
             self.c.acquisition_failures += 1
@@ -495,110 +473,49 @@ class CoupledLoop:
             self.c.acquisition_failures += 1
             log.debug("acquisition failed: %s", ident.status)
             return
-        # attitude at exposure mid-time → now along the gyro-propagated attitude history
-        from ..attitude import quat_conj, quat_mult, quat_normalize
-
-        q_rel_mid = self._hist_q_at(res.t_mid)
-        dq = quat_mult(self.q, quat_conj(q_rel_mid))          # rotation mid → now
-        self.q = quat_normalize(quat_mult(dq, np.asarray(ident.q, np.float64)))
-        self.q_valid = True
-        # error now = error at mid-exposure − Δb·Δt: the unknown drift acted since then
-        lag = max(now - res.t_mid, 0.0)
-        pbb = self.P[3:, 3:].copy()
-        self.P[:3, :3] = np.eye(3) * (2.0 * self.p.pyramid_sigma_px / self.f_px) ** 2 + pbb * lag * lag
-        self.P[:3, 3:] = -pbb * lag
-        self.P[3:, :3] = -pbb * lag
-        self._clear_stars()
-        self._add_stars_from_catalog(now)
+        self.filter.set_attitude(ident.q, res.t_mid, now, 2.0 * self.p.pyramid_sigma_px / self.f_px)
+        self.tracks.clear()
+        self.tracks.fill_from_catalog(self.filter.q)
         log.info("acquired: %d stars identified (p_false %.2g)", ident.n_identified, ident.p_false)
         # the mode turns to TRACK at the first image whose stars pass the filter's gate
-        self.confirm_failures = 0
+        self._set_state(modes.on_acquired(self.state), now)
         self.next_frame_t = now
 
     # -- TRACK / COAST --------------------------------------------------------------
     def _command_windows(self, now: float, frame: int | None = None, t_exp: float | None = None) -> None:
         """Plan and command windows: for the next CAPTURE, or (streaming) for stream frame
-        ``frame`` whose exposure starts at host time ``t_exp``."""
-        from ..core.motion import substeps_for
-        from .image_kernels import plan_windows
-        from .kernels import project_refs
-
-        self._add_stars_from_catalog(now)
-        act = np.flatnonzero(self.active)
-        if not len(act):
+        ``frame`` whose exposure starts at host time ``t_exp`` (on the head's own timer: no
+        command-to-exposure jitter to cover)."""
+        f = self.filter
+        if f.valid:
+            self.tracks.fill_from_catalog(f.q)
+        sig = math.sqrt(max(f.P[0, 0], f.P[1, 1]))
+        if self.streaming:
+            lag, jitter = max(t_exp - now, 0.0), 0.0
+        else:
+            lag, jitter = self.exposure_lag, self.lag_jitter
+        plan = self.tracks.plan(f.q, f.omega, f.b, sig, lag, jitter, self.gyro.odr_hz, budget=self.budget)
+        if plan is None:
             self._after_image(now, updated=0)
             return
-        order = act[np.argsort(self._slot_mag(act), kind="stable")]      # brightest first (budget)
-        uv, _ = project_refs(self.cam, self.q, self.ref[order])
-        # the exposure starts when the head gets CAPTURE, ~lat s from now (measured)
-        m = max(1, int(round(self.p.exposure_s * self.gyro.odr_hz)))
-        lag = self.exposure_lag if t_exp is None else max(t_exp - now, 0.0)
-        m_lat = int(round(lag * self.gyro.odr_hz))
-        rates = np.repeat((self.omega + self.bias)[None, :], m + m_lat, axis=0)
-        dt = self.p.exposure_s / m
-        sub = substeps_for(rates - self.bias, dt, self.f_px, 0.5)
-        sig_px = math.sqrt(max(self.P[0, 0], self.P[1, 1])) * self.f_px
-        speed = math.sqrt(float(self.omega @ self.omega)) * self.f_px          # px/s near the boresight
-        # a streaming head exposes on its own timer: no command-to-exposure jitter to cover
-        margin = 3.0 * sig_px + (0.0 if self.streaming else speed * self.lag_jitter)
-        k = min(self.p.window_k + 2 * int(math.ceil(margin)), 40)
-        pixel_budget, max_spans = self.p.pixel_budget, self.p.max_spans
+        plan["t_submit"] = now
         if self.budget is not None:
-            if not self.budget.margin_allowed():
-                k = self.p.window_k                  # degrade step 2: tighter windows
-            px, sp = self.budget.limits(len(order))
-            pixel_budget, max_spans = min(pixel_budget, px), min(max_spans, sp)
-        spans, wins, off, off_start, off_len = plan_windows(
-            uv, order.astype(np.int64), rates, dt, self.bias, self.cam, MODEL, sub, m_lat * sub, k,
-            self.camera.height_px, self.camera.width_px, pixel_budget, self.p.max_window_pixels,
-            max_spans)
-        if self.budget is not None:
-            div = self.budget.after_plan(now, len(order), len(wins), int(np.sum(spans[:, 3] - spans[:, 2])),
-                                         len(spans))
+            sp = plan["spans"]
+            div = self.budget.after_plan(now, plan["n_stars"], len(plan["wins"]), int(np.sum(sp[:, 3] - sp[:, 2])),
+                                         len(sp))
             if div is not None and self.streaming:
                 log.info("link %s: frame rate → %.1f Hz", self.budget.link.name, self.budget.frame_hz)
                 self.head.set_period(1.0 / self.budget.frame_hz)
-        if not len(wins):
-            self._after_image(now, updated=0)
-            return
-        plan = {"spans": spans, "wins": wins, "nav": self.star_nav[wins].copy(), "off": off,
-                "off_start": off_start, "off_len": off_len, "t_submit": now}
         if self.streaming:
             self.plans[frame] = plan
-            for old in [f for f in self.plans if f < frame - 8]:
+            for old in [k for k in self.plans if k < frame - 8]:
                 del self.plans[old]
-            self.head.submit_windows(spans, frame, lambda values, pl=plan: self._measure(pl, values))
+            self.head.submit_windows(plan["spans"], frame, lambda values, pl=plan: self.image.measure(pl, values))
             return
-        self.head.submit_windows(spans)
+        self.head.submit_windows(plan["spans"])
         self.pending = plan
 
-    def _measure_pool(self):
-        if self._pool is None:
-            from concurrent.futures import ThreadPoolExecutor
-
-            from ..realtime import join_realtime
-
-            self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="loop-measure", initializer=join_realtime)
-        return self._pool
-
-    def close(self) -> None:
-        """Stop the measuring thread (the devices belong to the caller)."""
-        if self._pool is not None:
-            self._pool.shutdown(wait=True)
-            self._pool = None
-
-    def _measure(self, pend: dict, values) -> tuple:
-        """Spot directions of a readout (:func:`image_kernels.measure_windows`, nogil)."""
-        from .image_kernels import measure_windows
-
-        p = self.p
-        vals = np.ascontiguousarray(values, dtype=np.float64)
-        return measure_windows(pend["spans"], vals, pend["wins"], pend["off"], pend["off_start"], pend["off_len"],
-                               self.cam, p.psf_sigma_px, p.thresh_sigma, p.min_signal, p.e_per_dn, 10, 1e-3)
-
     def _process_windows(self, pend: dict, res, measured: tuple, now: float) -> None:
-        from ..attitude import quat_conj, quat_mult, quat_to_dcm
-        from ..core.mekf import mekf_update
         from .image_kernels import MEAS_MISS, MEAS_OK
 
         self.c.frames += 1
@@ -607,150 +524,59 @@ class CoupledLoop:
             self.lag_jitter = 0.9 * self.lag_jitter + 0.1 * abs(lag - self.exposure_lag)
             self.exposure_lag = 0.9 * self.exposure_lag + 0.1 * lag
         state, b_mid, sig = measured
+        tr = self.tracks
         wins = pend["wins"]
-        live = self.active[wins] & (self.star_nav[wins] == pend["nav"])   # dropped/replaced meanwhile: skip
-        self.misses[wins[live & (state == MEAS_MISS)]] += 1
+        live = tr.active[wins] & (tr.nav[wins] == pend["nav"])   # dropped/replaced meanwhile: skip
+        tr.misses[wins[live & (state == MEAS_MISS)]] += 1
         use = live & (state == MEAS_OK)
         slots = wins[use]
         updated = 0
         if len(slots):
-            # rotation body(t_mid) → body(now) from the gyro-propagated attitude history
-            q_mid = self._hist_q_at(res.t_mid)
-            rot = quat_to_dcm(quat_mult(self.q, quat_conj(q_mid)))
-            bvecs = np.ascontiguousarray(b_mid[use] @ rot.T)
             acc = np.zeros(len(slots), np.uint8)
-            updated = mekf_update(self.q, self.bias, self.P, bvecs, np.ascontiguousarray(self.ref[slots]),
-                                  np.ascontiguousarray(sig[use]), GATE, acc)
-            self.c.updates += int(updated)
+            updated = self.filter.update(res.t_mid, b_mid[use], tr.ref[slots], sig[use], acc)
+            self.c.updates += updated
             good = acc.astype(np.bool_)
-            self.misses[slots[good]] = 0
-            self.rejects[slots[good]] = 0
-            self.seen[slots[good]] = True
-            bad = slots[~good]
-            self.rejects[bad] += 1
-            self.c.rejected_updates += len(bad)
+            if updated:
+                self.flags_pending |= R.FLAG_UPDATE_APPLIED
+                # its first output: the next sample's stamp
+                t_next = (self.filter.t_last or now) + self.filter.prm[0] + self.p.gyro_delay_s
+                self.floor.add(res.t_mid, t_next, 1.0 / float(np.sum(1.0 / sig[use][good] ** 2)), updated)
+            self.c.rejected_updates += int(np.count_nonzero(~good))
+            wrong = tr.score(slots, good)
             if updated >= self.p.min_stars:
-                for s in bad[self.rejects[bad] >= 5]:
-                    self._drop(int(s))
+                for s in wrong:
+                    tr.drop(s)
                     self.c.wrong_ids_dropped += 1
         self.id_verified = updated >= 3 and updated == len(slots)
         self._after_image(now, int(updated))
 
     def _after_image(self, now: float, updated: int) -> None:
-        if self.mode == R.MODE_ACQUIRE:
-            # confirming a fresh identification: TRACK once an image passes the gate,
-            # back to a full frame if none does within 20 images
-            if updated >= self.p.min_stars:
-                self._set_mode(R.MODE_TRACK, now)
-            else:
-                self.confirm_failures += 1
-                if self.confirm_failures >= 20:
-                    self.q_valid = False
-                    self._clear_stars()
-                    self.c.acquisition_failures += 1
-            return
-        few = updated < self.p.min_stars
-        self.last_image_flags = R.FLAG_IMAGE_UPDATE if updated else 0
-        self.few_run = self.few_run + 1 if few else 0
-        if few:
-            self.last_image_flags |= R.FLAG_FEW_STARS
+        self.few_run = self.few_run + 1 if updated < self.p.min_stars else 0
+        if self.streaming and self.state.mode == R.MODE_TRACK and 0 < self.few_run < STREAM_FEW_FRAMES:
             # streaming at 100 Hz: one frame read with a late window set is no reason to coast
-            if self.mode == R.MODE_TRACK and self.few_run >= (STREAM_FEW_FRAMES if self.streaming else 1):
-                self._set_mode(R.MODE_COAST, now)
-            elif self.mode == R.MODE_COAST and self.coast_since is not None \
-                    and now - self.coast_since > self.p.coast_timeout_s:
-                self._set_mode(R.MODE_ACQUIRE, now)
-                self._clear_stars()
-                self.q_valid = False
-                self.next_acquire_t = now
-        elif self.mode != R.MODE_TRACK:
-            self._set_mode(R.MODE_TRACK, now)
-        # drop stars that left the sensor, or were not seen for long while others were
-        for s in np.flatnonzero(self.active):
-            u, v = self.uv[s]
-            off = u < 2 or v < 2 or u > self.camera.width_px - 3 or v > self.camera.height_px - 3
-            if off or (self.mode == R.MODE_TRACK and self.misses[s] > self.p.max_misses):
-                self._drop(s)
-
-    def _set_mode(self, mode: int, t: float) -> None:
-        if mode == self.mode:
+            self.last_image_flags = (R.FLAG_IMAGE_UPDATE if updated else 0) | R.FLAG_FEW_STARS
             return
-        self.c.mode_changes.append((float(t), R.MODE_NAMES[self.mode], R.MODE_NAMES[mode]))
-        self.mode = mode
-        self.coast_since = t if mode == R.MODE_COAST else None
-
-    # -- star slots ----------------------------------------------------------------
-    def _clear_stars(self) -> None:
-        self.active[:] = False
-        self.seen[:] = False
-        self.star_nav[:] = -1
-        self.star_id[:] = -1
-
-    def _drop(self, s: int) -> None:
-        self.active[s] = False
-        self.seen[s] = False
-        self.star_nav[s] = -1
-        self.star_id[s] = -1
-
-    def _slot_mag(self, slots) -> np.ndarray:
-        return np.array([self.index.vmag[self.star_nav[s]] for s in slots]) if len(slots) else np.zeros(0)
-
-    def _add_stars_from_catalog(self, now: float) -> None:
-        """Fill free slots with catalog stars the current attitude puts on the sensor
-        (the gyro-extended field: the attitude is propagated by the gyro between images)."""
-        from ..attitude import quat_to_dcm
-        from .kernels import project_refs
-
-        free = [s for s in range(self.p.max_stars) if not self.active[s]]
-        if not free or not self.q_valid:
+        prev = self.state.mode
+        state, act = modes.on_image(self.state, now, updated, self.mp)
+        self._set_state(state, now)
+        if act & modes.Action.ACQUISITION_FAILED:
+            self.c.acquisition_failures += 1
+        if act & modes.Action.LOSE_ATTITUDE:
+            self.filter.valid = False
+            self.tracks.clear()
+        if act & modes.Action.ACQUIRE_NOW:
+            self.next_acquire_t = now
+        if prev == R.MODE_ACQUIRE:
             return
-        boresight = quat_to_dcm(self.q)[2]
-        radius = math.atan(0.5 * math.hypot(self.camera.width_px, self.camera.height_px) / self.f_px)
-        cand = self.index.cone(boresight, radius, self.p.mag_limit)
-        if len(cand) == 0:
-            return
-        cand = cand[np.argsort(self.index.vmag[cand], kind="stable")]
-        uv, ok = project_refs(self.cam, self.q, np.ascontiguousarray(self.index.vectors[cand]))
-        margin = self.p.window_k + 8
-        inside = ok & (uv[:, 0] > margin) & (uv[:, 1] > margin) \
-            & (uv[:, 0] < self.camera.width_px - 1 - margin) & (uv[:, 1] < self.camera.height_px - 1 - margin)
-        tracked = set(self.star_nav[self.active].tolist())
-        fi = 0
-        for j in np.flatnonzero(inside):
-            if fi >= len(free):
-                break
-            nav = int(cand[j])
-            if nav in tracked:
-                continue
-            # a neighbour closer than two windows would share pixels: skip the fainter
-            if any(abs(uv[j, 0] - self.uv[t, 0]) < 12 and abs(uv[j, 1] - self.uv[t, 1]) < 12
-                   for t in np.flatnonzero(self.active)):
-                continue
-            s = free[fi]
-            self.ref[s] = self.index.vectors[nav]
-            self.star_nav[s] = nav
-            self.star_id[s] = int(self.index.ids[nav])
-            self.active[s] = True
-            self.seen[s] = False
-            self.misses[s] = 0
-            self.rejects[s] = 0
-            self.uv[s] = uv[j]
-            fi += 1
+        self.last_image_flags = R.FLAG_IMAGE_UPDATE if updated else 0
+        if updated < self.p.min_stars:
+            self.last_image_flags |= R.FLAG_FEW_STARS
+        self.tracks.drop_lost(tracking=self.state.mode == R.MODE_TRACK)
 
-    # -- history --------------------------------------------------------------------
-    def _hist_q_at(self, t: float) -> np.ndarray:
-        """Attitude estimate at the newest gyro sample at or before ``t`` (history ring)."""
-        if self.h < 0:
-            return self.q
-        masked = np.where(self.hist_t <= t, self.hist_t, -np.inf)
-        best = int(np.argmax(masked))
-        best_t = masked[best]
-        if not np.isfinite(best_t):
-            return self.q
-        # propagate from that sample to t with the current rate (≤ one gyro period)
-        from ..attitude import quat_propagate
-
-        return quat_propagate(self.hist_q[best], self.omega, t - best_t)
+    def _set_state(self, state: modes.ModeState, t: float) -> None:
+        if state.mode != self.state.mode:
+            self.c.mode_changes.append((float(t), R.MODE_NAMES[self.state.mode], R.MODE_NAMES[state.mode]))
+        self.state = state
 
     # ------------------------------------------------------------------ summary
     def counters(self) -> dict:
@@ -758,14 +584,20 @@ class CoupledLoop:
         return {k: getattr(c, k) for k in c.__dataclass_fields__ if k != "mode_changes"} | {
             "mode_changes": list(c.mode_changes)}
 
+    def floor_summary(self) -> dict:
+        """The steady-state floor for this run's gyro ARW, star noise, star count and timing."""
+        return self.floor.summary(self.p.gyro_arw, self.filter.kappa)
+
+    def host_us_per_gyro_sample(self) -> float | None:
+        """Host µs per gyro sample in the 400 Hz path after the FIFO read (wall clock)."""
+        return self.gyro_path_s / self.c.gyro_samples * 1e6 if self.c.gyro_samples else None
+
 
 STREAM_FEW_FRAMES = 3       # streaming: consecutive images with too few stars before COAST (30 ms)
 
-
-def _link_closed(exc: Exception) -> bool:
-    """A failure that means the link itself is gone (port closed or failing)."""
-    text = str(exc)
-    return "closed" in text or "is down" in text or "failed" in text and "write" in text
+_NO_REFS = np.zeros((0, 3))
+_NO_IDS = np.zeros(0, np.int32)
+_NO_UV = np.zeros((0, 2))
 
 
 def warmup() -> dict:
@@ -773,7 +605,7 @@ def warmup() -> dict:
     with the argument types it uses, timed (see warmup.py). Kernels called only from inside
     other kernels (centroiding, trajectories, windows) come with their callers."""
     from ..attitude import quat_conj, quat_mult, quat_normalize, quat_propagate, quat_to_dcm
-    from ..core.mekf import mekf_init, mekf_predict, mekf_update
+    from ..core.mekf import mekf_init, mekf_update
     from ..core.motion import substeps_for
     from ..gyro.convert import convert_frames
     from ..protocol.payloads import _unpack10_kernel
@@ -789,8 +621,11 @@ def warmup() -> dict:
     q0 = np.array([0.0, 0.0, 0.0, 1.0])
     q, b, P = mekf_init(q0, w, 1e-3, 1e-3)
     img = np.zeros((64, 64))
+    af = AttitudeFilter(1e-4, 1e-6, 1e-3, 0.0025)
     calls = [
-        (mekf_predict, (q, b, P, w, 0.0025, 1e-4, 1e-6)),
+        (kernels.predict_batch, (np.zeros(4), np.zeros((4, 3)), np.zeros(4, np.uint8), 1, af.q, af.b, af.P, af.ts,
+                                 af.hist_t, af.hist_q, af.ih, af.prm, 0, 0, 0, ref, ref[:, 0].astype(np.int32), cam,
+                                 np.zeros((2, 2)), af.mid, af.smoothed, R.empty(4))),
         (mekf_update, (q, b, P, ref, ref, np.array([1e-5, 1e-5]), GATE, np.zeros(2, np.uint8))),
         (kernels.project_refs, (cam, q, ref)),
         (quat_propagate, (q, w, 0.001)),

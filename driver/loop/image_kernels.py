@@ -30,6 +30,7 @@ from ..core.windows import trajectory_window
 
 MEAS_OK = 0        # direction measured
 MEAS_MISS = 1      # window read, no spot above threshold (or too faint)
+SIGMA_FLOOR_PX = 0.005  # px: least centroid σ reported (the fit's own σ is below it only for saturating stars)
 MEAS_ABSENT = 2    # the window is not in the readout
 
 
@@ -149,7 +150,7 @@ def measure_windows(spans, values, wins, off, off_start, off_len, cam, psf_sigma
         if math.isfinite(fu) and math.isfinite(fv) and abs(fu - u) < 2.0 and abs(fv - v) < 2.0:
             u = fu
             v = fv
-            var = max(0.5 * (var_u + var_v), 0.02 ** 2)
+            var = max(0.5 * (var_u + var_v), SIGMA_FLOOR_PX ** 2)
         else:
             var = 0.3 ** 2
         d = unproject_point(cam, u, v)

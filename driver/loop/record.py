@@ -18,7 +18,19 @@ field              type        meaning (frames: gyrostar.attitude; body = camera
 ``star_id``        i4[16]      catalog ids of tracked stars (-1 = none)
 ``centroid_px``    f4[16,2]    predicted centroids (column, row) in pixels, sensor coords
 ``latency_us``     f4          host time from the gyro sample's FIFO read to this output, µs
+``t_mid``          f8          mid-exposure host time of the newest frame applied, s (nan: none)
+``q_mid``          f8[4]       attitude at ``t_mid`` (filtered with that frame), ICRS → body
+``cov_mid``        f8[3,3]     covariance of ``q_mid``'s δθ (rad², body axes at ``t_mid``)
+``t_mid_s``        f8          mid-exposure time of the frame before (s; nan: none)
+``q_mid_s``        f8[4]       attitude at ``t_mid_s`` smoothed with the newest frame
+``cov_mid_s``      f8[3,3]     its covariance (rad², body axes at ``t_mid_s``)
 =================  ==========  ===============================================================
+
+Two attitude products: the real-time one (``q``, ``cov``) at every gyro sample, and per
+frame the attitude at mid-exposure with its own timestamp (``t_mid``, ``q_mid``,
+``cov_mid``, filtered with that frame; ``*_mid_s``: the frame before, smoothed with the
+next), as conventional star trackers report; they repeat on every record until the next
+frame is applied.
 """
 
 from __future__ import annotations
@@ -43,19 +55,24 @@ FLAG_OVERRUN = 0x0080          # the loop missed its deadline before this sample
 FLAG_BIAS_CONVERGED = 0x0100   # bias covariance below threshold
 FLAG_ID_VERIFIED = 0x0200      # identification verified by residuals after the last solve
 FLAG_GYRO_STUCK = 0x0400       # a gyro axis output is stuck (unchanged for ≥ 32 frames: gyro.convert.FLAG_STUCK_AXIS)
+FLAG_UPDATE_APPLIED = 0x0800   # the first output after an image update (the one before it: the last prior)
 FLAG_NAMES = {
     FLAG_ATTITUDE_VALID: "attitude_valid", FLAG_IMAGE_UPDATE: "image_update",
     FLAG_GYRO_GAP: "gyro_gap", FLAG_GYRO_SATURATED: "gyro_saturated",
     FLAG_FEW_STARS: "few_stars", FLAG_LINK_ERROR: "link_error", FLAG_HEAD_LOST: "head_lost",
     FLAG_OVERRUN: "overrun", FLAG_BIAS_CONVERGED: "bias_converged", FLAG_ID_VERIFIED: "id_verified",
-    FLAG_GYRO_STUCK: "gyro_stuck",
+    FLAG_GYRO_STUCK: "gyro_stuck", FLAG_UPDATE_APPLIED: "update_applied",
 }
 
 OUTPUT_DTYPE = np.dtype([
     ("t", "<f8"), ("seq", "<u4"), ("mode", "u1"), ("n_stars", "u1"), ("flags", "<u2"),
     ("q", "<f8", (4,)), ("omega", "<f8", (3,)), ("bias", "<f8", (3,)), ("cov", "<f8", (6, 6)),
     ("star_id", "<i4", (MAX_STARS,)), ("centroid_px", "<f4", (MAX_STARS, 2)), ("latency_us", "<f4"),
+    ("t_mid", "<f8"), ("q_mid", "<f8", (4,)), ("cov_mid", "<f8", (3, 3)),
+    ("t_mid_s", "<f8"), ("q_mid_s", "<f8", (4,)), ("cov_mid_s", "<f8", (3, 3)),
 ])
+MID_N = 14
+"""Length of the mid-exposure product array the loop keeps: [t_mid, q_mid (4), cov_mid (9)]."""
 
 TRUTH_DTYPE = np.dtype([
     ("t", "<f8"), ("q", "<f8", (4,)), ("omega", "<f8", (3,)), ("bias", "<f8", (3,)),
@@ -70,6 +87,8 @@ def empty(n: int = 0) -> np.ndarray:
     """An array of ``n`` zeroed output records with ids set to -1."""
     out = np.zeros(n, OUTPUT_DTYPE)
     out["star_id"] = -1
+    out["t_mid"] = np.nan
+    out["t_mid_s"] = np.nan
     return out
 
 

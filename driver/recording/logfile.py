@@ -11,8 +11,8 @@ simulated clock on a simulated flatsat). ``channel`` tells devices apart (0 = th
 link, 1 = the gyro bus, ...). The writer keeps records in a user-space buffer and
 ``write(2)``\\ s it to the kernel every ``flush_bytes`` bytes or ``flush_s`` seconds (from a
 writer thread with ``background=True``), so a SIGKILL loses at most that unflushed tail;
-``fsync`` (power loss) is optional. A reader
-stops at the first truncated or corrupt record and reports how many bytes it ignored.
+``fsync`` (power loss) is optional. A reader skips a corrupt stretch to the next record
+whose sync byte and CRC hold (reporting offset and length) and reports a cut-off tail.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ import struct
 import threading
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import crc32c
@@ -32,6 +32,7 @@ from ..errors import ConfigError
 
 MAGIC = b"GYSTLOG1"
 SYNC = 0xA5
+SYNC_BYTE = bytes([SYNC])
 HEADER = struct.Struct("<BBHIq")
 CRC = struct.Struct("<I")
 MAX_PAYLOAD = 64 * 1024 * 1024
@@ -181,49 +182,106 @@ class LogWriter:
 
 @dataclass
 class ReadReport:
+    """What a read found: intact records, corrupt stretches skipped in the middle of the
+    file (``skipped``: ``(offset, bytes, reason)`` each) and an unusable tail (a log cut
+    short by a crash or a kill)."""
+
     records: int = 0
     good_bytes: int = 0
     ignored_tail_bytes: int = 0
     tail_reason: str = ""
+    skipped: list = field(default_factory=list)
+
+    @property
+    def skipped_bytes(self) -> int:
+        return sum(n for _, n, _ in self.skipped)
+
+    def describe(self) -> str:
+        """One human line, or "" when every byte was read."""
+        parts = []
+        if self.skipped:
+            where = ", ".join(f"{n} at byte {off}" for off, n, _ in self.skipped[:3])
+            more = f" and {len(self.skipped) - 3} more" if len(self.skipped) > 3 else ""
+            parts.append(f"{self.skipped_bytes} corrupt bytes skipped in {len(self.skipped)} place(s) "
+                         f"({where}{more})")
+        if self.ignored_tail_bytes:
+            parts.append(f"{self.ignored_tail_bytes} bytes of cut-off tail ignored at byte {self.good_bytes} "
+                         f"({self.tail_reason})")
+        return "; ".join(parts)
 
 
-def read_records(path: str | Path, report: ReadReport | None = None) -> Iterator[Record]:
-    """Yield every intact record; stop quietly at a truncated or corrupt tail.
+def _check_record(data, pos: int, end: int) -> tuple[int, str]:
+    """(end of the record at ``pos``, "") if it is intact, else (-1, why not)."""
+    if end - pos < HEADER.size + CRC.size:
+        return -1, "truncated record header"
+    sync, _kind, _channel, length, _t = HEADER.unpack_from(data, pos)
+    if sync != SYNC or length > MAX_PAYLOAD:
+        return -1, f"bad record header at byte {pos}"
+    stop = pos + HEADER.size + length
+    if stop + CRC.size > end:
+        return -1, "truncated record payload"
+    (crc,) = CRC.unpack_from(data, stop)
+    if crc32c.crc32c(data[pos:stop]) != crc:
+        return -1, f"CRC mismatch at byte {pos}"
+    return stop + CRC.size, ""
 
-    ``report`` (if given) receives the count of records and of ignored tail bytes.
-    Raises :class:`ConfigError` if the file is not a gyrostar log at all.
+
+def _resync(data, pos: int, end: int) -> int:
+    """Offset of the next intact record after ``pos`` (a sync byte whose record's CRC
+    holds), or -1 if none follows."""
+    while True:
+        pos = data.find(SYNC_BYTE, pos + 1, end)
+        if pos < 0:
+            return -1
+        if _check_record(memoryview(data), pos, end)[0] > 0:
+            return pos
+
+
+def read_records(path: str | Path, report: ReadReport | None = None, on_progress=None) -> Iterator[Record]:
+    """Yield every intact record. A corrupt stretch (a flipped byte, a torn write) is skipped
+    up to the next intact record and listed in ``report.skipped``; bytes after the last
+    intact record are the cut-off tail (``report.ignored_tail_bytes``). ``on_progress(pos,
+    size)`` is called now and then with the byte offset reached.
+
+    Raises :class:`ConfigError` if the file cannot be read or is not a gyrostar log at all.
     """
     path = Path(path)
     try:
         data = path.read_bytes()
     except FileNotFoundError as exc:
         raise ConfigError(f"log {path} does not exist") from exc
+    except IsADirectoryError as exc:
+        raise ConfigError(f"log {path} is a folder, not a log file (the run folder's log is flatsat.gslog)") from exc
+    except OSError as exc:
+        raise ConfigError(f"log {path} cannot be read: {exc.strerror or exc}") from exc
     if data[: len(MAGIC)] != MAGIC:
         raise ConfigError(f"{path} is not a gyrostar log (bad magic {data[:8]!r})")
     report = report if report is not None else ReadReport()
     pos = len(MAGIC)
     end = len(data)
+    view = memoryview(data)
+    next_report = 0
     while pos < end:
-        if end - pos < HEADER.size + CRC.size:
-            report.tail_reason = "truncated record header"
-            break
-        sync, kind, channel, length, t_ns = HEADER.unpack_from(data, pos)
-        if sync != SYNC or length > MAX_PAYLOAD:
-            report.tail_reason = f"bad record header at byte {pos}"
-            break
-        stop = pos + HEADER.size + length
-        if stop + CRC.size > end:
-            report.tail_reason = "truncated record payload"
-            break
-        (crc,) = CRC.unpack_from(data, stop)
-        if crc32c.crc32c(data[pos:stop]) != crc:
-            report.tail_reason = f"CRC mismatch at byte {pos}"
-            break
+        stop, why = _check_record(view, pos, end)
+        if stop < 0:
+            nxt = _resync(data, pos, end)
+            if nxt < 0:
+                report.tail_reason = why
+                break
+            report.skipped.append((pos, nxt - pos, why))
+            pos = nxt
+            continue
+        _sync, kind, channel, length, t_ns = HEADER.unpack_from(view, pos)
         report.records += 1
-        yield Record(kind, channel, t_ns, data[pos + HEADER.size: stop])
-        pos = stop + CRC.size
+        yield Record(kind, channel, t_ns, data[pos + HEADER.size: pos + HEADER.size + length])
+        pos = stop
+        if on_progress is not None and pos >= next_report:
+            on_progress(pos, end)
+            next_report = pos + (1 << 20)
     report.good_bytes = pos
     report.ignored_tail_bytes = end - pos
+    if on_progress is not None:
+        on_progress(end, end)
 
 
 def read_meta(path: str | Path) -> dict:

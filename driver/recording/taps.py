@@ -164,6 +164,20 @@ class ReplayLink:
                                    f"{lf.KIND_NAMES.get(rec.kind, rec.kind)} at t={rec.t_ns} ns")
         return rec
 
+    def recorded_first_seq(self) -> int | None:
+        """Sequence number of the next request the recorded client sent (a new client on this
+        link starts there, as the recorded one drew it), or None."""
+        from ..protocol.errors import FrameError
+        from ..protocol.framing import decode_frame
+
+        for rec in self._q:
+            if rec.kind == lf.TX:
+                try:
+                    return decode_frame(rec.payload[_RX.size:].split(b"\x00")[0]).seq
+                except FrameError:
+                    return None
+        return None
+
     def send(self, data) -> float:
         data = bytes(data)
         rec = self._next(lf.TX, f"send of {len(data)} bytes")
@@ -173,10 +187,10 @@ class ReplayLink:
         if sent != data:
             raise ReplayDivergence(f"replay: driver sent {data[:24].hex()}... but the log has "
                                    f"{body[:24].hex()}... at t={rec.t_ns} ns")
-        if status == TX_FAILED:
-            from ..errors import DeviceError
+        if status == TX_FAILED:     # links raise only for a lost link
+            from ..errors import LinkLostError
 
-            raise DeviceError(body[len(data) + 1:].decode(errors="replace"))
+            raise LinkLostError(body[len(data) + 1:].decode(errors="replace"))
         return t
 
     def recv(self, timeout: float):
@@ -186,9 +200,9 @@ class ReplayLink:
         if status == RX_TIMEOUT:
             return None
         if status == RX_CLOSED:
-            from ..errors import DeviceError
+            from ..errors import LinkLostError
 
-            raise DeviceError(body.decode(errors="replace"))
+            raise LinkLostError(body.decode(errors="replace"))
         return t, body
 
     def drain(self) -> int:

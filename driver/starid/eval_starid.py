@@ -14,12 +14,19 @@ propagated with the measured rate ω + b + η over the update period T to predic
 real attitude is q₁ = exp(ωT) q₀. The gyro error is paper 001's eq. 5 model: b = 1 °/h
 per axis (random sign), η ~ N(0, 0.5 °/h) per axis held over T.
 
-Per trial: success (≥ 2 stars identified correctly and none wrongly), any wrong id,
+Per trial: success (≥ 2 stars identified correctly and none wrongly), any wrong id (and
+wrong labels among all labels given),
 identification time (centroids → verified result; wall clock ``*_ms`` and the thread's
 CPU time ``*_cpu_ms``, which a busy shared machine does not inflate), stars in the field, and the
 neighbour-star selection of the reference stars (grid methods): the neighbour chosen in
 the observed (or extended C) image is the neighbour the true star's catalog pattern is
 oriented on (for the extended grid: one of its ``--orientations``).
+
+Pyramid is given the measured magnitudes with the centroids (its per-star check tests
+them; a peer gets them as brightness). ``--peer`` (Pyramid only): each worker also solves its fields with a peer of
+:mod:`gyrostar.starid.peers` (tetra3rs, or cedar-solve), after ours, on the same centroids
+(with their brightness) and a database built for the same field; reported with the ratios
+of its median and p99 time to ours.
 
 Trials run in chunks on a Dask cluster: a LocalCluster (``--workers`` processes, one
 thread each) unless ``--scheduler ADDRESS`` names an existing one.
@@ -34,11 +41,13 @@ import time
 import numpy as np
 
 from ..errors import ConfigError, NotAvailableError
+from .peers import PEERS
 
 HELP = "star identification Monte Carlo (paper 001 Figs 10–16): pyramid, grid, extended grid/triangle"
 METHODS = ("pyramid", "grid", "extended-grid", "extended-triangle")
 SWEEPS = ("fig10", "fig11", "fig12", "fig13", "fig14", "fig15", "fig16")
 DPH = math.pi / 180.0 / 3600.0
+FAST_PER_FIELD = 10  # navigation stars per field of Pyramid's first (thinned) tier
 
 
 @dataclasses.dataclass(frozen=True)
@@ -63,7 +72,7 @@ class TrialConfig:
     random_dph: float = 0.5
     orientations: int = 3
     xi: int = 4
-    peer: bool = False
+    peer: str = ""
 
     @property
     def total_pos_noise(self) -> float:
@@ -75,39 +84,61 @@ class TrialConfig:
 
 
 def configure(parser) -> None:
+    from ..cli.argtypes import positive_float
     from ..cli.main import add_json
 
     d = TrialConfig()
-    parser.add_argument("--method", choices=METHODS, default=d.method)
-    parser.add_argument("--preset", default=d.preset, help="camera preset (qian2015, xing2012)")
+    parser.add_argument("--method", choices=METHODS, default=d.method,
+                        help="identifier under test (default %(default)s)")
+    parser.add_argument("--preset", default=d.preset, help="camera preset: qian2015, xing2012 (default %(default)s)")
     parser.add_argument("--fov-deg", type=float, default=0.0,
-                        help="square camera of this full field instead of the preset (with --pixels)")
-    parser.add_argument("--pixels", type=int, default=d.pixels, help="pixels across, with --fov-deg")
-    parser.add_argument("--catalog", choices=("hip2", "gaia"), default=d.catalog)
-    parser.add_argument("--mag-limit", type=float, default=d.mag_limit, help="sensor limiting V")
+                        help="square camera of this full field, deg, instead of the preset (with --pixels; "
+                             "default 0: the preset's)")
+    parser.add_argument("--pixels", type=int, default=d.pixels,
+                        help="pixels across, with --fov-deg (default %(default)s)")
+    parser.add_argument("--catalog", choices=("hip2", "gaia"), default=d.catalog,
+                        help="star catalog (default %(default)s)")
+    parser.add_argument("--mag-limit", type=float, default=d.mag_limit,
+                        help="sensor limiting V magnitude (default %(default)s)")
     parser.add_argument("--per-field", type=int, default=-1,
-                        help="navigation stars per field for Pyramid (-1: 12 for gaia, all for hip2)")
-    parser.add_argument("--position-noise-px", type=float, default=d.pos_noise_px)
-    parser.add_argument("--mag-noise", type=float, default=d.mag_noise)
-    parser.add_argument("--catalog-position-noise-px", type=float, default=d.cat_pos_noise_px)
-    parser.add_argument("--catalog-mag-noise", type=float, default=d.cat_mag_noise)
-    parser.add_argument("--false-stars", type=int, default=0)
-    parser.add_argument("--update-period-s", type=float, default=d.update_period_s)
-    parser.add_argument("--rate-dps", type=float, default=d.rate_dps, help="largest body rate (°/s)")
-    parser.add_argument("--gyro-bias-dph", type=float, default=d.bias_dph)
-    parser.add_argument("--gyro-random-dph", type=float, default=d.random_dph)
+                        help="navigation stars per field for Pyramid (default -1: 12 for gaia, all for hip2)")
+    parser.add_argument("--position-noise-px", type=float, default=d.pos_noise_px,
+                        help="Gaussian centroid noise per axis, px (default %(default)s)")
+    parser.add_argument("--mag-noise", type=float, default=d.mag_noise,
+                        help="Gaussian noise on measured magnitudes, mag (default %(default)s)")
+    parser.add_argument("--catalog-position-noise-px", type=float, default=d.cat_pos_noise_px,
+                        help="Gaussian noise on catalog positions, px equivalent (default %(default)s)")
+    parser.add_argument("--catalog-mag-noise", type=float, default=d.cat_mag_noise,
+                        help="Gaussian noise on catalog magnitudes, mag (default %(default)s)")
+    parser.add_argument("--false-stars", type=int, default=0,
+                        help="spurious spots added per field (default %(default)s)")
+    parser.add_argument("--update-period-s", type=float, default=d.update_period_s,
+                        help="tracking: time between identifications, s (default %(default)s)")
+    parser.add_argument("--rate-dps", type=float, default=d.rate_dps,
+                        help="largest body rate, °/s (default %(default)s)")
+    parser.add_argument("--gyro-bias-dph", type=float, default=d.bias_dph,
+                        help="tracking: gyro constant drift, °/h (default %(default)s)")
+    parser.add_argument("--gyro-random-dph", type=float, default=d.random_dph,
+                        help="tracking: gyro random drift, °/h (default %(default)s)")
     parser.add_argument("--orientations", type=int, default=d.orientations,
-                        help="extended grid: catalog pattern orientations per candidate (1 = plain rule)")
-    parser.add_argument("--xi", type=int, default=d.xi, help="grid: minimum shared cells")
-    parser.add_argument("--peer", action="store_true",
-                        help="pyramid: also solve every field with cedar-solve (tetra3) in the same run")
-    parser.add_argument("--trials", type=int, default=1000)
-    parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--scheduler", default=None, help="address of an existing Dask scheduler")
-    parser.add_argument("--workers", type=int, default=2, help="LocalCluster worker processes")
+                        help="extended grid: catalog pattern orientations per candidate (1 = plain rule; "
+                             "default %(default)s)")
+    parser.add_argument("--xi", type=int, default=d.xi, help="grid: minimum shared cells ξ (default %(default)s)")
+    parser.add_argument("--peer", nargs="?", const="tetra3rs", default="", choices=PEERS,
+                        help="pyramid: also solve every field with this peer (default tetra3rs; or cedar-solve) "
+                             "in the same worker, after ours")
+    parser.add_argument("--trials", type=int, default=1000,
+                        help="Monte Carlo trials (per sweep point with --sweep; default %(default)s)")
+    parser.add_argument("--seed", type=int, default=1, help="random seed (default %(default)s)")
+    parser.add_argument("--scheduler", default=None, help="address of an existing Dask scheduler, e.g. tcp://host:8786 "
+                             "(default: a LocalCluster on this machine)")
+    parser.add_argument("--scheduler-timeout", type=positive_float, default=5.0, metavar="S",
+                        help="seconds to wait for --scheduler to answer (default %(default)s)")
+    parser.add_argument("--workers", type=int, default=2, help="LocalCluster worker processes (default %(default)s)")
     parser.add_argument("--sweep", choices=SWEEPS + ("all",), default=None,
-                        help="reproduce a figure of paper 001 (trials per point = --trials)")
-    parser.add_argument("--plot", default=None, help="write the sweep's figure(s) as PNG (file or folder)")
+                        help="reproduce a figure of paper 001 (trials per point = --trials; default: none)")
+    parser.add_argument("--plot", default=None,
+                        help="write the sweep's figure(s) as PNG (file or folder; default: none)")
     add_json(parser)
 
 
@@ -164,13 +195,15 @@ def setup(cfg: TrialConfig) -> dict:
     out = {"camera": cam, "sky": sky}
     if cfg.method == "pyramid":
         per_field = cfg.per_field if cfg.per_field >= 0 else (12 if cfg.catalog == "gaia" else 0)
-        index = load_index(cfg.catalog, cfg.mag_limit, round(diag + 0.01, 3), per_field)
-        out["ident"] = Pyramid(index, cam, sigma_px=sigma)
+        sep = round(diag + 0.01, 3)
+        index = load_index(cfg.catalog, cfg.mag_limit, sep, per_field)
+        # thinned first tier (the brightest stars per field) unless the index is thinned already
+        fast = load_index(cfg.catalog, cfg.mag_limit, sep, FAST_PER_FIELD) if per_field == 0 else None
+        out["ident"] = Pyramid(index, cam, sigma_px=sigma, fast_index=fast)
         if cfg.peer:
-            out["peer"] = _cedar() if cfg.catalog == "hip2" else "the peer's ids are HIP numbers: hip2 runs only"
-            if not isinstance(out["peer"], str) and not 10.0 <= cam.fov_x_deg <= 30.0:
-                out["peer"] = (f"cedar-solve's shipped database covers 10–30° fields, not {cam.fov_x_deg:.1f}°; "
-                               "building another needs its hip_main/tyc_main catalog files, not shipped")
+            from .peers import load_peer
+
+            out["peer"] = load_peer(cfg.peer, cam, cfg.mag_limit, cfg.catalog)
     elif cfg.method == "grid":
         params = GridParams(xi=cfg.xi)
         sep = round(max(diag, math.degrees(params.pr) * 2 ** 0.5) + 0.01, 3)
@@ -201,48 +234,6 @@ def _warm_up(cfg: TrialConfig, s: dict) -> None:
         s["ident"].identify(frame.uv)
 
 
-def _cedar():
-    """cedar-solve's Tetra3 with its shipped database, or the reason it is unavailable."""
-    try:
-        import tetra3
-    except Exception as exc:  # noqa: BLE001 - any import failure is a reason to skip
-        return f"cedar-solve not importable: {exc}"
-    # cedar-solve 0.5.1 pins numpy<2 and calls np.math.factorial; np.math was numpy's alias
-    # of the standard library module, removed in numpy 2 (this environment needs numpy 2)
-    if not hasattr(np, "math"):
-        np.math = math
-    import logging
-
-    logging.getLogger("tetra3").setLevel(logging.WARNING)
-    try:
-        t3 = tetra3.Tetra3()
-    except Exception as exc:  # noqa: BLE001
-        return f"cedar-solve default database not loadable: {exc}"
-    logging.getLogger("tetra3.Tetra3").setLevel(logging.WARNING)
-    return t3
-
-
-def cedar_solve(t3, uv, cam, truth, alt):
-    """Solve one field with tetra3; ``(solved, correct, ms)``. Its matched stars carry HIP
-    numbers (database built from hip_main), scored against truth like ours: correct means
-    ≥ 2 right and none wrong."""
-    from .synth import score
-
-    fov = 2.0 * math.degrees(math.atan((cam.width_px / 2.0) / cam.focal_length_px))
-    t0 = time.perf_counter()
-    sol = t3.solve_from_centroids(np.ascontiguousarray(uv[:, ::-1]), (cam.height_px, cam.width_px),
-                                  fov_estimate=fov, fov_max_error=0.1 * fov, return_matches=True)
-    ms = (time.perf_counter() - t0) * 1e3
-    if sol.get("RA") is None:
-        return False, False, ms
-    ids = -np.ones(uv.shape[0], dtype=np.int64)
-    for (y, x), cat_id in zip(np.asarray(sol["matched_centroids"]).reshape(-1, 2), sol["matched_catID"]):
-        k = int(np.argmin(np.hypot(uv[:, 0] - x, uv[:, 1] - y)))
-        ids[k] = int(np.ravel(cat_id)[0])
-    c, w = score(ids, truth, alt)
-    return True, c >= 2 and w == 0, ms
-
-
 def _gyro_prediction(q0_est, omega, cfg, rng):
     from ..attitude import quat_propagate
 
@@ -262,12 +253,15 @@ def run_chunk(cfg: TrialConfig, seed: int, n: int) -> dict:
     rng = np.random.default_rng(seed)
     pn, mn = cfg.total_pos_noise, cfg.total_mag_noise
     keys = ("success", "wrong", "n_stars", "ms", "cpu_ms", "nb_ok", "nb_total", "gyro_err_px", "peer_solved",
-            "peer_correct", "peer_ms")
+            "peer_correct", "peer_ms", "labels", "wrong_labels")
     res = {k: [] for k in keys}
     tracking = cfg.method.startswith("extended")
-    peer_frames = []
+    # every field first (same random stream as one trial after another: identifying draws
+    # nothing), then the identifications back to back, like the peer's below
+    trials = []
     for q in random_attitudes(n, rng):
         gyro_err = math.nan
+        q_pred = None
         if tracking:
             axis = rng.normal(size=3)
             omega = axis / np.linalg.norm(axis) * math.radians(rng.uniform(0.0, cfg.rate_dps))
@@ -277,21 +271,22 @@ def run_chunk(cfg: TrialConfig, seed: int, n: int) -> dict:
             q_true = quat_propagate(q, omega, cfg.update_period_s)
             q_pred = _gyro_prediction(q0, omega, cfg, rng)
             frame = sky.observe(cam, q_true, cfg.mag_limit, pn, mn, cfg.false_stars, rng)
-            t0, c0 = time.perf_counter(), time.thread_time()
-            r = ident.identify(frame.uv, q_pred)
-            dt, dc = time.perf_counter() - t0, time.thread_time() - c0
             # gyro-only prediction error at the boresight, px (paper 001 eq. 6 / Fig. 16)
             q_gyro = _gyro_prediction(q, omega, cfg, rng)
             gyro_err = math.acos(min(1.0, float(quat_to_dcm(q_gyro)[2] @ quat_to_dcm(q_true)[2]))) \
                 * cam.focal_length_px
         else:
             frame = sky.observe(cam, q, cfg.mag_limit, pn, mn, cfg.false_stars, rng)
-            t0, c0 = time.perf_counter(), time.thread_time()
-            r = ident.identify(frame.uv)
-            dt, dc = time.perf_counter() - t0, time.thread_time() - c0
+        trials.append((frame, q_pred, gyro_err))
+    for frame, q_pred, gyro_err in trials:
+        t0, c0 = time.perf_counter(), time.thread_time()
+        r = ident.identify(frame.uv, q_pred) if tracking else ident.identify(frame.uv, mag=frame.mag)
+        dt, dc = time.perf_counter() - t0, time.thread_time() - c0
         c, w = score(r.ids, frame.truth, frame.alt)
         res["success"].append(c >= 2 and w == 0)
         res["wrong"].append(w > 0)
+        res["labels"].append(c + w)
+        res["wrong_labels"].append(w)
         res["n_stars"].append(int(np.count_nonzero(frame.truth >= 0)))
         res["ms"].append(dt * 1e3)
         res["cpu_ms"].append(dc * 1e3)
@@ -299,17 +294,25 @@ def run_chunk(cfg: TrialConfig, seed: int, n: int) -> dict:
         res["nb_ok"].append(ok)
         res["nb_total"].append(tot)
         res["gyro_err_px"].append(gyro_err)
-        if cfg.method == "pyramid" and cfg.peer and not isinstance(s.get("peer"), str):
-            peer_frames.append(frame)
+    peer_frames = [t[0] for t in trials] if cfg.method == "pyramid" and cfg.peer and \
+        not isinstance(s.get("peer"), str) else []
     # the peer solves the same fields after ours, so neither runs on the other's cold caches
+    if peer_frames:
+        from .peers import score_peer
+
+        peer = s["peer"]
+        peer.solve(peer_frames[0].uv, peer_frames[0].mag, cam)  # untimed: loads the peer's code and data
     for frame in peer_frames:
-        solved, correct, ms = cedar_solve(s["peer"], frame.uv, cam, frame.truth, frame.alt)
+        solved, ids, r_est, ms = peer.solve(frame.uv, frame.mag, cam)
+        solved, correct = score_peer(peer, solved, ids, r_est, frame, cam)
         res["peer_solved"].append(solved)
         res["peer_correct"].append(correct)
         res["peer_ms"].append(ms)
     out = {k: np.asarray(v) for k, v in res.items()}
     if cfg.peer and isinstance(s.get("peer"), str):
         out["peer_reason"] = s["peer"]
+    elif peer_frames:
+        out["peer_name"] = s["peer"].name
     return out
 
 
@@ -358,7 +361,7 @@ def _neighbour_stats(cfg, ident, frame, index, row_of) -> tuple[int, int]:
 # ---------------------------------------------------------------- driver side
 def summarize(chunks: list[dict]) -> dict:
     """Aggregate chunk arrays into the reported figures."""
-    cat = {k: np.concatenate([c[k] for c in chunks]) for k in chunks[0] if k != "peer_reason"}
+    cat = {k: np.concatenate([c[k] for c in chunks]) for k in chunks[0] if k not in ("peer_reason", "peer_name")}
     n = int(cat["success"].size)
     ms = cat["ms"]
     nb_total = int(cat["nb_total"].sum())
@@ -367,6 +370,7 @@ def summarize(chunks: list[dict]) -> dict:
         "success_rate": float(cat["success"].mean()) if n else math.nan,
         "false_id_rate": float(cat["wrong"].mean()) if n else math.nan,
         "false_ids": int(cat["wrong"].sum()),
+        "wrong_label_rate": float(cat["wrong_labels"].sum() / max(1, cat["labels"].sum())),
         "neighbor_success_rate": float(cat["nb_ok"].sum() / nb_total) if nb_total else math.nan,
         "median_ms": float(np.median(ms)) if n else math.nan,
         "p99_ms": float(np.percentile(ms, 99)) if n else math.nan,
@@ -379,11 +383,12 @@ def summarize(chunks: list[dict]) -> dict:
     if np.any(np.isfinite(g)):
         out["gyro_error_px_rms"] = float(np.sqrt(np.nanmean(g ** 2)))
     if cat["peer_ms"].size:
-        out["peer"] = {"name": "cedar-solve (tetra3, default database)",
+        pm, p99 = float(np.median(cat["peer_ms"])), float(np.percentile(cat["peer_ms"], 99))
+        out["peer"] = {"name": next(c["peer_name"] for c in chunks if "peer_name" in c),
                        "success_rate": float(cat["peer_correct"].mean()),
                        "wrong_rate": float(np.mean(cat["peer_solved"] & ~cat["peer_correct"])),
-                       "median_ms": float(np.median(cat["peer_ms"])),
-                       "p99_ms": float(np.percentile(cat["peer_ms"], 99))}
+                       "median_ms": pm, "p99_ms": p99,
+                       "median_ratio": pm / out["median_ms"], "p99_ratio": p99 / out["p99_ms"]}
     reasons = [c["peer_reason"] for c in chunks if "peer_reason" in c]
     if reasons:
         out["peer"] = {"skipped": reasons[0]}
@@ -393,7 +398,7 @@ def summarize(chunks: list[dict]) -> dict:
 class Runner:
     """Submits trial chunks to a Dask cluster (local unless an address is given)."""
 
-    def __init__(self, scheduler: str | None, workers: int):
+    def __init__(self, scheduler: str | None, workers: int, connect_timeout_s: float = 5.0):
         try:
             from dask.distributed import Client, LocalCluster
         except ImportError as exc:
@@ -405,7 +410,13 @@ class Runner:
             logging.getLogger(name).setLevel(logging.ERROR)
         self.cluster = None
         if scheduler:
-            self.client = Client(scheduler)
+            try:
+                self.client = Client(scheduler, timeout=connect_timeout_s)
+            except (OSError, TimeoutError, ValueError) as exc:
+                from ..errors import DeviceError
+
+                raise DeviceError(f"--scheduler {scheduler}: no Dask scheduler answered within "
+                                  f"{connect_timeout_s:g} s ({type(exc).__name__})") from exc
         else:
             self.cluster = LocalCluster(n_workers=max(1, workers), threads_per_worker=1, processes=True,
                                         dashboard_address=None, silence_logs=logging.ERROR)
@@ -445,7 +456,7 @@ def run(args) -> int:
     cfg = config_from_args(args)
     if args.trials < 1:
         raise ConfigError(f"--trials must be ≥ 1, got {args.trials}")
-    runner = Runner(args.scheduler, args.workers)
+    runner = Runner(args.scheduler, args.workers, args.scheduler_timeout)
     try:
         if args.sweep:
             from .figures import run_sweeps
@@ -465,7 +476,7 @@ def run(args) -> int:
 def _text(r: dict) -> str:
     lines = [f"{r['method']}: {r['trials']} trials",
              f"  success {100 * r['success_rate']:.2f} %   false ids {r['false_ids']} "
-             f"({100 * r['false_id_rate']:.3f} %)",
+             f"({100 * r['false_id_rate']:.3f} % of fields; {100 * r['wrong_label_rate']:.4f} % of labels)",
              f"  neighbour selection {100 * r['neighbor_success_rate']:.2f} %" if
              math.isfinite(r["neighbor_success_rate"]) else "  neighbour selection n/a",
              f"  time median {r['median_ms']:.3f} ms  p99 {r['p99_ms']:.3f} ms (wall);  "
@@ -475,7 +486,8 @@ def _text(r: dict) -> str:
         p = r["peer"]
         lines.append(f"  peer: skipped ({p['skipped']})" if "skipped" in p else
                      f"  peer {p['name']}: success {100 * p['success_rate']:.2f} %  wrong "
-                     f"{100 * p['wrong_rate']:.2f} %  median {p['median_ms']:.3f} ms")
+                     f"{100 * p['wrong_rate']:.2f} %  median {p['median_ms']:.3f} ms ({p['median_ratio']:.2f}× ours)  "
+                     f"p99 {p['p99_ms']:.3f} ms ({p['p99_ratio']:.2f}× ours)")
     return "\n".join(lines)
 
 

@@ -6,27 +6,37 @@ analytic expected number of false matches is below ``p_false_max`` and the QUEST
 residuals of every identified star are within ``label_tol``.
 
 1. Triangles (i, j, k) of the observed stars in Mortari's smart order (index gaps
-   dj, dk grow slowly, so a spurious star spoils few consecutive triangles).
+   dj, dk grow slowly, so a spurious star spoils few consecutive triangles), first among
+   the brightest 8 spots, then 12, 16, 24 and all (adaptive spot budget; a wider budget
+   tries only the triangles with a new spot). With a thinned first tier (``fast_index``:
+   the brightest few navigation stars per field) the brightest spots are tried against
+   it before the full index.
 2. Each side θ looks up the catalog pairs within θ ± ε with the k-vector; candidate
    catalog triangles (x, y, z) need all three sides and the same handedness
    (mirror test: sign of b_i·(b_j×b_k) = sign of r_x·(r_y×r_z)).
 3. A fourth observed star r confirms a candidate when exactly one catalog star w has
-   all three angles to x, y, z within ε; a triangle is accepted when exactly one of its
-   candidates is confirmed.
-4. QUEST on the pyramid, then every other centroid is labelled with the nearest catalog
-   star within ``label_tol`` of its predicted direction; QUEST again over all and the
-   residual test of :mod:`gyrostar.starid.verify`.
+   all three angles to x, y, z within ε (w is looked up in the voxel grid around r's
+   direction predicted by the candidate's triad); a triangle is accepted when exactly
+   one of its candidates is confirmed.
+4. QUEST on the pyramid, then every other centroid (all of them, whatever the budget) is
+   labelled with the nearest catalog star within ``label_tol`` of its predicted direction;
+   QUEST again over all and the residual test of :mod:`gyrostar.starid.verify`.
 5. The per-star check (:class:`gyrostar.starid.star_check.StarCheck`, swappable): each
    label's own χ² (position, and magnitude when given) after QUEST; failures are
    unlabelled, the attitude re-solved over the rest, and fewer than three reject.
 
-Expected false matches for a uniform sky of N navigation stars and tolerance ε (rad):
-a triangle with side θ_ij and angle φ_k at vertex k:  E₃ = N³ ε³ sin θ_ij / (π sin φ_k)
-(N choices of x, N ε sin θ_ij stars in the band around x, N ε²/(π sin φ_k) stars in the
-intersection of the two other bands on the mirror-correct side); the confirming star
-multiplies by N ε²/(π sin φ_r); every further labelled star by N δ²/4 (δ = label_tol, a
-random star inside the cone; N there counts every indexed star, not only navigation
-stars). ``p_false`` reported is that product.
+Expected false matches for a sky of N navigation stars and tolerance ε (rad): a triangle
+with side θ_ij and angle φ_k at vertex k:  E₃ = N ρ² ε³ sin θ_ij / (π sin φ_k)
+(N choices of x, ρ ε sin θ_ij stars in the band around x, ρ ε²/(π sin φ_k) stars in the
+intersection of the two other bands on the mirror-correct side), where ρ is the star
+density around the candidate written as an all-sky count (N for an average sky; the
+galactic plane is up to 2–3 N, and a false match is most likely there); the confirming
+star multiplies by ρ ε²/(π sin φ_r) and by the n − 3 spots that could have confirmed;
+every further labelled star by ρ' δ²/4 (δ = label_tol, a random spot landing on a star;
+ρ' counts every indexed star, not only navigation stars). ``p_false`` reported is that
+product times the number of triangles tried (a union bound over the search); the search
+stops when no triangle could still pass even in the sparsest sky with every spot labelled.
+A 3-star field is accepted on a unique triangle when E₃ allows it.
 """
 
 from __future__ import annotations
@@ -46,9 +56,10 @@ from .result import StarIdResult, to_body_vectors
 from .star_check import StarCheck
 from .verify import verify_matches
 
-ST_OK, ST_TOO_FEW, ST_NO_MATCH, ST_REJECTED, ST_STAR_CHECK = 0, 1, 2, 3, 4
+ST_OK, ST_TOO_FEW, ST_NO_MATCH, ST_REJECTED, ST_STAR_CHECK, ST_SPARSE = 0, 1, 2, 3, 4, 5
 STATUS_TEXT = {ST_OK: "ok", ST_TOO_FEW: "fewer than 3 stars", ST_NO_MATCH: "no unique pyramid",
-               ST_REJECTED: "rejected by verification", ST_STAR_CHECK: "fewer than 3 stars pass the per-star check"}
+               ST_REJECTED: "rejected by verification", ST_STAR_CHECK: "fewer than 3 stars pass the per-star check",
+               ST_SPARSE: "every spot fits one pyramid but too few stars for p_false_max"}
 _MAX_CAND = 256
 
 
@@ -76,215 +87,339 @@ def _triple(a, b, c):
 
 
 @njit(cache=True)
-def _confirm(b, i, j, k, x, y, z, vec, nbs, nbi, eps, max_sep):
-    """First observed star r ∉ {i,j,k} with a unique catalog star w fitting all three angles.
+def _triad(b1, b2, r1, r2):
+    """Body → ICRS rotation (3, 3) taking ``b1`` onto ``r1`` and the plane of (b1, b2) onto (r1, r2)."""
+    out = np.empty((3, 3))
+    tb = np.cross(b1, b2)
+    tb /= np.sqrt(tb @ tb)
+    tr = np.cross(r1, r2)
+    tr /= np.sqrt(tr @ tr)
+    ub = np.cross(b1, tb)
+    ur = np.cross(r1, tr)
+    for a in range(3):
+        for c in range(3):
+            out[a, c] = r1[a] * b1[c] + tr[a] * tb[c] + ur[a] * ub[c]
+    return out
 
-    ``w`` is searched among the catalog neighbours of ``x`` (the neighbour table)."""
-    n = b.shape[0]
-    for r in range(n):
+
+@njit(cache=True)
+def _confirm(b, nb, i, j, k, x, y, z, vec, is_nav, vstart, vstars, vvec, vh, vg, eps, max_sep):
+    """First observed star r < ``nb``, r ∉ {i,j,k}, with a unique catalog star w fitting all three angles.
+
+    The candidate attitude (triad on the triangle's longest side) predicts r's ICRS direction;
+    ``w`` is searched in a cone around it (voxel grid) wide enough for the triad's error, and
+    must have all three angles to x, y, z within ε and the same handedness."""
+    # triad base: the longest side of the observed triangle
+    tij = _angle(b[i], b[j])
+    tik = _angle(b[i], b[k])
+    tjk = _angle(b[j], b[k])
+    if tij >= tik and tij >= tjk:
+        m = _triad(b[i], b[j], vec[x], vec[y])
+        base = tij
+    elif tik >= tjk:
+        m = _triad(b[i], b[k], vec[x], vec[z])
+        base = tik
+    else:
+        m = _triad(b[j], b[k], vec[y], vec[z])
+        base = tjk
+    vx, vy, vz = vec[x], vec[y], vec[z]
+    p = np.empty(3)
+    for r in range(nb):
         if r == i or r == j or r == k:
             continue
         tri = _angle(b[r], b[i])
-        trj = _angle(b[r], b[j])
-        trk = _angle(b[r], b[k])
         if tri > max_sep - eps or tri < 2.0 * eps:
             continue
-        found = -1
-        nfound = 0
+        trj = _angle(b[r], b[j])
+        trk = _angle(b[r], b[k])
+        for a in range(3):
+            p[a] = m[a, 0] * b[r, 0] + m[a, 1] * b[r, 1] + m[a, 2] * b[r, 2]
+        # the triad's error grows with the distance from its base star over the base length
+        radius = eps * (3.0 + 2.0 * max(tri, trj) / base)
         # angle windows as cosine windows: |θ − t| ≤ ε  ⇔  cos(t+ε) ≤ cos θ ≤ cos(t−ε)
         ci_lo, ci_hi = np.cos(tri + eps), np.cos(max(tri - eps, 0.0))
         cj_lo, cj_hi = np.cos(trj + eps), np.cos(max(trj - eps, 0.0))
         ck_lo, ck_hi = np.cos(trk + eps), np.cos(max(trk - eps, 0.0))
-        vx, vy, vz = vec[x], vec[y], vec[z]
         hand = np.sign(_triple(b[i], b[j], b[r]))
-        for p in range(nbs[x], nbs[x + 1]):
-            w = nbi[p]
-            if w == y or w == z:
-                continue
-            vw = vec[w]
-            d = vw[0] * vx[0] + vw[1] * vx[1] + vw[2] * vx[2]
-            if d < ci_lo or d > ci_hi:
-                continue
-            d = vw[0] * vy[0] + vw[1] * vy[1] + vw[2] * vy[2]
-            if d < cj_lo or d > cj_hi:
-                continue
-            d = vw[0] * vz[0] + vw[1] * vz[1] + vw[2] * vz[2]
-            if d < ck_lo or d > ck_hi:
-                continue
-            if np.sign(_triple(vx, vy, vw)) == hand:
-                found = w
-                nfound += 1
+        found = -1
+        nfound = 0
+        # voxel cells around the prediction (cone_query inline, without its allocation)
+        chord = 2.0 * np.sin(radius / 2.0)
+        cosr = np.cos(radius)
+        lo0 = max(0, int(np.floor((p[0] - chord + 1.0) / vh)))
+        hi0 = min(vg - 1, int(np.floor((p[0] + chord + 1.0) / vh)))
+        lo1 = max(0, int(np.floor((p[1] - chord + 1.0) / vh)))
+        hi1 = min(vg - 1, int(np.floor((p[1] + chord + 1.0) / vh)))
+        lo2 = max(0, int(np.floor((p[2] - chord + 1.0) / vh)))
+        hi2 = min(vg - 1, int(np.floor((p[2] + chord + 1.0) / vh)))
+        for c0 in range(lo0, hi0 + 1):
+            for c1 in range(lo1, hi1 + 1):
+                cell = (c0 * vg + c1) * vg
+                for t in range(vstart[cell + lo2], vstart[cell + hi2 + 1]):
+                    vw = vvec[t]
+                    if vw[0] * p[0] + vw[1] * p[1] + vw[2] * p[2] < cosr:
+                        continue
+                    w = vstars[t]
+                    if w == x or w == y or w == z or not is_nav[w]:
+                        continue
+                    d = vw[0] * vx[0] + vw[1] * vx[1] + vw[2] * vx[2]
+                    if d < ci_lo or d > ci_hi:
+                        continue
+                    d = vw[0] * vy[0] + vw[1] * vy[1] + vw[2] * vy[2]
+                    if d < cj_lo or d > cj_hi:
+                        continue
+                    d = vw[0] * vz[0] + vw[1] * vz[1] + vw[2] * vz[2]
+                    if d < ck_lo or d > ck_hi:
+                        continue
+                    if np.sign(_triple(vx, vy, vw)) == hand:
+                        found = w
+                        nfound += 1
         if nfound == 1:
             return r, found
     return -1, -1
 
 
 @njit(cache=True)
-def pyramid_core(b, vec, vmag, pt, pa, pb, kv, km, kq, nbs, nbi, vstart, vstars, vvec, vh, vg, eps, label_tol, max_sep,
-                 fov_radius, p_false_max, max_triangles, mark, nnav):
-    """Numba core. ``b`` (n,3) body unit vectors, brightest first; ``mark`` int64 (2N,) zeros (work, left zeroed).
+def _triangle_candidates(b, i, j, k, vec, pt, pa, pb, kv, km, kq, eps, mark, nxt, oth, cand):
+    """Catalog triangles (x, y, z) matching observed (i, j, k): all three sides within ε and
+    the same handedness. Writes up to ``_MAX_CAND`` rows of ``cand``; returns their count
+    (more than ``_MAX_CAND``: too many to be useful) and the work arrays ``nxt``/``oth``
+    (grown when needed). ``mark`` int32 (N,) zeros, left zeroed.
 
-    ``nnav``: number of navigation stars (the N of the triangle/pyramid probabilities).
-    Returns ``(match (n,), q (4,), p_false, status, triangles_tried)``.
-    """
+    The shorter of the ik/jk pair ranges (k-vector) is threaded into per-star linked lists
+    (heads in ``mark``, 1-based); each ij pair (x, y) in both orders walks the list of x (or
+    of y) and tests the third side by its cosine window, so one pass over each range."""
+    tij = _angle(b[i], b[j])
+    tik = _angle(b[i], b[k])
+    tjk = _angle(b[j], b[k])
+    s1, e1 = query(pt, kv, km, kq, tij - eps, tij + eps)
+    s2, e2 = query(pt, kv, km, kq, tik - eps, tik + eps)
+    s3, e3 = query(pt, kv, km, kq, tjk - eps, tjk + eps)
+    if e1 == s1 or e2 == s2 or e3 == s3:
+        return 0, nxt, oth
+    # thread the shorter range: from x (ik pairs) or from y (jk pairs)
+    from_x = (e2 - s2) <= (e3 - s3)
+    if from_x:
+        s, e = s2, e2
+        c_lo, c_hi = np.cos(tjk + eps), np.cos(max(tjk - eps, 0.0))
+    else:
+        s, e = s3, e3
+        c_lo, c_hi = np.cos(tik + eps), np.cos(max(tik - eps, 0.0))
+    m = e - s
+    if nxt.shape[0] < 2 * m:
+        nxt = np.empty(4 * m, dtype=np.int32)
+        oth = np.empty(4 * m, dtype=np.int32)
+    for p in range(s, e):
+        t = 2 * (p - s)
+        a = pa[p]
+        c = pb[p]
+        nxt[t] = mark[a] - 1
+        oth[t] = c
+        mark[a] = t + 1
+        nxt[t + 1] = mark[c] - 1
+        oth[t + 1] = a
+        mark[c] = t + 2
+    hand = np.sign(_triple(b[i], b[j], b[k]))
+    nc = 0
+    for p in range(s1, e1):
+        for o in range(2):
+            x = pa[p] if o == 0 else pb[p]
+            y = pb[p] if o == 0 else pa[p]
+            h = x if from_x else y
+            u = y if from_x else x   # the vertex whose side to z is tested by angle
+            t = mark[h] - 1
+            if t < 0:
+                continue
+            vu = vec[u]
+            while t >= 0:
+                z = oth[t]
+                t = nxt[t]
+                if z == u:
+                    continue
+                vzz = vec[z]
+                d = vu[0] * vzz[0] + vu[1] * vzz[1] + vu[2] * vzz[2]
+                if d < c_lo or d > c_hi:
+                    continue
+                if np.sign(_triple(vec[x], vec[y], vzz)) != hand:
+                    continue
+                if nc < _MAX_CAND:
+                    cand[nc, 0] = x
+                    cand[nc, 1] = y
+                    cand[nc, 2] = z
+                nc += 1
+    for p in range(s, e):
+        mark[pa[p]] = 0
+        mark[pb[p]] = 0
+    return nc, nxt, oth
+
+
+@njit(cache=True)
+def _search(b, vec, vmag, is_nav, pt, pa, pb, kv, km, kq, vstart, vstars, vvec, vh, vg, eps, label_tol, max_sep,
+            fov_radius, p_false_max, max_triangles, mark, nnav, nloc, nmin, lab_nloc, max_spots, budgets, tried,
+            status):
+    """Pyramid search over one navigation-star tier (pair table ``pt/pa/pb`` with its k-vector,
+    ``is_nav``/``nnav`` its stars, ``nloc`` their local density as an all-sky count and ``nmin``
+    its least value; only the brightest ``max_spots`` spots form pyramids);
+    ``tried``/``status`` carry over from earlier tiers.
+    Returns ``(match (n,), q (4,), p_false, status, triangles_tried)``."""
     n = b.shape[0]
     nstar = vec.shape[0]
     match = -np.ones(n, dtype=np.int64)
     q = np.array([0.0, 0.0, 0.0, 1.0])
-    if n < 3:
-        return match, q, np.inf, ST_TOO_FEW, 0
     cand = np.empty((_MAX_CAND, 3), dtype=np.int64)
-    mark2 = mark[nstar:]
-    nxt = np.empty(64, dtype=np.int64)
-    oth = np.empty(64, dtype=np.int64)
-    nxt2 = np.empty(64, dtype=np.int64)
-    oth2 = np.empty(64, dtype=np.int64)
+    last_q = np.zeros(4)
+    same_q = np.cos(5.0 * label_tol)  # two attitudes within 10 label tolerances: the same solution
+    lab_min = nstar * label_tol * label_tol / 4.0 * nmin / nnav  # least chance of a random label
+    nxt = np.empty(256, dtype=np.int32)
+    oth = np.empty(256, dtype=np.int32)
+    prev = 0
+    for lev in range(budgets.shape[0] + 1):
+        nb = min(n, max_spots) if lev == budgets.shape[0] else min(n, budgets[lev], max_spots)
+        if nb <= prev:
+            continue
+        for dj in range(1, nb - 1):
+            for dk in range(1, nb - dj):
+                for i in range(0, nb - dj - dk):
+                    j = i + dj
+                    k = j + dk
+                    if k < prev:
+                        continue  # tried at a smaller budget
+                    if tried >= max_triangles:
+                        return match, q, np.inf, status, tried
+                    tij = _angle(b[i], b[j])
+                    tik = _angle(b[i], b[k])
+                    tjk = _angle(b[j], b[k])
+                    if (tij > max_sep - eps or tik > max_sep - eps or tjk > max_sep - eps
+                            or tij < 2.0 * eps or tik < 2.0 * eps or tjk < 2.0 * eps):
+                        continue
+                    sin_k = max(_sin_vertex(b[k], b[i], b[j]), 0.05)
+                    # E₃ with the local density ρ (an all-sky count) for the stars around x
+                    g3 = nnav * eps ** 3 * np.sin(tij) / (np.pi * sin_k)
+                    # early rejection: even in the sparsest sky, with the best-placed confirming star
+                    # and every other spot labelled, this triangle's pyramid could not pass the bound
+                    if n == 3:
+                        best = g3 * nmin * nmin * (tried + 1)
+                    else:
+                        best = (g3 * nmin ** 3 * eps * eps / np.pi * (nb - 3) * (lab_min ** (n - 4) if lab_min < 1.0
+                                                                                   else 1.0) * (tried + 1))
+                    if best > p_false_max:
+                        continue
+                    tried += 1
+                    nc, nxt, oth = _triangle_candidates(b, i, j, k, vec, pt, pa, pb, kv, km, kq, eps, mark, nxt,
+                                                        oth, cand)
+                    if nc == 0 or nc > _MAX_CAND:
+                        continue
+                    if n == 3:
+                        rho = max(nloc[cand[0, 0]], nloc[cand[0, 1]], nloc[cand[0, 2]])
+                        e3v = g3 * rho * rho
+                        if nc == 1 and e3v * tried <= p_false_max:
+                            match[0] = cand[0, 0]
+                            match[1] = cand[0, 1]
+                            match[2] = cand[0, 2]
+                            q, match, nok, _ = verify_matches(b, vec, match, label_tol)
+                            if nok == 3:
+                                return match, q, e3v * tried, ST_OK, tried
+                            match[:] = -1
+                            return match, q, np.inf, ST_REJECTED, tried
+                        status = ST_REJECTED if nc == 1 else status
+                        continue
+                    nconf = 0
+                    best = -1
+                    br = -1
+                    bw = -1
+                    for c in range(nc):
+                        r, w = _confirm(b, nb, i, j, k, cand[c, 0], cand[c, 1], cand[c, 2], vec, is_nav, vstart,
+                                        vstars, vvec, vh, vg, eps, max_sep)
+                        if r >= 0:
+                            nconf += 1
+                            best = c
+                            br = r
+                            bw = w
+                    if nconf != 1:
+                        continue
+                    sin_r = max(_sin_vertex(b[br], b[i], b[j]), 0.05)
+                    x = cand[best, 0]
+                    y = cand[best, 1]
+                    z = cand[best, 2]
+                    rho = max(nloc[x], nloc[y], nloc[z], nloc[bw])
+                    # any of the nb − 3 other spots could have confirmed a false candidate
+                    pf = g3 * rho ** 3 * eps * eps / (np.pi * sin_r) * (nb - 3) * tried
+                    lab = lab_nloc[x] * label_tol * label_tol / 4.0  # chance of a random label near x
+                    # attitude from the pyramid, then label every spot
+                    bb = np.empty((4, 3))
+                    rr = np.empty((4, 3))
+                    bb[0] = b[i]
+                    bb[1] = b[j]
+                    bb[2] = b[k]
+                    bb[3] = b[br]
+                    rr[0] = vec[x]
+                    rr[1] = vec[y]
+                    rr[2] = vec[z]
+                    rr[3] = vec[bw]
+                    q4, _ = quest(bb, rr, np.ones(4))
+                    match[:] = -1
+                    match[i] = x
+                    match[j] = y
+                    match[k] = z
+                    match[br] = bw
+                    label_rest(b, q4, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, label_tol, match)
+                    q, out, nok, _ = verify_matches(b, vec, match, label_tol)
+                    if out[i] != x or out[j] != y or out[k] != z or out[br] != bw:
+                        status = ST_REJECTED
+                        match[:] = -1
+                        continue
+                    pf *= lab ** (nok - 4)
+                    if pf > p_false_max:
+                        status = ST_REJECTED
+                        match[:] = -1
+                        # every spot labelled, or a second pyramid at the same attitude labelling
+                        # half the spots or more, and still the bound is not met: the field has too few stars for
+                        # the confidence asked (speed only: stopping never outputs anything)
+                        if nok == n or (2 * nok >= n and abs(q @ last_q) >= same_q):
+                            return match, q, np.inf, ST_SPARSE, tried
+                        if 2 * nok >= n:
+                            last_q = q
+                        continue
+                    return out, q, pf, ST_OK, tried
+        prev = nb
+    return match, q, np.inf, status, tried
+
+
+@njit(cache=True)
+def pyramid_core(b, vec, vmag, tiers, lab_nloc, vstart, vstars, vvec, vh, vg, eps, label_tol, max_sep, fov_radius,
+                 p_false_max, max_triangles, mark, budgets):
+    """Numba core. ``b`` (n,3) body unit vectors, brightest first; ``mark`` int32 (N,) zeros (work, left zeroed).
+
+    ``tiers``: tuple of navigation-star tiers, searched in order, each
+    ``(is_nav, pair_theta, pair_a, pair_b, kv, nloc, (kv_m, kv_q, n_nav, max_spots, nloc_min))``
+    over the same star numbering (a thinned tier of the brightest stars per field, on the brightest few
+    spots, first; then all stars on all spots).
+    Adaptive spot budget: triangles and confirming stars come from the brightest
+    ``budgets[0]`` spots first; when no pyramid is accepted there, from the brightest
+    ``budgets[1]`` (only triangles with a new spot), and so on, then from all. Labelling and
+    the false-match count use every spot. The false-match count takes the star density
+    around the candidate: ``nloc`` (per star) is the tier's navigation stars within the pair
+    radius scaled to an all-sky count (N where the sky is average; ``n_nav`` anchors,
+    ``nloc`` for the stars found near them), ``lab_nloc`` the same for every indexed star
+    (the labels); ``max_triangles``
+    bounds the triangles tried over all tiers. The accepted ``p_false`` is the pyramid's
+    expected false-match count times the number of triangles tried so far (a union bound
+    over the search), and must be ≤ ``p_false_max``.
+    Returns ``(match (n,), q (4,), p_false, status, triangles_tried)``.
+    """
+    n = b.shape[0]
+    if n < 3:
+        return -np.ones(n, dtype=np.int64), np.array([0.0, 0.0, 0.0, 1.0]), np.inf, ST_TOO_FEW, 0
     tried = 0
     status = ST_NO_MATCH
-    for dj in range(1, n - 1):
-        for dk in range(1, n - dj):
-            for i in range(0, n - dj - dk):
-                j = i + dj
-                k = j + dk
-                if tried >= max_triangles:
-                    return match, q, np.inf, status, tried
-                tij = _angle(b[i], b[j])
-                tik = _angle(b[i], b[k])
-                tjk = _angle(b[j], b[k])
-                if (tij > max_sep - eps or tik > max_sep - eps or tjk > max_sep - eps
-                        or tij < 2.0 * eps or tik < 2.0 * eps or tjk < 2.0 * eps):
-                    continue
-                tried += 1
-                s1, e1 = query(pt, kv, km, kq, tij - eps, tij + eps)
-                s2, e2 = query(pt, kv, km, kq, tik - eps, tik + eps)
-                s3, e3 = query(pt, kv, km, kq, tjk - eps, tjk + eps)
-                if e1 == s1 or e2 == s2 or e3 == s3:
-                    continue
-                # linked lists of the ik pairs per catalog star (head: mark, 1-based)
-                nik = e2 - s2
-                if nxt.shape[0] < 2 * nik:
-                    nxt = np.empty(4 * nik, dtype=np.int64)
-                    oth = np.empty(4 * nik, dtype=np.int64)
-                for p in range(s2, e2):
-                    e = 2 * (p - s2)
-                    nxt[e] = mark[pa[p]] - 1
-                    oth[e] = pb[p]
-                    mark[pa[p]] = e + 1
-                    nxt[e + 1] = mark[pb[p]] - 1
-                    oth[e + 1] = pa[p]
-                    mark[pb[p]] = e + 2
-                njk = e3 - s3
-                if nxt2.shape[0] < 2 * njk:
-                    nxt2 = np.empty(4 * njk, dtype=np.int64)
-                    oth2 = np.empty(4 * njk, dtype=np.int64)
-                for p in range(s3, e3):
-                    e = 2 * (p - s3)
-                    nxt2[e] = mark2[pa[p]] - 1
-                    oth2[e] = pb[p]
-                    mark2[pa[p]] = e + 1
-                    nxt2[e + 1] = mark2[pb[p]] - 1
-                    oth2[e + 1] = pa[p]
-                    mark2[pb[p]] = e + 2
-                hand = np.sign(_triple(b[i], b[j], b[k]))
-                nc = 0
-                for p in range(s1, e1):
-                    for o in range(2):
-                        x = pa[p] if o == 0 else pb[p]
-                        y = pb[p] if o == 0 else pa[p]
-                        if mark2[y] == 0:
-                            continue
-                        e = mark[x] - 1
-                        while e >= 0:
-                            z = oth[e]
-                            e = nxt[e]
-                            if z == y:
-                                continue
-                            # is (y, z) a jk pair?
-                            f = mark2[y] - 1
-                            hit = False
-                            while f >= 0:
-                                if oth2[f] == z:
-                                    hit = True
-                                    break
-                                f = nxt2[f]
-                            if not hit:
-                                continue
-                            if np.sign(_triple(vec[x], vec[y], vec[z])) != hand:
-                                continue
-                            if nc < _MAX_CAND:
-                                cand[nc, 0] = x
-                                cand[nc, 1] = y
-                                cand[nc, 2] = z
-                            nc += 1
-                for p in range(s2, e2):
-                    mark[pa[p]] = 0
-                    mark[pb[p]] = 0
-                for p in range(s3, e3):
-                    mark2[pa[p]] = 0
-                    mark2[pb[p]] = 0
-                if nc == 0 or nc > _MAX_CAND:
-                    continue
-                sin_k = max(_sin_vertex(b[k], b[i], b[j]), 0.05)
-                e3v = (nnav * eps) ** 3 * np.sin(tij) / (np.pi * sin_k)
-                if n == 3:
-                    if nc == 1 and e3v <= p_false_max:
-                        match[0] = cand[0, 0]
-                        match[1] = cand[0, 1]
-                        match[2] = cand[0, 2]
-                        q, match, nok, _ = verify_matches(b, vec, match, label_tol)
-                        if nok == 3:
-                            return match, q, e3v, ST_OK, tried
-                        match[:] = -1
-                        return match, q, np.inf, ST_REJECTED, tried
-                    continue
-                nconf = 0
-                best = -1
-                br = -1
-                bw = -1
-                for c in range(nc):
-                    r, w = _confirm(b, i, j, k, cand[c, 0], cand[c, 1], cand[c, 2], vec, nbs, nbi, eps, max_sep)
-                    if r >= 0:
-                        nconf += 1
-                        best = c
-                        br = r
-                        bw = w
-                if nconf != 1:
-                    continue
-                sin_r = max(_sin_vertex(b[br], b[i], b[j]), 0.05)
-                pf = e3v * nnav * eps * eps / (np.pi * sin_r)
-                x = cand[best, 0]
-                y = cand[best, 1]
-                z = cand[best, 2]
-                # attitude from the pyramid, then label the rest
-                bb = np.empty((4, 3))
-                rr = np.empty((4, 3))
-                bb[0] = b[i]
-                bb[1] = b[j]
-                bb[2] = b[k]
-                bb[3] = b[br]
-                rr[0] = vec[x]
-                rr[1] = vec[y]
-                rr[2] = vec[z]
-                rr[3] = vec[bw]
-                q4, _ = quest(bb, rr, np.ones(4))
-                match[:] = -1
-                match[i] = x
-                match[j] = y
-                match[k] = z
-                match[br] = bw
-                label_rest(b, q4, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, label_tol, match)
-                q, out, nok, _ = verify_matches(b, vec, match, label_tol)
-                if out[i] != x or out[j] != y or out[k] != z or out[br] != bw:
-                    status = ST_REJECTED
-                    match[:] = -1
-                    continue
-                extra = nok - 4
-                pf *= (nstar * label_tol * label_tol / 4.0) ** extra
-                if pf > p_false_max:
-                    status = ST_REJECTED
-                    match[:] = -1
-                    continue
-                return out, q, pf, ST_OK, tried
+    for tier in tiers:
+        is_nav, pt, pa, pb, kv, nloc, kmq = tier
+        match, q, pf, status, tried = _search(b, vec, vmag, is_nav, pt, pa, pb, kv, kmq[0], kmq[1], vstart, vstars,
+                                              vvec, vh, vg, eps, label_tol, max_sep, fov_radius, p_false_max,
+                                              max_triangles, mark, kmq[2], nloc, kmq[4], lab_nloc, int(kmq[3]),
+                                              budgets, tried, status)
+        if status == ST_OK or status == ST_SPARSE or tried >= max_triangles:
+            return match, q, pf, status, tried
     return match, q, np.inf, status, tried
 
 
@@ -294,6 +429,9 @@ def label_rest(b, q, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, tol, m
 
     A label is given only when it is unambiguous both ways: exactly one catalog star within
     ``tol`` of the observed star, and no other observed star within ``tol`` of that one.
+    Then every label, the caller's included, is dropped when two observed stars lie within
+    ``tol`` of its catalog star, and moves to the observed star nearest its catalog star
+    (or is dropped when that one is named already).
     """
     a = quat_to_dcm(q)
     bore = a[2].copy()  # boresight in ICRS = A^T e_z
@@ -329,6 +467,35 @@ def label_rest(b, q, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, tol, m
         if hits == 1 and count_obs[bt] == 1 and not used[bt]:
             match[i] = near[bt]
             used[bt] = True
+    # every label (the caller's too) belongs to the spot nearest its star: a spurious spot
+    # close to a star must not keep the star's name while the star's own spot goes unnamed
+    for i in range(n):
+        s = match[i]
+        if s < 0:
+            continue
+        best = i
+        bd = obs_icrs[i, 0] * vec[s, 0] + obs_icrs[i, 1] * vec[s, 1] + obs_icrs[i, 2] * vec[s, 2]
+        within = 0
+        for j in range(n):
+            d = obs_icrs[j, 0] * vec[s, 0] + obs_icrs[j, 1] * vec[s, 1] + obs_icrs[j, 2] * vec[s, 2]
+            if d >= cos_tol:
+                within += 1
+            if d > bd:
+                bd = d
+                best = j
+        if within >= 2:
+            match[i] = -1  # two spots at the star: either could be it
+        elif best != i:
+            match[i] = -1
+            if match[best] < 0 and bd >= cos_tol:
+                match[best] = s
+
+
+def local_density(index: StarIndex) -> np.ndarray:
+    """Per star: the navigation stars within the pair radius around it, scaled to an all-sky
+    count (the N a uniform sky of that density would have; at least one star per cap)."""
+    frac = (1.0 - math.cos(index.max_sep)) / 2.0
+    return np.maximum(np.diff(index.nb_start), 1).astype(np.float64) / frac
 
 
 @dataclasses.dataclass
@@ -337,7 +504,14 @@ class Pyramid:
 
     ``sigma_px``: centroid noise (px, 1σ) the tolerances are built from:
     ε = n_sigma·√2·σ (pair angles), label_tol = n_sigma·1.25·σ (labelling/residuals).
-    ``max_stars``: only the brightest this many centroids are used for the pyramid.
+    ``budgets``: the adaptive spot budget — pyramids are searched among the brightest
+    ``budgets[0]`` centroids, then (when none is accepted) among the brightest
+    ``budgets[1]``, and so on, then among all; every centroid is labelled and counted in
+    the false-match bound whatever the budget. ``max_triangles`` bounds the search.
+    ``fast_index``: optional thinned index over the same stars (``load_index(..., per_field=k)``:
+    the brightest k navigation stars per field), searched first — its pair table is a few
+    per cent of the full one and its smaller N makes its pyramids more certain — on the
+    brightest ``fast_spots`` centroids; the full index follows when it finds nothing.
     ``check``: the per-star verification stage (any object with ``apply(b, mag, ref, vmag,
     match) -> (q, match, n_ok)``); default a :class:`StarCheck` at ``sigma_px`` and the
     index's limiting magnitude, three stars minimum.
@@ -348,13 +522,19 @@ class Pyramid:
     sigma_px: float = 0.5
     n_sigma: float = 3.0
     p_false_max: float = 1e-6
-    max_stars: int = 8
+    budgets: tuple = (8, 12, 16, 24)
+    fast_index: object = None
+    fast_spots: int = 10
     max_triangles: int = 400
     check: object = None
 
     def __post_init__(self) -> None:
-        if not (self.sigma_px > 0 and self.n_sigma > 0 and self.max_stars >= 3):
-            raise ConfigError("pyramid needs sigma_px > 0, n_sigma > 0 and max_stars ≥ 3")
+        if not (self.sigma_px > 0 and self.n_sigma > 0 and self.max_triangles >= 1):
+            raise ConfigError("pyramid needs sigma_px > 0, n_sigma > 0 and max_triangles ≥ 1")
+        if not (len(self.budgets) >= 1 and all(int(k) >= 3 for k in self.budgets)
+                and list(self.budgets) == sorted(self.budgets)):
+            raise ConfigError(f"pyramid spot budgets must be ascending and ≥ 3, got {self.budgets!r}")
+        self._budgets = np.asarray(self.budgets, dtype=np.int64)
         self._params = self.camera.as_array()
         sig = self.sigma_px / self.camera.focal_length_px
         self.eps = self.n_sigma * math.sqrt(2.0) * sig + 2e-6
@@ -364,8 +544,19 @@ class Pyramid:
         if 2.0 * self.fov_radius > self.index.max_sep + 1e-9:
             raise ConfigError(f"index pairs reach {math.degrees(self.index.max_sep):.2f}° but the camera "
                               f"diagonal is {math.degrees(2 * self.fov_radius):.2f}°")
-        self._mark = np.zeros(2 * len(self.index), dtype=np.int64)
-        self._nnav = int(np.count_nonzero(self.index.is_nav))
+        self._mark = np.zeros(len(self.index), dtype=np.int32)
+        tiers = [self.index] if self.fast_index is None else [self.fast_index, self.index]
+        if self.fast_index is not None and not (len(self.fast_index) == len(self.index)
+                                                and np.array_equal(self.fast_index.ids, self.index.ids)):
+            raise ConfigError("pyramid fast_index must index the same stars as index (same catalog and limit)")
+        caps = [float(self.fast_spots)] * (len(tiers) - 1) + [1e9]
+        dens = [local_density(t) for t in tiers]
+        self._tiers = tuple((t.is_nav, t.pair_theta, t.pair_a, t.pair_b, t.kv, d,
+                             (float(t.kv_m), float(t.kv_q), float(np.count_nonzero(t.is_nav)), cap,
+                              float(d[t.is_nav].min())))
+                            for t, cap, d in zip(tiers, caps, dens))
+        # every indexed star (labels): the full tier's navigation density scaled to all stars
+        self._lab_nloc = dens[-1] * (len(self.index) / np.count_nonzero(self.index.is_nav))
         if self.check is None:
             self.check = StarCheck(self.sigma_px, self.camera.focal_length_px, mag_limit=self.index.mag_limit,
                                    min_stars=3)
@@ -373,23 +564,21 @@ class Pyramid:
     def identify_vectors(self, b: np.ndarray, mag=None) -> StarIdResult:
         """Identify body unit vectors (n, 3), brightest first; ``mag`` (n,) measured V or None."""
         ix = self.index
-        nb = min(b.shape[0], self.max_stars)
-        match, q, pf, st, tried = pyramid_core(
-            np.ascontiguousarray(b[:nb]), ix.vectors, ix.vmag, ix.pair_theta, ix.pair_a, ix.pair_b, ix.kv,
-            ix.kv_m, ix.kv_q, ix.nb_start, ix.nb_idx, ix.vox_start, ix.vox_stars, ix.vox_vec, ix.vox_h, ix.vox_g,
-            self.eps, self.label_tol, ix.max_sep, self.fov_radius, self.p_false_max, self.max_triangles, self._mark,
-            self._nnav)
-        full = -np.ones(b.shape[0], dtype=np.int64)
-        full[:nb] = match
-        if st == ST_OK and b.shape[0] > nb:
-            label_rest(np.ascontiguousarray(b), q, ix.vectors, ix.vmag, ix.vox_start, ix.vox_stars, ix.vox_vec,
-                       ix.vox_h, ix.vox_g, self.fov_radius, self.label_tol, full)
-            q, full, _, _ = verify_matches(np.ascontiguousarray(b), ix.vectors, full, self.label_tol)
+        b = np.ascontiguousarray(b, dtype=np.float64)
+        full, q, pf, st, tried = pyramid_core(
+            b, ix.vectors, ix.vmag, self._tiers, self._lab_nloc, ix.vox_start, ix.vox_stars, ix.vox_vec, ix.vox_h,
+            ix.vox_g, self.eps, self.label_tol, ix.max_sep, self.fov_radius, self.p_false_max, self.max_triangles,
+            self._mark, self._budgets)
+        text = STATUS_TEXT[int(st)]
         if st == ST_OK:
             q, full, n_ok = self.check.apply(b, mag, ix.vectors, ix.vmag, full)
             if n_ok == 0:
                 st = ST_STAR_CHECK
-        return StarIdResult.make(ix, full, q, st == ST_OK, STATUS_TEXT[int(st)], pf, "pyramid")
+                text = STATUS_TEXT[ST_STAR_CHECK]
+            elif n_ok <= 4:
+                # a sparse field, accepted because the bound allowed it at p_false_max
+                text = f"ok: sparse field, {n_ok} stars (p_false {pf:.1e})"
+        return StarIdResult.make(ix, full, q, st == ST_OK, text, pf, "pyramid")
 
     def identify(self, uv: np.ndarray, mag=None) -> StarIdResult:
         """Identify centroids ``uv`` (n, 2) [col, row] px, brightest first; ``mag`` (n,)

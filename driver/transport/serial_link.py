@@ -17,7 +17,7 @@ import time
 import serial
 import serial.threaded
 
-from ..errors import DeviceError
+from ..errors import DeviceError, LinkLostError
 
 
 class _Packets(serial.threaded.Packetizer):
@@ -105,13 +105,13 @@ class SerialLink:
     def send(self, data: bytes) -> float:
         """Write ``data``; returns the host monotonic time (s) just before the write."""
         if self._proto.lost is not None:
-            raise DeviceError(f"serial link {self.url} is down: {self._proto.lost}")
+            raise LinkLostError(f"serial link {self.url} is down: {self._proto.lost}")
         with self._write_lock:
             t = time.monotonic()
             try:
                 self.port.write(data)
             except (serial.SerialException, OSError) as exc:
-                raise DeviceError(f"write to serial link {self.url} failed: {exc}") from exc
+                raise LinkLostError(f"write to serial link {self.url} failed: {exc}") from exc
         return t
 
     def recv(self, timeout: float) -> tuple[float, bytes] | None:
@@ -122,7 +122,7 @@ class SerialLink:
             return None
         if packet is None:
             self._queue.put((t, None))  # keep the sentinel for later callers
-            raise DeviceError(f"serial link {self.url} closed: {self._proto.lost}")
+            raise LinkLostError(f"serial link {self.url} closed: {self._proto.lost}")
         return t, packet
 
     def drain(self) -> int:

@@ -50,6 +50,14 @@ def make(part="bmi088", wire="i2c", source=None, ppm=1500.0, faults=True):
     return clock, model, bus, cls(regs, clock=clock)
 
 
+def started(part="bmi088", wire="i2c", range_dps=2000, watermark=10, **kw):
+    """``make`` + configure (400 Hz) + start."""
+    clock, model, bus, gyro = make(part, wire, **kw)
+    gyro.configure(400, range_dps, watermark)
+    gyro.start()
+    return clock, model, bus, gyro
+
+
 def run(clock, model, gyro, out, seconds, step=0.025, events=True, rng=None):
     t_end = clock.now() + seconds
     while clock.now() < t_end:
@@ -259,9 +267,7 @@ def test_bmi088_rate_registers_latch_msb():
 
 
 def test_stuck_fifo_status_is_a_device_error_and_keeps_rows():
-    clock, model, bus, gyro = make("bmi088", "i2c")
-    gyro.configure(400, 2000, 10)
-    gyro.start()
+    clock, model, bus, gyro = started("bmi088", "i2c")
     out = GyroSamples(2000)
     run(clock, model, gyro, out, 0.5)
     n = out.n
@@ -318,9 +324,7 @@ def test_bad_arguments_are_clear():
 def test_first_read_after_overflow_flags_the_gap_and_keeps_indices(part, wire, events, ppm):
     """The FIFO overflows before the first read: the frames lost before it are a flagged gap
     and every index counts from the FIFO start (the bug: no gap, all indices 50+ low)."""
-    clock, model, bus, gyro = make(part, wire, ppm=ppm)
-    gyro.configure(400, 2000, 10)
-    gyro.start()
+    clock, model, bus, gyro = started(part, wire, ppm=ppm)
     k0 = model.next_sample_index          # model index of the first frame the FIFO holds
     clock.advance(0.6)                    # 240 frames: BMI088 FIFO keeps 100, L3GD20H 32
     out = GyroSamples(6000)
@@ -353,9 +357,7 @@ def test_first_read_after_overflow_flags_the_gap_and_keeps_indices(part, wire, e
 def test_burst_failing_part_way_flags_the_drained_frames(part, wire):
     """A FIFO burst fails after the part shifted out half of it: those frames are a flagged
     gap and indices and times stay right (the bug: no gap, indices low from then on)."""
-    clock, model, bus, gyro = make(part, wire)
-    gyro.configure(400, 2000, 10)
-    gyro.start()
+    clock, model, bus, gyro = started(part, wire)
     out = GyroSamples(8000)
     events = part == "bmi088"
     run(clock, model, gyro, out, 2.0, events=events)
@@ -418,9 +420,7 @@ def test_silent_reset_is_detected_counted_and_reconfigured(part, wire):
 
 
 def test_register_fault_count_reaches_the_read_and_a_stuck_bus_is_not_one():
-    clock, model, bus, gyro = make("bmi088", "i2c")
-    gyro.configure(400, 2000, 10)
-    gyro.start()
+    clock, model, bus, gyro = started("bmi088", "i2c")
     out = GyroSamples(4000)
     run(clock, model, gyro, out, 0.5)
     bus.stick(0xFF)                      # every register reads 0xFF: a bus fault, not a reset

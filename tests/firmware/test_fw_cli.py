@@ -1,7 +1,9 @@
 """``gyrostar fw`` targets: ARM sizes within the product limits, ping against the host program."""
 
 import json
+import os
 import shutil
+import signal
 import subprocess
 import sys
 
@@ -45,3 +47,77 @@ def test_fw_ping_bad_url_is_a_device_error():
     proc = _gyrostar("fw", "ping", "/nonexistent/tty", "-n", "1")
     assert proc.returncode == 3
     assert "cannot open serial link" in proc.stderr
+
+
+def _children(pid: int) -> list[int]:
+    out = []
+    for d in os.listdir("/proc"):
+        if d.isdigit():
+            try:
+                with open(f"/proc/{d}/stat") as fh:
+                    if int(fh.read().rsplit(")", 1)[1].split()[1]) == pid:
+                        out.append(int(d))
+            except (OSError, IndexError, ValueError):
+                pass
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as fh:   # a zombie awaiting reaping counts as gone
+            return fh.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_fw_host_stops_its_program_when_signalled(tmp_path, sig):
+    """``gyrostar fw host`` stopped by SIGTERM (or Ctrl-C) stops the host program before it
+    exits (issue 18: SIGTERM left it running): the program is gone the moment the launcher
+    is, its pty link is removed, and the CLI says so in one line with exit code 130."""
+    build.build("host")
+    link = tmp_path / "head-pty"
+    proc = subprocess.Popen([sys.executable, "-m", "gyrostar", "fw", "host", "--sensor", str(tmp_path / "px.gspx"),
+                             "--width", "64", "--height", "32", "--planes", "1", "--link", str(link)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        line = proc.stdout.readline()
+        assert line.startswith("gyrostar-head: pty "), (line, proc.stderr.read() if proc.poll() is not None else "")
+        assert link.is_symlink()
+        kids = [k for k in _children(proc.pid) if _alive(k)]
+        assert len(kids) == 1
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=10)
+        assert not _alive(kids[0]), "host program outlived its launcher"
+        assert proc.returncode == 130
+        assert not link.exists() and not link.is_symlink(), "the program cleaned up (it was stopped, not killed)"
+        lines = [ln for ln in err.splitlines() if ln.strip()]
+        assert "Traceback" not in err and any("interrupted" in ln for ln in lines), err
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+@pytest.mark.skipif(shutil.which("arm-none-eabi-gcc") is None or shutil.which("qemu-system-arm") is None,
+                    reason="arm-none-eabi-gcc and qemu-system-arm needed (.ci/run)")
+def test_fw_arm_run_stops_qemu_on_sigterm(tmp_path):
+    from gyrostar.mocks.firmware_host import PixelFile
+
+    px = PixelFile(tmp_path / "px.gspx", 64, 32)
+    proc = subprocess.Popen([sys.executable, "-m", "gyrostar", "fw", "arm", "--run", "--sensor", str(px.path)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        for line in proc.stdout:
+            if "under QEMU" in line:
+                break
+        kids = [k for k in _children(proc.pid) if _alive(k)]
+        assert len(kids) == 1
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=20)
+        assert not _alive(kids[0]), "QEMU outlived its launcher"
+        assert proc.returncode == 130 and "Traceback" not in err and "interrupted" in err
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()

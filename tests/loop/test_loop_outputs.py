@@ -15,7 +15,7 @@ from gyrostar.realtime import join_realtime, leave_realtime
 
 def test_record_layout_is_fixed_little_endian():
     dt = record.OUTPUT_DTYPE
-    assert dt.itemsize == 8 + 4 + 1 + 1 + 2 + 32 + 24 + 24 + 288 + 64 + 128 + 4 == 580
+    assert dt.itemsize == 8 + 4 + 1 + 1 + 2 + 32 + 24 + 24 + 288 + 64 + 128 + 4 + 2 * (8 + 32 + 72) == 804
     assert dt.fields["q"][1] == 16 and dt.fields["cov"][1] == 96
     r = record.empty(2)
     assert (r["star_id"] == -1).all()
@@ -27,12 +27,13 @@ def test_udp_stream_roundtrip_on_loopback():
     rx.bind(("127.0.0.1", 0))
     rx.settimeout(2.0)
     sink = sinks.UdpSink("127.0.0.1", rx.getsockname()[1])
-    recs = record.empty(300)                      # > one datagram's worth: split
-    recs["seq"] = np.arange(300)
+    n = 2 * sinks.UDP_MAX_RECORDS + 12            # > one datagram's worth: split (3 fit the socket buffer)
+    recs = record.empty(n)
+    recs["seq"] = np.arange(n)
     recs["q"][:, 3] = 1.0
     sink.put(recs)
     got = []
-    while sum(len(g) for g in got) < 300:
+    while sum(len(g) for g in got) < n:
         got.append(sinks.decode_datagram(rx.recv(65535)))
     assert len(got) == 3 and len(got[0]) == sinks.UDP_MAX_RECORDS
     back = np.concatenate(got)

@@ -1,0 +1,166 @@
+"""Attitude filter and history: the MEKF state the loop carries between gyro samples.
+
+State (frames of :mod:`gyrostar.attitude`): ``q`` ICRS → body, gyro drift ``b`` (rad/s),
+``P`` the 6×6 covariance of [δθ body rad, Δb rad/s]. Every FIFO batch goes through one
+numba call (:func:`gyrostar.loop.kernels.predict_batch`) that predicts each sample and
+writes each output record; the attitude of every sample is kept in a ring (``HIST``
+samples, 5 s at 400 Hz) so an image, which arrives after its exposure, is applied at its
+mid-exposure time: the measured directions are carried to now along the gyro-propagated
+attitude (:meth:`update`).
+
+Gyro delay: ``delay_s`` τ, the group delay of the gyro's low-pass filter: a sample stamped
+t measured the rate at t − τ, so the filter, its history and the image updates run on
+t − τ and each output's attitude is carried on to t (:func:`~gyrostar.loop.kernels.predict_batch`).
+
+Process noise: ``arw`` is the gyro's angle random walk N (rad/√s, the IEEE coefficient:
+σ²(angle) = N² t); a one-sided rate noise density n gives N = n/√2 (white noise
+band-limited to the internal rate's Nyquist frequency).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..attitude import quat_conj, quat_mult, quat_normalize, quat_propagate, quat_to_dcm, rotvec_to_quat
+from ..core.mekf import mekf_update
+from . import record as R
+from .kernels import predict_batch
+
+HIST = 2048              # gyro samples of history (5 s at 400 Hz) for delayed measurements
+GATE = 13.815510557964274  # χ² 2 dof, P = 0.001
+
+
+class AttitudeFilter:
+    def __init__(self, arw: float, sigma_bias_rw: float, bias_prior: float, period_s: float, delay_s: float = 0.0,
+                 lowpass_hz: float = 0.0):
+        self.q = np.array([0.0, 0.0, 0.0, 1.0])   # ACQUIRE: gyro-relative attitude from the start
+        self.b = np.zeros(3)
+        self.P = np.zeros((6, 6))
+        self.P[:3, :3] = np.eye(3) * 1e-2
+        self.P[3:, 3:] = np.eye(3) * bias_prior ** 2
+        self.ts = np.array([np.nan, 0.0, 0.0, 0.0])   # [t of the last sample, ω̂]
+        self.hist_t = np.full(HIST, -np.inf)
+        self.hist_q = np.zeros((HIST, 4))
+        self.ih = np.array([HIST - 1, 0], np.int64)   # [ring head, output seq]
+        self.prm = np.array([period_s, arw, sigma_bias_rw, (1e-4) ** 2, delay_s])
+        # the gyro's 2nd-order low-pass takes the rate noise above f_c out of every finite
+        # window: the angle walk over Δ is N²(Δ − κ), κ = 1/(2√2 π f_c) (Δ ≫ 1/f_c)
+        self.kappa = 1.0 / (2.0 * math.sqrt(2.0) * math.pi * lowpass_hz) if lowpass_hz > 0 else 0.0
+        self.valid = False                            # q is an identified attitude
+        self.mid = np.full(R.MID_N, np.nan)           # [t_mid, q_mid, cov_mid]: the newest frame's product
+        self.smoothed = np.full(R.MID_N, np.nan)      # the frame before it, smoothed with the newest
+        self._state = (self.q, self.b, self.P, self.ts, self.hist_t, self.hist_q, self.ih, self.prm)
+
+    @property
+    def omega(self) -> np.ndarray:
+        """Bias-corrected body rate at the last sample (rad/s)."""
+        return self.ts[1:]
+
+    @property
+    def t_last(self) -> float | None:
+        """Time of the filter state (s): the last sample's stamp less the gyro delay."""
+        t = self.ts[0]
+        return None if t != t else float(t)
+
+    def predict(self, smp, flags_first: int, flags_base: int, mode: int, refs, ids, cam, uv_last, out) -> int:
+        """Predict every sample of a FIFO batch and write its output record (one numba call);
+        returns the count of stuck-axis samples."""
+        return predict_batch(smp.t, smp.rate, smp.flags, smp.n, *self._state, flags_first, flags_base, mode, refs,
+                             ids, cam, uv_last, self.mid, self.smoothed, out)
+
+    def q_at(self, t: float) -> np.ndarray:
+        """Attitude estimate at host time ``t`` (s): the newest sample at or before it,
+        propagated to ``t`` with the current rate (≤ one gyro period)."""
+        if self.ts[0] != self.ts[0]:
+            return self.q.copy()
+        masked = np.where(self.hist_t <= t, self.hist_t, -np.inf)
+        best = int(np.argmax(masked))
+        best_t = masked[best]
+        if not np.isfinite(best_t):
+            return self.q.copy()
+        return quat_propagate(self.hist_q[best], self.omega, t - best_t)
+
+    def update(self, t_mid: float, b_mid, refs, sigmas, accepted) -> int:
+        """Star directions measured at mid-exposure ``t_mid`` (body unit vectors (n, 3)),
+        catalog vectors (n, 3), σ (n,) rad, applied now (χ² gated per star; ``accepted``
+        (n,) uint8 written). Returns the count used.
+
+        A delayed measurement: the state now is the state at ``t_mid`` carried by the gyro
+        (rotation R from the attitude history) plus the gyro's random walk since then,
+        Q_Δ = N² Δ I (Δ = now − t_mid), which the measurement knows nothing of. So the
+        update runs on P − Q_Δ (the prior at ``t_mid`` seen from now) with the directions
+        rotated to now, and the walk since ``t_mid`` is added back after it: P⁺ = Φ P⁺_mid Φᵀ
+        + N²(Δ − κ) I (exact for this linear structure; adding Q_Δ to the star noise instead
+        would ignore that the same random walk is in the state). κ: the gyro low-pass's
+        share of the walk over a finite window (``lowpass_hz``; 0: white rate noise).
+
+        Also sets the mid-exposure product (:attr:`mid`): the updated attitude carried back
+        to ``t_mid`` along R, with the attitude block of Φ P⁺_mid Φᵀ rotated back to the body
+        axes at ``t_mid``."""
+        q_prior_mid = self.q_at(t_mid)
+        rq = quat_mult(self.q, quat_conj(q_prior_mid))                    # body(t_mid) → body(now)
+        rot = quat_to_dcm(rq)
+        bvecs = np.ascontiguousarray(b_mid @ rot.T)
+        lag = max((self.t_last if self.t_last is not None else t_mid) - t_mid, 0.0)
+        qd = self.prm[1] ** 2 * lag
+        P = self.P
+        if qd > 0 and min(P[0, 0], P[1, 1], P[2, 2]) > 2.0 * qd:       # else: no usable prior at t_mid
+            for i in range(3):
+                P[i, i] -= qd
+        else:
+            qd = 0.0
+        p_prior_mid = rot.T @ P[:3, :3] @ rot
+        n = int(mekf_update(self.q, self.b, P, bvecs, np.ascontiguousarray(refs),
+                            np.ascontiguousarray(sigmas), GATE, accepted))
+        if n:
+            q_mid = quat_mult(quat_conj(rq), self.q)
+            p_mid = rot.T @ P[:3, :3] @ rot
+            self._smooth_previous(q_prior_mid, p_prior_mid, q_mid, p_mid)
+            self.mid[0] = t_mid
+            self.mid[1:5] = q_mid
+            self.mid[5:] = p_mid.ravel()
+        # back to now: the walk since t_mid, less what the gyro's low-pass takes out of it
+        back = self.prm[1] ** 2 * max(lag - self.kappa, 0.0) if qd > 0 else 0.0
+        for i in range(3):
+            P[i, i] += back
+        return n
+
+    def _smooth_previous(self, q_prior, p_prior, q_post, p_post) -> None:
+        """The previous frame's mid-exposure attitude smoothed with this frame (one-lag
+        Rauch–Tung–Striebel on the attitude error): this frame's correction δ (its filtered
+        attitude against its prior, both at its mid-exposure) is carried back through the
+        gyro rotation R between the two mid-exposures with the gain C = P_k Rᵀ (P⁻_k+1)⁻¹:
+        q_s = δq(C δ) ⊗ q_k, P_s = P_k + C (P_k+1 − P⁻_k+1) Cᵀ. Sets :attr:`smoothed`."""
+        prev = self.mid
+        if not np.isfinite(prev[0]):
+            return
+        q_k = prev[1:5]
+        p_k = prev[5:].reshape(3, 3)
+        r = quat_to_dcm(quat_mult(q_prior, quat_conj(q_k)))       # body(mid_k) → body(mid_k+1), the gyro's
+        d = quat_mult(q_post, quat_conj(q_prior))
+        delta = 2.0 * d[:3] * (1.0 if d[3] >= 0 else -1.0)      # correction at mid_k+1 (rad, its body axes)
+        try:
+            c = p_k @ r.T @ np.linalg.inv(p_prior)
+        except np.linalg.LinAlgError:
+            return
+        self.smoothed[0] = prev[0]
+        self.smoothed[1:5] = quat_normalize(quat_mult(rotvec_to_quat(c @ delta), q_k))
+        ps = p_k + c @ (p_post - p_prior) @ c.T
+        self.smoothed[5:] = (0.5 * (ps + ps.T)).ravel()
+
+    def set_attitude(self, q_ident, t_mid: float, now: float, sigma_rad: float) -> None:
+        """A lost-in-space attitude ``q_ident`` measured at ``t_mid``: carried to now along
+        the history; its covariance adds the drift's unknown action since then."""
+        dq = quat_mult(self.q, quat_conj(self.q_at(t_mid)))          # rotation mid → now
+        self.q[:] = quat_normalize(quat_mult(dq, np.asarray(q_ident, np.float64)))
+        self.valid = True
+        lag = max(now - t_mid, 0.0)
+        pbb = self.P[3:, 3:].copy()
+        self.P[:3, :3] = np.eye(3) * sigma_rad ** 2 + pbb * lag * lag
+        self.P[:3, 3:] = -pbb * lag
+        self.P[3:, :3] = -pbb * lag
+
+    def bias_converged(self) -> bool:
+        return max(self.P[3, 3], self.P[4, 4], self.P[5, 5]) < self.prm[3]

@@ -1,0 +1,83 @@
+"""Image pipeline: a readout's window pixels → star directions at mid-exposure.
+
+The pixels are centroided on a measuring thread (:func:`gyrostar.loop.image_kernels.
+measure_windows` is nogil: background, CoG, smeared-PSF fit along the predicted
+trajectory, unit direction with its σ) while the loop keeps stepping; :meth:`result`
+returns them at the next step. Also lost-in-space on a full frame (spot detection +
+the identifier), run on the head port's worker after the frame is read.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .image_kernels import measure_windows
+
+
+class ImagePipeline:
+    """``threaded`` False (lock-step runs, where steps take no simulated time): the readout is
+    centroided at once on the caller's thread; the result is the same, it is taken at the
+    same step, and no thread hand-over is paid per frame."""
+
+    def __init__(self, params, camera, identifier, threaded: bool = True):
+        self.p = params
+        self.cam = camera.as_array()
+        self.identifier = identifier
+        self.threaded = threaded
+        self._pool = None
+        self._job = None           # (plan, image result, future or measured tuple)
+
+    @property
+    def busy(self) -> bool:
+        return self._job is not None
+
+    def submit(self, plan: dict, res) -> None:
+        """Centroid ``res.values`` (pixels in span order) of the windows ``plan`` commanded."""
+        if self.threaded:
+            self._job = (plan, res, self._measure_pool().submit(self._measure, plan, res.values))
+        else:
+            self._job = (plan, res, self._measure(plan, res.values))
+
+    def result(self):
+        """``(plan, image result, (state, b_mid (n, 3), σ (n,) rad))`` of the submitted
+        readout (waits for the measuring thread), or None."""
+        if self._job is None:
+            return None
+        plan, res, job = self._job
+        self._job = None
+        return plan, res, (job.result() if self.threaded else job)
+
+    def measure(self, plan: dict, values) -> tuple:
+        """``(state, b_mid, σ)`` of a readout, on the caller's thread (a streaming head port
+        measures each frame on its own worker with this)."""
+        return self._measure(plan, values)
+
+    def _measure(self, plan: dict, values) -> tuple:
+        p = self.p
+        vals = np.ascontiguousarray(values, dtype=np.float64)
+        return measure_windows(plan["spans"], vals, plan["wins"], plan["off"], plan["off_start"], plan["off_len"],
+                               self.cam, p.psf_sigma_px, p.thresh_sigma, p.min_signal, p.e_per_dn, 10, 1e-3)
+
+    def _measure_pool(self):
+        if self._pool is None:
+            from concurrent.futures import ThreadPoolExecutor
+
+            from ..realtime import join_realtime
+
+            self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="loop-measure", initializer=join_realtime)
+        return self._pool
+
+    def lost_in_space(self, image: np.ndarray):
+        """Spots of a full frame and their identification: ``(spots, ident or None)``.
+        Runs on the head port's worker, off the loop's steps; reads no loop state."""
+        from .acquire import detect_spots
+
+        spots = detect_spots(image.astype(np.float64), 6.0, 40, 7)
+        if len(spots) < 3:
+            return spots, None
+        return spots, self.identifier.identify(np.ascontiguousarray(spots[:, :2]))
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+            self._pool = None

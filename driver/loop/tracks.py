@@ -1,0 +1,163 @@
+"""Star tracks and their windows: which catalog stars the loop follows, and where to read.
+
+:class:`StarTracks` holds up to ``max_stars`` slots (catalog vector, navigation index, id,
+miss and reject counts, latest predicted centroid px). Stars enter from the catalog
+around the current attitude (the gyro-extended field: the attitude is propagated by the
+gyro between images), leave when they reach the sensor edge, miss too many images, or fail
+the filter's gate ``wrong_id_rejects`` times in a row. :meth:`plan` builds the windows of
+the next exposure for every tracked star (trajectory over the exposure and the command
+lag from the current rate, :func:`gyrostar.loop.image_kernels.plan_windows`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from . import record as R
+from .image_kernels import plan_windows
+from .kernels import project_refs
+
+MODEL = 1                # core.motion.MODEL_PINHOLE
+
+
+class StarTracks:
+    def __init__(self, params, camera, star_index):
+        self.p = params
+        self.camera = camera
+        self.cam = camera.as_array()
+        self.f_px = camera.focal_length_px
+        self.index = star_index
+        S = R.MAX_STARS
+        self.active = np.zeros(S, np.bool_)
+        self.ref = np.zeros((S, 3))
+        self.nav = -np.ones(S, np.int64)       # navigation-star index of each slot
+        self.ids = -np.ones(S, np.int32)       # catalog id
+        self.misses = np.zeros(S, np.int64)
+        self.rejects = np.zeros(S, np.int64)
+        self.uv = np.zeros((S, 2))             # predicted centroid (col, row) px at the last output
+        self.version = 0                       # changes whenever the set of tracked stars changes
+
+    # -- slots ---------------------------------------------------------------------------
+    def clear(self) -> None:
+        self.active[:] = False
+        self.nav[:] = -1
+        self.ids[:] = -1
+        self.version += 1
+
+    def drop(self, s: int) -> None:
+        self.active[s] = False
+        self.nav[s] = -1
+        self.ids[s] = -1
+        self.version += 1
+
+    def tracked(self) -> np.ndarray:
+        return np.flatnonzero(self.active)
+
+    def mags(self, slots) -> np.ndarray:
+        return self.index.vmag[self.nav[slots]] if len(slots) else np.zeros(0)
+
+    def fill_from_catalog(self, q) -> None:
+        """Fill free slots with catalog stars attitude ``q`` puts on the sensor, brightest
+        first, skipping one closer than ``neighbour_sep_px`` to a tracked star."""
+        from ..attitude import quat_to_dcm
+
+        free = [s for s in range(self.p.max_stars) if not self.active[s]]
+        if not free:
+            return
+        cam = self.camera
+        boresight = quat_to_dcm(q)[2]
+        radius = math.atan(0.5 * math.hypot(cam.width_px, cam.height_px) / self.f_px)
+        cand = self.index.cone(boresight, radius, self.p.mag_limit)
+        if len(cand) == 0:
+            return
+        cand = cand[np.argsort(self.index.vmag[cand], kind="stable")]
+        uv, ok = project_refs(self.cam, q, np.ascontiguousarray(self.index.vectors[cand]))
+        margin = self.p.window_k + 8
+        inside = ok & (uv[:, 0] > margin) & (uv[:, 1] > margin) \
+            & (uv[:, 0] < cam.width_px - 1 - margin) & (uv[:, 1] < cam.height_px - 1 - margin)
+        tracked = set(self.nav[self.active].tolist())
+        sep = self.p.neighbour_sep_px
+        fi = 0
+        for j in np.flatnonzero(inside):
+            if fi >= len(free):
+                break
+            nav = int(cand[j])
+            if nav in tracked:
+                continue
+            act = self.active
+            if np.any(act & (np.abs(uv[j, 0] - self.uv[:, 0]) < sep) & (np.abs(uv[j, 1] - self.uv[:, 1]) < sep)):
+                continue
+            s = free[fi]
+            self.ref[s] = self.index.vectors[nav]
+            self.nav[s] = nav
+            self.ids[s] = int(self.index.ids[nav])
+            self.active[s] = True
+            self.misses[s] = 0
+            self.rejects[s] = 0
+            self.uv[s] = uv[j]
+            tracked.add(nav)
+            fi += 1
+        if fi:
+            self.version += 1
+
+    def drop_lost(self, tracking: bool) -> None:
+        """Drop stars that left the sensor, or (``tracking``) missed more than ``max_misses``
+        images in a row while others were measured."""
+        w, h = self.camera.width_px, self.camera.height_px
+        for s in self.tracked():
+            u, v = self.uv[s]
+            off = u < 2 or v < 2 or u > w - 3 or v > h - 3
+            if off or (tracking and self.misses[s] > self.p.max_misses):
+                self.drop(int(s))
+
+    def score(self, slots, accepted) -> list[int]:
+        """Record the filter's verdict on measured ``slots``; returns the slots that failed
+        the gate ``wrong_id_rejects`` times in a row (a wrong or lost identification)."""
+        good = slots[accepted]
+        self.misses[good] = 0
+        self.rejects[good] = 0
+        bad = slots[~accepted]
+        self.rejects[bad] += 1
+        return [int(s) for s in bad[self.rejects[bad] >= self.p.wrong_id_rejects]]
+
+    # -- windows -------------------------------------------------------------------------
+    def plan(self, q, omega, bias, sigma_att_rad: float, lag_s: float, lag_jitter_s: float, odr_hz: float,
+             budget=None):
+        """Windows of the next exposure for every tracked star, brightest first within the
+        head's budgets: ``(spans, window slots, per-window trajectory offsets...)`` as a dict,
+        or None when no star gets a window. ``lag_s``: commanding → exposure start (s).
+        ``budget`` (:class:`gyrostar.loop.linkbudget.LinkBudget`): the link's per-frame pixel
+        and span budgets too, and no uncertainty margin while it says windows are tightened;
+        the plan then holds ``n_stars`` (tracked stars it was made for)."""
+        from ..core.motion import substeps_for
+
+        act = self.tracked()
+        if not len(act):
+            return None
+        p = self.p
+        order = act[np.argsort(self.mags(act), kind="stable")]
+        uv, _ = project_refs(self.cam, q, self.ref[order])
+        m = max(1, int(round(p.exposure_s * odr_hz)))
+        m_lat = int(round(lag_s * odr_hz))
+        rates = np.repeat((omega + bias)[None, :], m + m_lat, axis=0)
+        dt = p.exposure_s / m
+        sub = substeps_for(rates - bias, dt, self.f_px, 0.5)
+        sig_px = sigma_att_rad * self.f_px
+        speed = math.sqrt(float(omega @ omega)) * self.f_px          # px/s near the boresight
+        margin = 3.0 * sig_px + speed * lag_jitter_s
+        k = min(p.window_k + 2 * int(math.ceil(margin)), 40)
+        pixel_budget, max_spans = p.pixel_budget, p.max_spans
+        if budget is not None:
+            if not budget.margin_allowed():
+                k = p.window_k                      # degrade step 2: tighter windows
+            px, sp = budget.limits(len(order))
+            pixel_budget, max_spans = min(pixel_budget, px), min(max_spans, sp)
+        spans, wins, off, off_start, off_len = plan_windows(
+            uv, order.astype(np.int64), rates, dt, bias, self.cam, MODEL, sub, m_lat * sub, k,
+            self.camera.height_px, self.camera.width_px, pixel_budget, p.max_window_pixels, max_spans)
+        if not len(wins):
+            return None
+        return {"spans": spans, "wins": wins, "nav": self.nav[wins].copy(), "off": off, "off_start": off_start,
+                "off_len": off_len, "n_stars": len(order)}

@@ -1,0 +1,60 @@
+"""A scenario's acceptance keys applied to a run's summary (``gyrostar run`` exits 1 on a failure).
+
+Keys (:class:`gyrostar.hil.config.Scenario`): ``max_error_arcsec_1sigma`` (cross-boresight
+1σ over TRACK samples against truth; 0 = not checked), ``min_track_fraction`` (share of
+outputs in TRACK with a valid attitude; 0 = not checked), ``must_reacquire`` (TRACK lost
+and regained at least once). They describe the whole scenario: a run shorter than it, an
+interrupted one, or one without simulator truth (a real flatsat, for the error) is not
+judged on them, and the result says why.
+"""
+
+from __future__ import annotations
+
+
+def evaluate(scen, summary: dict, duration_s: float) -> dict:
+    """``{"applied": bool, "note": str, "checks": {key: {value, limit, pass}}}``."""
+    wanted = scen.max_error_arcsec_1sigma > 0 or scen.min_track_fraction > 0 or scen.must_reacquire
+    if not wanted:
+        return {"applied": False, "note": f"scenario {scen.name} sets no acceptance keys", "checks": {}}
+    if summary.get("interrupted"):
+        return {"applied": False, "note": "run interrupted", "checks": {}}
+    if duration_s + 1e-9 < scen.duration_s:
+        return {"applied": False, "checks": {},
+                "note": f"run of {duration_s:g} s is shorter than the scenario's {scen.duration_s:g} s"}
+    checks: dict = {}
+    has_truth = "track_fraction" in summary
+    if scen.max_error_arcsec_1sigma > 0 and has_truth:
+        err = summary.get("attitude_error_arcsec_1sigma")
+        checks["max_error_arcsec_1sigma"] = {"value": err, "limit": scen.max_error_arcsec_1sigma, "unit": "arcsec",
+                                             "pass": err is not None and err <= scen.max_error_arcsec_1sigma}
+    if scen.min_track_fraction > 0 and has_truth:
+        frac = summary["track_fraction"]
+        checks["min_track_fraction"] = {"value": frac, "limit": scen.min_track_fraction, "unit": "",
+                                        "pass": frac >= scen.min_track_fraction}
+    if scen.must_reacquire:
+        n = summary.get("track_regained", 0)
+        checks["must_reacquire"] = {"value": n, "limit": 1, "unit": "returns to TRACK", "pass": n >= 1}
+    note = "" if has_truth else "no simulator truth: error and track fraction not checked"
+    return {"applied": True, "note": note, "checks": checks}
+
+
+def track_regained(mode, track_mode: int) -> int:
+    """How often the mode sequence returned to TRACK after leaving it."""
+    import numpy as np
+
+    tr = np.asarray(mode) == track_mode
+    entries = int(np.count_nonzero(tr[1:] & ~tr[:-1])) + int(bool(len(tr) and tr[0]))
+    return max(entries - 1, 0)
+
+
+def failures(result: dict) -> list[str]:
+    """One text per failed check, e.g. ``max_error_arcsec_1sigma: 4.58 > 3 arcsec``."""
+    out = []
+    for key, c in result.get("checks", {}).items():
+        if c["pass"]:
+            continue
+        value = "never tracked" if c["value"] is None else f"{c['value']:.4g}"
+        rel = "<" if key.startswith("min") or key == "must_reacquire" else ">"
+        rel = rel if c["value"] is not None else "vs limit"
+        out.append(f"{key}: {value} {rel} {c['limit']:g} {c['unit']}".rstrip())
+    return out

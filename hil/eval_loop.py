@@ -1,0 +1,128 @@
+"""``gyrostar eval loop``: Monte Carlo of the coupled loop on Dask (docs/MONTECARLO.md).
+
+Each run draws its own case from its seed (:mod:`gyrostar.hil.montecarlo.cases`) and runs
+the simulated flatsat in fast mode; the campaign reports distributions, the worst runs
+with their seeds, a per-run Parquet table and plots.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+HELP = "Monte Carlo of the coupled loop: many simulated flatsat runs on Dask, faster than real time"
+
+
+def configure(parser) -> None:
+    from ..cli.main import add_json
+
+    parser.add_argument("--runs", type=int, default=200, help="number of runs (default: 200)")
+    parser.add_argument("--duration", type=float, default=30.0, metavar="S",
+                        help="flatsat seconds per run (default: 30, at least 10)")
+    parser.add_argument("--seed", type=int, default=1,
+                        help="campaign seed: run k uses seed SEED*100000 + k (default: 1)")
+    parser.add_argument("--workers", type=int, default=2, help="LocalCluster worker processes (default: 2)")
+    parser.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                        help="an existing Dask scheduler (tcp://127.0.0.1:8786; beyond loopback only with TLS)")
+    parser.add_argument("--tls-ca", default=None, metavar="PEM", help="CA certificate for a TLS scheduler")
+    parser.add_argument("--tls-cert", default=None, metavar="PEM", help="client certificate for a TLS scheduler")
+    parser.add_argument("--tls-key", default=None, metavar="PEM", help="client key for a TLS scheduler")
+    parser.add_argument("--config", default=None, metavar="TOML",
+                        help="flatsat config (default: the built-in simulated flatsat)")
+    parser.add_argument("--out", default=None, metavar="DIR",
+                        help="folder for results.parquet, summary.json and plots (default: runs/mc-<time>)")
+    parser.add_argument("--plot", default=None, metavar="DIR", help="write the plots to DIR (default: --out)")
+    add_json(parser)
+
+
+def run_seeds(campaign_seed: int, runs: int) -> list[int]:
+    """The run seeds of a campaign: independent of the worker count and the order of runs."""
+    return [campaign_seed * 100_000 + k for k in range(runs)]
+
+
+def run(args) -> int:
+    import json
+    from datetime import UTC, datetime
+
+    from ..cli.output import _clean, emit
+    from ..errors import ConfigError
+    from ..paths import runs_dir
+    from .montecarlo.campaign import Cluster, TlsFiles, summarize, write_table
+    from .montecarlo.plots import write_plots
+
+    if args.runs < 1:
+        raise ConfigError(f"--runs must be ≥ 1, got {args.runs}")
+    if not (args.duration >= 10.0 and args.duration < 1e6):
+        raise ConfigError(f"--duration must be a number of seconds ≥ 10, got {args.duration}")
+    tls_given = [args.tls_ca, args.tls_cert, args.tls_key]
+    if any(tls_given) and not all(tls_given):
+        raise ConfigError("--tls-ca, --tls-cert and --tls-key go together")
+    for flag, value in (("--tls-ca", args.tls_ca), ("--tls-cert", args.tls_cert), ("--tls-key", args.tls_key)):
+        if value and not Path(value).is_file():
+            raise ConfigError(f"{flag} {value}: no such file")
+    tls = TlsFiles(args.tls_ca, args.tls_cert, args.tls_key) if all(tls_given) else None
+    folder = Path(args.out) if args.out else runs_dir() / f"mc-{datetime.now(UTC):%Y%m%dT%H%M%S}"
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigError(f"--out {folder}: {exc.strerror}") from None
+    seeds = run_seeds(args.seed, args.runs)
+    t0 = time.perf_counter()
+    with Cluster(args.workers, args.scheduler, tls, args.config) as cluster:
+        rows = _with_progress(args, cluster, seeds)
+        n_workers = cluster.n_workers
+    wall = time.perf_counter() - t0
+    res = summarize(rows)
+    res.update(wall_s=round(wall, 2), runs_per_minute=round(60.0 * len(rows) / wall, 2), workers=n_workers,
+               duration_s=args.duration, seed=args.seed,
+               scheduler=args.scheduler or f"LocalCluster({args.workers} processes)")
+    write_table(rows, folder / "results.parquet")
+    res["results_table"] = str(folder / "results.parquet")
+    res["plots"] = [str(p) for p in write_plots(rows, Path(args.plot) if args.plot else folder)]
+    (folder / "summary.json").write_text(json.dumps(_clean(res), indent=2))
+    emit(args, res, _text(res))
+    return 1 if res["wrong_attitude_runs"] or res["wrong_id_runs"] else 0
+
+
+def _with_progress(args, cluster, seeds):
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+    from .montecarlo.campaign import run_campaign
+
+    quiet = getattr(args, "verbose", 0) < 0
+    bar = Progress(TextColumn("[bold]loop Monte Carlo"), BarColumn(), MofNCompleteColumn(),
+                   TextColumn("failed {task.fields[failed]}"), TimeRemainingColumn(),
+                   console=Console(stderr=True), transient=True, disable=quiet)
+    with bar:
+        task = bar.add_task("runs", total=len(seeds), failed=0)
+        failed = [0]
+
+        def on_row(row):
+            failed[0] += bool(row["failed"])
+            bar.update(task, advance=1, failed=failed[0])
+
+        return run_campaign(cluster, seeds, args.duration, on_row)
+
+
+def _fmt(v, spec=".2f") -> str:
+    return "—" if v is None else format(v, spec)
+
+
+def _text(r: dict) -> str:
+    e = r["attitude_error_arcsec"]
+    f = r["time_to_first_fix_s"]
+    lines = [f"loop Monte Carlo: {r['runs']} runs of {r['duration_s']:g} s on {r['workers']} workers, "
+             f"{r['wall_s']:.1f} s wall ({r['runs_per_minute']:.1f} runs/min)",
+             f"  failed {r['failed']}   wrong attitude runs {r['wrong_attitude_runs']}   "
+             f"wrong id runs {r['wrong_id_runs']}",
+             f"  attitude error (cross-boresight, TRACK) p50 {_fmt(e['p50'])}″  p95 {_fmt(e['p95'])}″  "
+             f"p99 {_fmt(e['p99'])}″",
+             f"  time to first fix p50 {_fmt(f['p50'])} s  p95 {_fmt(f['p95'])} s "
+             f"({r['runs_without_fix']} runs without a fix)",
+             "  by rate (°/s): " + "  ".join(f"{b}: {_fmt(v['rms_arcsec'])}″" for b, v in
+                                             r["attitude_error_arcsec_by_rate_dps"].items()),
+             "  worst runs (re-run: gyrostar run --fast --scenario mc:SEED@DURATION --seed SEED): "
+             + ", ".join(f"{w['seed']} ({w['profile']}, {_fmt(w['worst_arcsec'], '.0f')}″)" for w in r["worst_runs"]),
+             f"  results {r['results_table']}   sha256 {r['results_sha256'][:16]}…"]
+    return "\n".join(lines)

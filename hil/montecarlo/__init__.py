@@ -1,0 +1,1 @@
+"""Monte Carlo of the coupled loop (``gyrostar eval loop``): cases, worker, campaign, plots."""

@@ -1,0 +1,185 @@
+"""Every CLI command × every class of bad input: the README's exit code, one line on stderr
+naming what is wrong, no traceback; with --json, the error object on stdout.
+
+Inputs are chosen to fail at load (parse, config, file checks), so the table stays fast.
+"""
+
+import json
+
+import numpy as np
+import pytest
+from cli_helpers import gyrostar
+
+USAGE, DEVICE, NOT_AVAILABLE = 2, 3, 4
+
+
+def _files(d):
+    """Bad input files, made once per test in ``d``."""
+    (d / "text.npz").write_text("not an npz archive\n")
+    np.savez(d / "empty.npz")
+    np.save(d / "array.npy", np.zeros(3))
+    (d / "array.npy").rename(d / "plain.npz")
+    np.savez(d / "no_rate.npz", t=np.arange(10.0))
+    np.savez(d / "empty_arrays.npz", t=np.zeros(0), rate=np.zeros((0, 3)))
+    (d / "cells.csv").write_text("field,u,v,ra_deg,dec_deg\n0,1.5,2.5,10.0,20.0\n0,x!,2.5,10.0,20.0\n")
+    (d / "fits").mkdir()
+    (d / "fits" / "dark1.fits").write_bytes(b"SIMPLE  =                    T" + b"\x00garbage" * 50)
+    (d / "notalog.gslog").write_bytes(b"hello, not a log")
+    (d / "bad.toml").write_text("[loop\nframe_hz = 1\n")
+    (d / "plain.txt").write_text("x")
+    return d
+
+
+def _flatsat(d, section: str, key: str, value: str):
+    """The built-in flatsat config with one key changed."""
+    from gyrostar.hil.config import default_config_path
+
+    lines, inside = [], False
+    for line in default_config_path().read_text().splitlines():
+        if line.startswith("["):
+            inside = line.strip() == f"[{section}]"
+        if inside and line.split("=")[0].strip() == key:
+            line = f"{key} = {value}"
+        lines.append(line)
+    text = "\n".join(lines) + "\n"
+    path = d / f"{section}_{key}_{abs(hash(value)):x}.toml"
+    path.write_text(text)
+    return path
+
+
+# (id, argv with {d} for the bad-input folder, exit code, words the one line must hold)
+CASES = [
+    # --- usage: unknown commands, flags, bad numbers
+    ("no-command", [], USAGE, ["COMMAND"]),
+    ("unknown-command", ["fly"], USAGE, ["fly"]),
+    ("run-unknown-flag", ["run", "--bogus"], USAGE, ["--bogus"]),
+    ("run-duration-0", ["run", "--duration", "0"], USAGE, ["--duration"]),
+    ("run-duration-nan", ["run", "--duration", "nan"], USAGE, ["--duration"]),
+    ("run-duration-inf", ["run", "--duration", "inf"], USAGE, ["--duration"]),
+    ("run-duration-word", ["run", "--duration", "ten"], USAGE, ["--duration"]),
+    ("run-seed-float", ["run", "--seed", "1.5"], USAGE, ["--seed"]),
+    # --- run: configuration the devices reject (exit 2 naming key and file)
+    ("run-config-missing", ["run", "--config", "{d}/nope.toml"], USAGE, ["nope.toml"]),
+    ("run-config-not-toml", ["run", "--config", "{d}/bad.toml"], USAGE, ["bad.toml", "TOML"]),
+    ("run-config-folder", ["run", "--config", "{d}"], USAGE, []),
+    ("run-frame-hz-0", ["run", "--config", ("loop", "frame_hz", "0")], USAGE, ["loop.frame_hz", ".toml"]),
+    ("run-frame-hz-neg", ["run", "--config", ("loop", "frame_hz", "-5")], USAGE, ["loop.frame_hz", ".toml"]),
+    ("run-frame-hz-nan", ["run", "--config", ("loop", "frame_hz", "nan")], USAGE, ["loop.frame_hz", ".toml"]),
+    ("run-bmi088-range", ["run", "--config", ("gyro", "range_dps", "7")], USAGE, ["gyro.range_dps", "BMI088"]),
+    ("run-bmi088-odr", ["run", "--config", ("gyro", "odr_hz", "800")], USAGE, ["gyro.odr_hz", "BMI088"]),
+    ("run-bmi088-watermark", ["run", "--config", ("gyro", "fifo_watermark", "1000")], USAGE,
+     ["gyro.fifo_watermark", "BMI088"]),
+    ("run-l3gd20h-odr", ["run", "--config", ("gyro", "model", '"l3gd20h"'), "+odr_hz=1000"], USAGE,
+     ["gyro.odr_hz", "L3GD20H"]),
+    ("run-l3gd20h-range", ["run", "--config", ("gyro", "model", '"l3gd20h"'), "+range_dps=250"], USAGE,
+     ["gyro.range_dps", "L3GD20H"]),
+    ("run-unknown-key", ["run", "--config", ("loop", "frame_hz", "100\nframe_rate = 3")], USAGE, ["frame_rate"]),
+    ("run-unknown-scenario", ["run", "--scenario", "nosuch"], USAGE, ["nosuch"]),
+    ("run-scenario-missing-file", ["run", "--scenario", "{d}/nosuch.toml"], USAGE, ["nosuch.toml"]),
+    ("run-out-under-file", ["run", "--out", "/dev/null/x"], USAGE, ["--out", "/dev/null/x"]),
+    # --- replay
+    ("replay-missing", ["replay", "{d}/nope.gslog"], USAGE, ["nope.gslog"]),
+    ("replay-folder", ["replay", "{d}"], USAGE, ["folder"]),
+    ("replay-not-a-log", ["replay", "{d}/notalog.gslog"], USAGE, ["not a gyrostar log"]),
+    ("replay-export-no-out", ["replay", "{d}/notalog.gslog", "--export", "csv"], USAGE, ["--out"]),
+    ("replay-export-missing-folder", ["replay", "{d}/notalog.gslog", "--export", "csv", "--out", "{d}/no/x.csv"],
+     USAGE, ["--out", "does not exist"]),
+    ("replay-export-format", ["replay", "x.gslog", "--export", "xml"], USAGE, ["--export"]),
+    # --- calibrate: bad inputs name the argument
+    ("cal-static-text-npz", ["calibrate", "gyro-static", "{d}/text.npz"], USAGE,
+     ["INPUT", "text.npz", "npz"]),
+    ("cal-static-empty-npz", ["calibrate", "gyro-static", "{d}/empty.npz"], USAGE,
+     ["INPUT", "empty"]),
+    ("cal-static-npy", ["calibrate", "gyro-static", "{d}/plain.npz"], USAGE, ["INPUT"]),
+    ("cal-static-missing-array", ["calibrate", "gyro-static", "{d}/no_rate.npz"], USAGE,
+     ["INPUT", "rate"]),
+    ("cal-static-empty-arrays", ["calibrate", "gyro-static", "{d}/empty_arrays.npz"], USAGE,
+     ["INPUT", "empty"]),
+    ("cal-static-missing-file", ["calibrate", "gyro-static", "{d}/nope.npz"], USAGE, ["INPUT", "nope.npz"]),
+    ("cal-static-hours-0", ["calibrate", "gyro-static", "--simulate", "--hours", "0"], USAGE, ["--hours"]),
+    ("cal-static-no-source", ["calibrate", "gyro-static"], USAGE, ["--simulate"]),
+    ("cal-scale-empty-npz", ["calibrate", "gyro-scale", "{d}/empty.npz"], USAGE,
+     ["INPUT", "empty"]),
+    ("cal-align-text-npz", ["calibrate", "alignment", "{d}/text.npz"], USAGE, ["INPUT"]),
+    ("cal-camera-bad-cell", ["calibrate", "camera", "{d}/cells.csv"], USAGE,
+     ["INPUT", "line 3", "'u'"]),
+    ("cal-camera-fields-0", ["calibrate", "camera", "--simulate", "--fields", "0"], USAGE, ["--fields"]),
+    ("cal-camera-empty-npz", ["calibrate", "camera", "{d}/empty.npz"], USAGE, ["INPUT"]),
+    ("cal-dark-corrupt-fits", ["calibrate", "dark", "{d}/fits"], USAGE,
+     ["INPUT", "dark1.fits"]),
+    ("cal-dark-frames-0", ["calibrate", "dark", "--simulate", "--frames", "0"], USAGE, ["--frames"]),
+    ("cal-dark-exposures", ["calibrate", "dark", "--simulate", "--exposures", "0,-1"], USAGE, ["--exposures"]),
+    ("cal-dark-empty-npz", ["calibrate", "dark", "{d}/empty.npz"], USAGE, ["INPUT"]),
+    ("cal-unknown-target", ["calibrate", "compass"], USAGE, ["compass"]),
+    # --- eval, sim, bench, fw
+    ("eval-starid-trials-0", ["eval", "starid", "--trials", "0"], USAGE, ["trials"]),
+    ("eval-starid-noise-neg", ["eval", "starid", "--position-noise-px", "-1"], USAGE, ["pos_noise_px"]),
+    ("eval-starid-scheduler-silent", ["eval", "starid", "--scheduler", "tcp://127.0.0.1:9",
+                                      "--scheduler-timeout", "0.5", "--trials", "10"], DEVICE, ["--scheduler"]),
+    ("eval-centroid-scenario", ["eval", "centroid", "--scenario", "sim9"], USAGE, ["--scenario"]),
+    ("eval-starcount-word", ["eval", "starcount", "--trials", "many"], USAGE, ["--trials"]),
+    ("sim-frame-no-out", ["sim", "frame"], USAGE, ["--out"]),
+    ("bench-unknown-suite", ["bench", "nosuch"], USAGE, ["nosuch"]),
+    ("fw-ping-no-device", ["fw", "ping", "{d}/no-such-tty", "-n", "1"], DEVICE, ["no-such-tty"]),
+    ("fw-unknown-target", ["fw", "flash"], USAGE, ["flash"]),
+]
+
+
+def _argv(case_argv, d):
+    out, extra = [], {}
+    for a in case_argv:
+        if isinstance(a, str) and a.startswith("+"):
+            k, v = a[1:].split("=")
+            extra[k] = v
+    for a in case_argv:
+        if isinstance(a, tuple):
+            path = _flatsat(d, *a)
+            if extra:
+                text = path.read_text()
+                for k, v in extra.items():
+                    text = "\n".join(f"{k} = {v}" if ln.split("=")[0].strip() == k else ln
+                                     for ln in text.splitlines()) + "\n"
+                path.write_text(text)
+            out.append(str(path))
+        elif a.startswith("+"):
+            continue
+        else:
+            out.append(a.replace("{d}", str(d)))
+    return out
+
+
+@pytest.fixture(scope="module")
+def bad(tmp_path_factory):
+    return _files(tmp_path_factory.mktemp("bad"))
+
+
+@pytest.mark.parametrize("name,argv,code,words", CASES, ids=[c[0] for c in CASES])
+def test_bad_input_one_line_and_exit_code(name, argv, code, words, bad, tmp_path):
+    res = gyrostar(_argv(argv, bad), cwd=tmp_path, env={"GYROSTAR_RUNS": str(tmp_path / "runs")}, timeout=60)
+    lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
+    assert res.returncode == code, (res.returncode, res.stderr)
+    assert "Traceback" not in res.stderr and "Traceback" not in res.stdout, res.stderr
+    assert len(lines) == 1, res.stderr
+    for w in words:
+        assert w in lines[0], (w, lines[0])
+    assert not (tmp_path / "runs").exists() or not any((tmp_path / "runs").iterdir()), "a failed command left a run"
+
+
+JSON_CASES = [c for c in CASES if c[0] in ("run-duration-nan", "run-bmi088-odr", "replay-folder",
+                                           "cal-static-text-npz", "fw-ping-no-device", "run-unknown-flag")]
+
+
+@pytest.mark.parametrize("name,argv,code,words", JSON_CASES, ids=[c[0] for c in JSON_CASES])
+def test_json_error_object_on_stdout(name, argv, code, words, bad, tmp_path):
+    res = gyrostar(_argv(argv, bad) + ["--json"], cwd=tmp_path, env={"GYROSTAR_RUNS": str(tmp_path / "runs")})
+    obj = json.loads(res.stdout)
+    assert obj["exit_code"] == res.returncode == code
+    assert all(w in obj["error"] for w in words), obj
+
+
+def test_long_error_is_not_wrapped_off_a_terminal(bad, tmp_path):
+    """The log handler writes one line however long, when stderr is a pipe."""
+    deep = tmp_path / ("a-rather-long-folder-name-" * 4) / "and-a-long-log-file-name-that-does-not-exist.gslog"
+    res = gyrostar(["replay", deep], cwd=tmp_path)
+    lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
+    assert res.returncode == USAGE and len(lines) == 1 and str(deep) in lines[0] and len(lines[0]) > 150

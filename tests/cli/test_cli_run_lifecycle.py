@@ -1,0 +1,154 @@
+"""``gyrostar run`` from start to end as a user meets it: a run that fails after start, the
+same ``--out`` again, scenario acceptance, and Ctrl-C at start-up and mid-run (real
+subprocesses of the console script, SIGINT sent to the process group as a terminal does)."""
+
+import json
+import os
+import signal
+import subprocess
+import time
+
+import pytest
+from cli_helpers import GYROSTAR, gyrostar
+from gyrostar.hil.config import default_config_path
+from gyrostar.recording import logfile as lf
+
+
+def _config(tmp_path, **changes):
+    """The built-in flatsat config with ``section.key = value`` lines replaced."""
+    lines, section = [], None
+    for line in default_config_path().read_text().splitlines():
+        if line.startswith("["):
+            section = line.strip()[1:-1]
+        key = line.split("=")[0].strip()
+        if f"{section}.{key}" in changes:
+            line = f"{key} = {changes[f'{section}.{key}']}"
+        lines.append(line)
+    path = tmp_path / "flatsat.toml"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def _records(path):
+    return [(lf.KIND_NAMES.get(r.kind), r.payload) for r in lf.read_records(path)]
+
+
+def test_failed_run_leaves_meta_and_its_out_is_reused(tmp_path):
+    out = tmp_path / "run"
+    # real devices that are not there: the run fails after its log was opened
+    cfg = _config(tmp_path, **{"head.kind": '"serial"', "head.url": '"/nonexistent/tty"', "gyro.kind": '"i2c"',
+                               "gyro.i2c_bus": "97"})
+    res = gyrostar(["run", "--config", cfg, "--out", out])
+    assert res.returncode == 3, res.stderr
+    assert "Traceback" not in res.stderr
+    recs = _records(out / "flatsat.gslog")
+    assert recs[0][0] == "meta" and json.loads(recs[0][1])["config"]["gyro"]["i2c_bus"] == 97
+    assert "aborted" in json.loads(recs[-1][1])
+    # the same --out again: the failed run's log is kept aside, the new run goes ahead
+    res = gyrostar(["run", "--fast", "--duration", "1", "--no-plots", "--out", out])
+    assert res.returncode == 0, res.stderr
+    assert "flatsat.failed-1.gslog" in res.stderr
+    assert _records(out / "flatsat.failed-1.gslog") == recs
+    assert (out / "summary.json").exists() and _records(out / "flatsat.gslog")[0][0] == "meta"
+    # a finished run is never overwritten
+    res = gyrostar(["run", "--fast", "--duration", "1", "--out", out])
+    assert res.returncode == 2 and "finished run" in res.stderr
+
+
+SCENARIO = """name = "acc"
+duration_s = 2.0
+segments = [{{ seconds = 2.0 }}]
+max_error_arcsec_1sigma = {err}
+min_track_fraction = 0.01
+"""
+
+
+@pytest.mark.parametrize("limit,code", [(0.001, 1), (1000.0, 0)])
+def test_scenario_acceptance_is_applied(tmp_path, limit, code):
+    scen = tmp_path / "acc.toml"
+    scen.write_text(SCENARIO.format(err=limit))
+    res = gyrostar(["run", "--fast", "--scenario", scen, "--out", tmp_path / "r", "--no-plots", "--json"])
+    assert res.returncode == code, res.stderr
+    summary = json.loads(res.stdout)
+    checks = summary["acceptance"]["checks"]
+    assert summary["acceptance"]["applied"] and summary["exit_code"] == code
+    err = summary["attitude_error_arcsec_1sigma"]
+    assert checks["max_error_arcsec_1sigma"]["value"] == err and checks["max_error_arcsec_1sigma"]["pass"] == (
+        err <= limit)
+    assert checks["min_track_fraction"]["pass"]
+    if code:
+        line = [ln for ln in res.stderr.splitlines() if "acceptance failed" in ln]
+        assert len(line) == 1 and "max_error_arcsec_1sigma" in line[0] and "min_track_fraction" not in line[0]
+    assert json.loads((tmp_path / "r" / "summary.json").read_text())["acceptance"] == summary["acceptance"]
+
+
+def test_acceptance_not_applied_to_a_shortened_run(tmp_path):
+    scen = tmp_path / "acc.toml"
+    scen.write_text(SCENARIO.format(err=0.001))
+    res = gyrostar(["run", "--fast", "--scenario", scen, "--duration", "1", "--out", tmp_path / "r", "--no-plots",
+                    "--json"])
+    assert res.returncode == 0, res.stderr
+    acc = json.loads(res.stdout)["acceptance"]
+    assert not acc["applied"] and "shorter" in acc["note"]
+
+
+def _interrupt(tmp_path, ready, extra=()):
+    """Start ``gyrostar run`` in its own process group, wait for ``ready(out)``, send SIGINT
+    to the group (as a terminal's Ctrl-C does) and return (result, out, seconds to ready)."""
+    out = tmp_path / "run"
+    p = subprocess.Popen([GYROSTAR, "run", "--duration", "60", "--out", str(out), *extra], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, start_new_session=True, stdin=subprocess.DEVNULL)
+    t0 = time.monotonic()
+    try:
+        while not ready(out):
+            assert p.poll() is None, p.communicate()
+            assert time.monotonic() - t0 < 90, "run never got ready"
+            time.sleep(0.01)
+        waited = time.monotonic() - t0
+        os.killpg(p.pid, signal.SIGINT)
+        stdout, stderr = p.communicate(timeout=60)
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+    return subprocess.CompletedProcess(p.args, p.returncode, stdout, stderr), out, waited
+
+
+def _one_interrupt_line(res):
+    assert res.returncode == 130, res.stderr
+    for bad in ("Traceback", "SystemError", "KeyboardInterrupt"):
+        assert bad not in res.stderr and bad not in res.stdout, res.stderr
+    lines = [ln for ln in res.stderr.splitlines() if "interrupted" in ln]
+    assert len(lines) == 1, res.stderr
+    return lines[0]
+
+
+def test_ctrl_c_during_start_up(tmp_path):
+    """SIGINT while numba loads and the devices start: one line, exit 130, the log says why."""
+    res, out, _ = _interrupt(tmp_path, lambda out: (out / "flatsat.gslog").exists())
+    _one_interrupt_line(res)
+    recs = _records(out / "flatsat.gslog")
+    assert recs[0][0] == "meta"
+    assert any(k == "event" and json.loads(p).get("aborted") == "interrupted" for k, p in recs)
+    assert not (out / "summary.json").exists()
+
+
+def test_ctrl_c_mid_run_keeps_summary_and_plots(tmp_path):
+    """SIGINT once the loop records outputs: summary.json and plots of the part that ran."""
+
+    def running(out):
+        log = out / "flatsat.gslog"
+        return log.exists() and log.stat().st_size > 400_000     # outputs are being recorded
+
+    res, out, waited = _interrupt(tmp_path, running)
+    line = _one_interrupt_line(res)
+    assert str(out) in line
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["interrupted"] is True and 0 < summary["ran_s"] < 60
+    assert summary["outputs"] > 0 and summary["gyro_samples"] > 0
+    for png in ("attitude_error.png", "latency_histogram.png"):
+        assert (out / png).stat().st_size > 1000
+    # the log is complete up to the interruption: it replays bit-exact
+    rep = gyrostar(["replay", out / "flatsat.gslog", "--check", "--json"])
+    assert rep.returncode == 0, rep.stderr
+    assert json.loads(rep.stdout)["verdict"] == "bit-exact"

@@ -1,0 +1,110 @@
+"""Fast mode (gyrostar.hil.lockstep): the link at its line rate, repeatable runs, exact replay."""
+
+import numpy as np
+import pytest
+from gyrostar.clock import SimulatedClock
+from gyrostar.errors import LinkLostError
+from gyrostar.head import HeadClient
+from gyrostar.hil.lockstep import Lockstep, SimHead
+from gyrostar.protocol import MsgType
+from gyrostar.protocol.framing import encode_frame
+from gyrostar.transport.linkrate import preset
+
+
+class _Sky:
+    class camera:
+        width_px = height_px = 64
+
+
+def _head(link_name):
+    from gyrostar.mocks.head_emulator import HeadEmulator
+
+    clock = SimulatedClock(100.0)
+    dev = SimulatedClock(100.0)
+    emu = HeadEmulator(_Sky(), scene=None, clock=dev)
+    lk = Lockstep(clock)
+    head = SimHead(emu, dev, preset(link_name), lk)
+    head.start()
+    return clock, head
+
+
+@pytest.mark.parametrize("name", ["uart-921k", "uart-3m", "usb-fs"])
+def test_ping_takes_its_wire_time(name):
+    clock, head = _head(name)
+    link = head.open_link()
+    p = preset(name)
+    echo = bytes(range(1, 201))
+    req = encode_frame(MsgType.PING, 7, echo)
+    t0 = link.send(req)
+    t_rx, packet = link.recv(1.0)
+    rep_len = len(packet) + 1                        # the delimiter travels too
+    expect = 2 * p.latency_s + (len(req) + rep_len) / p.bytes_per_s
+    assert t_rx - t0 == pytest.approx(expect, rel=1e-9)
+    assert clock.now() == pytest.approx(t_rx)        # the runner's own wait moved the clock
+
+
+def test_back_to_back_requests_queue_on_the_wire():
+    clock, head = _head("uart-921k")
+    link = head.open_link()
+    p = preset("uart-921k")
+    req = encode_frame(MsgType.PING, 1, bytes(200))
+    t0 = link.send(req)
+    link.send(encode_frame(MsgType.PING, 2, bytes(200)))
+    t1, _ = link.recv(1.0)
+    t2, _ = link.recv(1.0)
+    # the second reply cannot start before the first left the wire
+    assert t2 - t1 >= (len(req) + 1) / p.bytes_per_s * 0.99
+    assert t1 - t0 >= 2 * len(req) / p.bytes_per_s
+
+
+def test_client_over_the_simulated_link_and_link_loss():
+    clock, head = _head("usb-fs")
+    client = HeadClient(head.open_link(), timeout=0.05, clock=clock)
+    assert client.get_info()["width"] == 64
+    client.sync(4)
+    assert client.sync_state.ready
+    head.disconnect()
+    with pytest.raises(LinkLostError):
+        client.ping(b"x")
+
+
+def _fast_run(tmp_path, name, seconds=3.0):
+    from gyrostar.hil import config as hc
+    from gyrostar.hil.runner import run_flatsat
+
+    cfg = hc.load_flatsat()
+    scen = hc.load_scenario("demo")
+    folder = tmp_path / name
+    folder.mkdir()
+    outs = []
+    res = run_flatsat(cfg, scen, duration=seconds, seed=3, folder=folder, plots=False, status=False, fast=True,
+                      on_output=lambda r: outs.append(r.copy()))
+    return res, np.concatenate(outs)
+
+
+def test_fast_run_repeats_and_replays_exactly(tmp_path):
+    from gyrostar.hil.replay import replay
+
+    r1, o1 = _fast_run(tmp_path, "a")
+    r2, o2 = _fast_run(tmp_path, "b")
+    assert r1["fast"] and r1["frames"] > 50 and r1["samples_lost"] == 0
+    assert len(o1) == len(o2) > 0.95 * 3.0 * 400        # every gyro sample after the set-up exchanges
+    for key in ("t", "q", "cov", "flags", "mode", "centroid_px"):
+        np.testing.assert_array_equal(o1[key], o2[key])      # latency (host time) aside: same run
+    rep = replay(r1["log"])
+    assert rep["bit_exact"], rep
+    # the summary carries the floor, the mid-exposure product and the NEES
+    for key in ("floor_arcsec", "measured_over_floor", "mid_exposure_error_arcsec_1sigma", "nees_after_update",
+                "nees_before_update", "host_us_per_gyro_sample"):
+        assert r1[key] is not None, key
+    assert 0.5 < r1["measured_over_floor"] < 2.0
+    mid = o1[np.isfinite(o1["t_mid"])]
+    assert len(np.unique(mid["t_mid"])) > 30 and np.all(mid["t_mid"] < mid["t"])
+    assert np.any(o1["flags"] & 0x0800)
+    # smoothed product: the frame before the newest, with no more variance than when filtered
+    filt = {float(r["t_mid"]): np.trace(r["cov_mid"]) for r in mid}
+    sm = o1[np.isfinite(o1["t_mid_s"])]
+    assert len(sm) and np.all(sm["t_mid_s"] < sm["t_mid"])
+    ok = [np.trace(r["cov_mid_s"]) <= filt[float(r["t_mid_s"])] * (1 + 1e-9) for r in sm
+          if float(r["t_mid_s"]) in filt]
+    assert len(ok) > 100 and all(ok)
