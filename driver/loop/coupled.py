@@ -101,6 +101,7 @@ class Counters:
     frames: int = 0
     frames_failed: int = 0
     frames_unmatched: int = 0      # streamed frames whose window plan was gone (stream mode)
+    frames_stale_windows: int = 0  # streamed frames read with an earlier frame's windows, not used
     full_frames: int = 0
     acquisitions: int = 0
     acquisition_failures: int = 0
@@ -401,6 +402,14 @@ class CoupledLoop:
             pend = self.plans.get(res.set_frame)
             if pend is None or res.measured is None:
                 self.c.frames_unmatched += 1
+                continue
+            # read with an earlier frame's windows (its own set came late): the stars have moved
+            # since; past half a pixel a window may clip its star and bias the centroid
+            late = res.frame - res.set_frame if res.set_frame else 0
+            speed = math.sqrt(float(self.filter.omega @ self.filter.omega)) * self.f_px
+            if late > 0 and late * head.period_s * speed > 0.5:
+                self.c.frames_stale_windows += 1
+                self._after_image(now, updated=0)
                 continue
             self._process_windows(pend, res, res.measured, now)
             self._mids.append(res.t_mid)
