@@ -94,9 +94,13 @@ def mid_exposure_errors(out: np.ndarray, truth_at) -> dict:
     (``*_mid_s``): cross-boresight 1σ (arcsec), the same at rest, NEES per axis.
     ``truth_at(t)`` → TRUTH_DTYPE rows."""
     res: dict = {}
+    track = tracking_mask(out)
+    tracked_frames = np.unique(out["t_mid"][track & np.isfinite(out["t_mid"])])
     for tag, suffix in (("mid_exposure", ""), ("mid_exposure_smoothed", "_s")):
         tcol = out["t_mid" + suffix]
-        m = tracking_mask(out) & np.isfinite(tcol)
+        m = track & np.isfinite(tcol)
+        if suffix:      # the frames the filtered figure counts (a frame filtered in COAST is not)
+            m &= np.isin(tcol, tracked_frames)
         if not np.any(m):
             res[f"{tag}_error_arcsec_1sigma"] = None
             continue

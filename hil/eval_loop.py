@@ -52,6 +52,12 @@ def run(args) -> int:
 
     if args.runs < 1:
         raise ConfigError(f"--runs must be ≥ 1, got {args.runs}")
+    try:
+        import pyarrow  # noqa: F401 - the per-run table is written with it: fail before the runs, not after
+    except ImportError as exc:
+        from ..errors import NotAvailableError
+
+        raise NotAvailableError(f"pyarrow is needed for the per-run table (pip install 'pyarrow>=14'): {exc}") from None
     if not (args.duration >= 10.0 and args.duration < 1e6):
         raise ConfigError(f"--duration must be a number of seconds ≥ 10, got {args.duration}")
     tls_given = [args.tls_ca, args.tls_cert, args.tls_key]
@@ -76,8 +82,9 @@ def run(args) -> int:
     res.update(wall_s=round(wall, 2), runs_per_minute=round(60.0 * len(rows) / wall, 2), workers=n_workers,
                duration_s=args.duration, seed=args.seed,
                scheduler=args.scheduler or f"LocalCluster({args.workers} processes)")
-    write_table(rows, folder / "results.parquet")
     res["results_table"] = str(folder / "results.parquet")
+    (folder / "summary.json").write_text(json.dumps(_clean(res), indent=2))   # first: nothing after can lose it
+    write_table(rows, folder / "results.parquet")
     res["plots"] = [str(p) for p in write_plots(rows, Path(args.plot) if args.plot else folder)]
     (folder / "summary.json").write_text(json.dumps(_clean(res), indent=2))
     emit(args, res, _text(res))

@@ -30,6 +30,7 @@ from .kernels import predict_batch
 
 HIST = 2048              # gyro samples of history (5 s at 400 Hz) for delayed measurements
 GATE = 13.815510557964274  # χ² 2 dof, P = 0.001
+SMOOTH_GAP_S = 0.1       # s: frames further apart than this are not smoothed together
 
 
 class AttitudeFilter:
@@ -117,7 +118,7 @@ class AttitudeFilter:
         if n:
             q_mid = quat_mult(quat_conj(rq), self.q)
             p_mid = rot.T @ P[:3, :3] @ rot
-            self._smooth_previous(q_prior_mid, p_prior_mid, q_mid, p_mid)
+            self._smooth_previous(t_mid, q_prior_mid, p_prior_mid, q_mid, p_mid)
             self.mid[0] = t_mid
             self.mid[1:5] = q_mid
             self.mid[5:] = p_mid.ravel()
@@ -127,14 +128,19 @@ class AttitudeFilter:
             P[i, i] += back
         return n
 
-    def _smooth_previous(self, q_prior, p_prior, q_post, p_post) -> None:
+    def _smooth_previous(self, t_mid, q_prior, p_prior, q_post, p_post) -> None:
         """The previous frame's mid-exposure attitude smoothed with this frame (one-lag
         Rauch–Tung–Striebel on the attitude error): this frame's correction δ (its filtered
         attitude against its prior, both at its mid-exposure) is carried back through the
         gyro rotation R between the two mid-exposures with the gain C = P_k Rᵀ (P⁻_k+1)⁻¹:
-        q_s = δq(C δ) ⊗ q_k, P_s = P_k + C (P_k+1 − P⁻_k+1) Cᵀ. Sets :attr:`smoothed`."""
+        q_s = δq(C δ) ⊗ q_k, P_s = P_k + C (P_k+1 − P⁻_k+1) Cᵀ. Sets :attr:`smoothed`.
+        Frames more than ``SMOOTH_GAP_S`` apart (a coast between them) are not combined: the
+        previous product is passed on as it was filtered."""
         prev = self.mid
         if not np.isfinite(prev[0]):
+            return
+        if t_mid - prev[0] > SMOOTH_GAP_S:
+            self.smoothed[:] = prev
             return
         q_k = prev[1:5]
         p_k = prev[5:].reshape(3, 3)

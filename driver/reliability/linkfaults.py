@@ -47,6 +47,9 @@ def _cum(x: np.ndarray) -> np.ndarray:
     return np.cumsum(np.where(d < 0, x, d))
 
 
+IN_FLIGHT_S = 0.05   # s: longer than one image cycle (windows, exposure, reply) at 100 Hz
+
+
 def analyse(res: dict, faults) -> dict:
     """Per-fault continuity, resynchronisation and bad-frame accounting from a campaign result."""
     from ..loop.record import MODE_NAMES
@@ -65,6 +68,9 @@ def analyse(res: dict, faults) -> dict:
         t0, t1 = ev.at_s, ev.at_s + ev.seconds
         before = (t >= t0 - 1.0) & (t < t0)
         during = (t >= t0) & (t < t1)
+        # a frame whose reply was already on the wire when the fault began completes inside
+        # the window without having crossed the faulty link: not counted as good "during"
+        settled = (t >= t0 + IN_FLIGHT_S) & (t < t1)
         after = (t >= t1) & (t < t1 + 2.0)
         around = (t >= t0 - 1.0) & (t < t1 + 2.0)
         i1 = int(np.searchsorted(t, t1))
@@ -89,7 +95,7 @@ def analyse(res: dict, faults) -> dict:
             "modes_during_s": {name: round(float(np.count_nonzero(tr["mode"][during] == m)) / 400.0, 2)
                                for m, name in MODE_NAMES.items()},
             "valid_fraction_during": float(np.mean(np.isfinite(err[during]))) if np.any(during) else None,
-            "frames_good_during": int(np.ptp(good[during])) if np.any(during) else 0,
+            "frames_good_during": int(np.ptp(good[settled])) if np.any(settled) else 0,
             "frames_failed_during": int(np.ptp(failed[during | after])) if np.any(during) else 0,
             "resync_frames": resync, "resync_s": t_back,
             "host_corrupt_frames": int(np.ptp(corrupt[during | after])) if np.any(during) else 0,

@@ -88,7 +88,7 @@ class Cluster:
             if workers < 1:
                 raise ConfigError(f"--workers must be ≥ 1, got {workers}")
             self.cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                        dashboard_address=None, silence_logs=logging.CRITICAL)
+                                        dashboard_address=":0", silence_logs=logging.CRITICAL)
             self.client = Client(self.cluster)
         self.client.register_plugin(preload_plugin(config_path))
         self.config_path = config_path

@@ -21,6 +21,13 @@ pytestmark = pytest.mark.skipif(shutil.which("make") is None or shutil.which("cc
                                 reason="make and a C compiler are needed")
 
 
+def _clean_env():
+    """The environment without what an outer ``make test CMOCKA_...=...`` passes down (make
+    exports command-line variables to the environment as well as in MAKEFLAGS)."""
+    drop = ("MAKEFLAGS", "MFLAGS", "MAKELEVEL", "CMOCKA_CFLAGS", "CMOCKA_INSTALL")
+    return {k: v for k, v in os.environ.items() if k not in drop}
+
+
 def _setup(tmp_path, apt_ok=True, uid="0"):
     shadow = tmp_path / "shadow"
     shadow.mkdir()
@@ -33,14 +40,14 @@ def _setup(tmp_path, apt_ok=True, uid="0"):
     (fakebin / "id").write_text(f'#!/bin/sh\necho {uid}\n')
     for f in fakebin.iterdir():
         f.chmod(0o755)
-    env = {k: v for k, v in os.environ.items() if k not in ("MAKEFLAGS", "MFLAGS", "MAKELEVEL")}  # run by make
+    env = _clean_env()
     env["PATH"] = f"{fakebin}:{os.environ['PATH']}"
     return shadow, log, env
 
 
-def _fw_test(shadow, env, *extra):
-    return subprocess.run(["make", "-s", "-C", str(REPO), "fw-test", f"CMOCKA_CFLAGS=-I{shadow}", *extra],
-                          capture_output=True, text=True, env=env, timeout=600)
+def _fw_test(shadow, env, install="yes"):
+    return subprocess.run(["make", "-s", "-C", str(REPO), "fw-test", f"CMOCKA_CFLAGS=-I{shadow}",
+                           f"CMOCKA_INSTALL={install}"], capture_output=True, text=True, env=env, timeout=600)
 
 
 def _skip_lines(out):
@@ -62,7 +69,7 @@ def test_missing_cmocka_is_installed_when_root_with_apt_get(tmp_path):
                                       ("forbidden", "CMOCKA_INSTALL=no")])
 def test_missing_cmocka_is_skipped_in_one_line_saying_why(tmp_path, case, why):
     shadow, log, env = _setup(tmp_path, apt_ok=case != "apt-fails", uid="1000" if case == "not-root" else "0")
-    proc = _fw_test(shadow, env, *(["CMOCKA_INSTALL=no"] if case == "forbidden" else []))
+    proc = _fw_test(shadow, env, install="no" if case == "forbidden" else "yes")
     assert proc.returncode == 0, proc.stdout + proc.stderr
     lines = _skip_lines(proc.stdout + proc.stderr)
     assert len(lines) == 1 and why in lines[0] and "cmocka.h" in lines[0] and "libcmocka-dev" in lines[0]
@@ -74,9 +81,8 @@ def test_missing_cmocka_is_skipped_in_one_line_saying_why(tmp_path, case, why):
 def test_make_test_runs_the_python_tests_after_a_skip(tmp_path):
     """The top-level ``test`` target goes on to pytest when the C tests were skipped (a
     dry run of make shows the order; the skip exits 0, as above)."""
-    env = {k: v for k, v in os.environ.items() if k not in ("MAKEFLAGS", "MFLAGS", "MAKELEVEL")}
-    proc = subprocess.run(["make", "-n", "-C", str(REPO), "test"], capture_output=True, text=True, env=env,
-                          timeout=60)
+    proc = subprocess.run(["make", "-n", "-C", str(REPO), "test"], capture_output=True, text=True,
+                          env=_clean_env(), timeout=60)
     out = proc.stdout
     assert proc.returncode == 0
     assert out.index("test-or-skip") < out.index("-m pytest")

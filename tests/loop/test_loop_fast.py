@@ -108,3 +108,20 @@ def test_fast_run_repeats_and_replays_exactly(tmp_path):
     ok = [np.trace(r["cov_mid_s"]) <= filt[float(r["t_mid_s"])] * (1 + 1e-9) for r in sm
           if float(r["t_mid_s"]) in filt]
     assert len(ok) > 100 and all(ok)
+
+
+def test_fast_head_disconnect_coasts_and_reconnects(tmp_path):
+    """The disconnect scenario in lock-step: the link is lost (LinkLostError, by type) at 4 s,
+    the loop coasts, reconnects when the head is back at 6 s, and tracks again."""
+    from gyrostar.hil import config as hc
+    from gyrostar.hil.runner import run_flatsat
+
+    res = run_flatsat(hc.load_flatsat(), hc.load_scenario("disconnect"), duration=7.5, seed=2, folder=tmp_path,
+                      plots=False, status=False, fast=True, record=False)
+    c = res["counters"]
+    assert c["head_reconnects"] == 1 and c["frames_failed"] >= 1
+    modes = [(round(t - 1000.0, 1), a, b) for t, a, b in c["mode_changes"]]
+    assert ("TRACK", "COAST") in [(a, b) for _, a, b in modes]
+    lost = [t for t, a, b in modes if (a, b) == ("TRACK", "COAST")][0]
+    back = [t for t, a, b in modes if (a, b) == ("COAST", "TRACK")][0]
+    assert 4.0 <= lost <= 4.2 and 6.0 <= back <= 6.6

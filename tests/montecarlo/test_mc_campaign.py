@@ -1,0 +1,56 @@
+"""The Dask campaign: same per-run results for 1 and 2 workers; the network rules."""
+
+import socket
+import subprocess
+import sys
+
+import pytest
+from gyrostar.errors import ConfigError, DeviceError
+from gyrostar.hil.eval_loop import run_seeds
+from gyrostar.hil.montecarlo import campaign
+from gyrostar.hil.montecarlo.campaign import Cluster, _is_loopback, results_sha256, run_campaign
+
+
+@pytest.mark.slow
+def test_results_do_not_depend_on_the_worker_count():
+    seeds = run_seeds(9, 2)
+    with Cluster(1) as c1:
+        one = run_campaign(c1, seeds, 10.0)
+    with Cluster(2) as c2:
+        two = run_campaign(c2, seeds, 10.0)
+    assert not any(r["failed"] for r in one), [r["reason"] for r in one]
+    assert [r["seed"] for r in one] == seeds
+    assert results_sha256(one) == results_sha256(two)
+    # the runs really ran: outputs at 400 Hz for the whole run
+    assert all(r["outputs"] >= 0.99 * 400 * 10.0 for r in one)
+
+
+@pytest.mark.parametrize("address,loop", [("tcp://127.0.0.1:8786", True), ("localhost:8786", True),
+                                          ("tcp://[::1]:8786", True), ("tcp://10.0.0.5:8786", False),
+                                          ("tls://scheduler.example:8786", False)])
+def test_loopback_rule(address, loop):
+    assert _is_loopback(address) is loop
+
+
+def test_remote_scheduler_without_tls_is_refused():
+    with pytest.raises(ConfigError, match="only over TLS"):
+        Cluster(scheduler="tcp://192.0.2.10:8786")
+
+
+def test_a_scheduler_that_does_not_answer_is_one_line(monkeypatch):
+    monkeypatch.setattr(campaign, "CONNECT_TIMEOUT_S", 1.0)
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    with pytest.raises(DeviceError, match="no Dask scheduler answered"):
+        Cluster(scheduler=f"tcp://127.0.0.1:{port}")
+
+
+def test_cli_rejects_bad_arguments_in_one_line():
+    for args, text in ((["--runs", "0"], "--runs"), (["--duration", "5"], "--duration"),
+                       (["--tls-ca", "x.pem"], "go together")):
+        p = subprocess.run([sys.executable, "-m", "gyrostar.cli.main", "eval", "loop", *args],
+                           capture_output=True, text=True, timeout=60)
+        assert p.returncode == 2, p.stderr
+        assert text in p.stderr and "Traceback" not in p.stderr
+        assert len(p.stderr.strip().splitlines()) == 1
