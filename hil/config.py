@@ -150,6 +150,15 @@ class LoopConfig:
     # cut-off of the gyro's 2nd-order low-pass (Hz; 0: none): it takes the rate noise above
     # it out of short windows (BMI088 at 400 Hz ODR: 47 Hz); the simulated flatsat uses its model's
     gyro_lowpass_hz: float = 47.0
+    # rate-proportional gyro error left after calibration (scale factor and misalignment, 1σ,
+    # ppm of the rate): the filter's coast covariance grows with it at speed. BMI088 uncalibrated:
+    # ~4700 (sensitivity ±1 %, cross-axis ±1 %); after `gyrostar calibrate gyro-scale`: ~200.
+    # The simulated flatsat uses its gyro model's
+    gyro_rate_error_ppm: float = 200.0
+    # the gyro offset the filter starts from (1σ, deg/s): the BMI088's zero-rate offset is
+    # ±1 deg/s raw, ~0.01 after `gyrostar calibrate gyro-static`. The simulated flatsat uses its
+    # gyro model's (3σ of the per-part draw, or the fixed offset)
+    gyro_bias_prior_dps: float = 1.15
 
     def validate(self):
         from ..loop.record import MAX_STARS
@@ -161,6 +170,10 @@ class LoopConfig:
             raise ValueError("loop.gyro_lowpass_hz must be in [0, 10000)")
         if not 0.0 <= self.gyro_delay_ms < 100.0:
             raise ValueError("loop.gyro_delay_ms must be in [0, 100)")
+        if not 0.0 < self.gyro_bias_prior_dps <= 10.0:
+            raise ValueError("loop.gyro_bias_prior_dps must be in (0, 10]")
+        if not 0.0 <= self.gyro_rate_error_ppm <= 1e5:
+            raise ValueError("loop.gyro_rate_error_ppm must be in [0, 100000]")
         for key in ("neighbour_sep_px", "reconnect_every_s", "gyro_arw_deg_rts"):
             if not getattr(self, key) > 0:
                 raise ValueError(f"loop.{key} must be positive")

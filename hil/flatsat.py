@@ -170,6 +170,8 @@ def loop_params(cfg: hc.FlatsatConfig, e_per_dn: float | None = None, scen: hc.S
     arw = lc.gyro_arw_deg_rts * DEG
     delay = lc.gyro_delay_ms * 1e-3
     lowpass = lc.gyro_lowpass_hz
+    rate_error = lc.gyro_rate_error_ppm * 1e-6
+    bias_prior = lc.gyro_bias_prior_dps * DEG
     if cfg.simulated:
         from ..mocks.gyro_truth import gyro_params
 
@@ -180,12 +182,18 @@ def loop_params(cfg: hc.FlatsatConfig, e_per_dn: float | None = None, scen: hc.S
         if n2 > 0:
             arw = math.sqrt(n2)
         lowpass = gp.filter_hz
+        # scale factor and cross-axis errors the simulated part carries (none in a calibrated set)
+        rate_error = math.hypot(gp.scale_factor_sigma_ppm * 1e-6, gp.misalignment_sigma_mrad * 1e-3)
+        # the offset the part may have, as a 1σ prior wide enough for it: 3x its fixed value or
+        # 3σ of its per-part draw (what a calibration's uncertainty would give)
+        bias_prior = 3.0 * max(max(abs(v) for v in gp.bias_dps), gp.bias_sigma_dps, 0.002) * DEG
     p = LoopParams(frame_hz=lc.frame_hz, exposure_s=cfg.head.exposure_ms * 1e-3, window_k=lc.window_k,
                    max_stars=lc.max_stars, min_stars=lc.min_stars, coast_timeout_s=lc.coast_timeout_s,
                    acquire_every_s=lc.acquire_every_s, mag_limit=lc.mag_limit, confirm_images=lc.confirm_images,
                    wrong_id_rejects=lc.wrong_id_rejects, neighbour_sep_px=lc.neighbour_sep_px,
                    reconnect_every_s=lc.reconnect_every_s, head_timeouts_lost=lc.head_timeouts_lost, gyro_arw=arw,
-                   gyro_delay_s=delay, gyro_lowpass_hz=lowpass)
+                   gyro_delay_s=delay, gyro_lowpass_hz=lowpass, gyro_rate_error=rate_error,
+                   bias_prior=bias_prior)
     if e_per_dn:
         p.e_per_dn = e_per_dn
     return p

@@ -184,7 +184,7 @@ def fit_noise_terms(curve: AllanCurve, tau_min: float = 0.1, model: str = "auto"
     tau, ad, err, n = curve.tau, curve.adev, curve.err, curve.n
     keep = (tau >= tau_min) & (ad > 0) & (err > 0) & (n > 0)
     if keep.sum() < 5:
-        raise ConfigError(f"too few Allan points above tau_min={tau_min} s to fit the noise terms "
+        raise ConfigError(f"too few Allan points above --tau-min {tau_min} s to fit the noise terms "
                           f"({int(keep.sum())}); record a longer log")
     t, a, e = tau[keep], ad[keep], err[keep]
     var_sd = 2.0 * a * np.maximum(e, 1e-3 * a)

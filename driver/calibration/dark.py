@@ -25,14 +25,15 @@ HELP = "dark frames at several exposures -> dark-current map, hot pixels, read n
 
 
 def configure(parser) -> None:
-    from ..cli.argtypes import positive_float_list, positive_int
+    from ..cli.argtypes import int_at_least, positive_float_list
     from .report import add_common_args
 
     add_common_args(parser, "folder of FITS dark frames (EXPTIME header) or .npz (frames, exposure)")
     parser.add_argument("--preset", default="xing2012", help="--simulate: simulator preset (default xing2012)")
     parser.add_argument("--exposures", type=positive_float_list, default=[0.005, 0.03, 0.055, 0.08],
                         help="--simulate: exposure times, s, comma separated")
-    parser.add_argument("--frames", type=positive_int, default=8, help="--simulate: frames per exposure (default 8)")
+    parser.add_argument("--frames", type=int_at_least(2), default=8,
+                        help="--simulate: frames per exposure, at least 2 (default 8)")
     parser.add_argument("--k-sigma", type=float, default=8.0,
                         help="hot pixel: dark current above median + K robust sigma (default 8)")
     parser.add_argument("--hot-factor", type=float, default=5.0,

@@ -88,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
             parser = build_parser()
             args = parser.parse_args(argv)
         except KeyboardInterrupt:
-            sys.stderr.write("gyrostar: interrupted\n")
+            sys.stderr.write("gyrostar: ERROR: interrupted\n")
             emit_error(_argv_has_json(argv), "interrupted", 130)
             return 130
         from .. import logs

@@ -22,6 +22,8 @@ def run(args) -> int:
     from . import build, qemu
     from .interrupt import sigterm_as_interrupt
 
+    if args.run and not args.sensor:      # before the build: a usage error costs nothing
+        raise ConfigError("--run needs --sensor FILE (a GSPX pixel file, see firmware/README.md)")
     sizes = build.arm_sizes(build.build("arm"))
     ok = sizes["flash_bytes"] <= sizes["flash_limit"] and sizes["static_ram_bytes"] <= sizes["ram_limit"]
     result = {"elf": str(build.arm_elf_path()), **sizes, "within_limits": ok}
@@ -30,8 +32,6 @@ def run(args) -> int:
                        f"{sizes['line_buffer_bytes']} B and stack {sizes['stack_bytes']} B apart)")
     if not args.run:
         return 0 if ok else 1
-    if not args.sensor:
-        raise ConfigError("--run needs --sensor FILE (a GSPX pixel file, see firmware/README.md)")
     with sigterm_as_interrupt(), qemu.QemuHead(args.sensor, elf=build.arm_elf_path(), port=args.port or None) as q:
         print(f"gyrostar-head (mps2-an385 under QEMU): {q.url}", flush=True)
         while q.proc.poll() is None:   # Ctrl-C or SIGTERM: QEMU is stopped on the way out, exit 130

@@ -36,7 +36,7 @@ SMOOTH_GAP_S = 0.1       # s: frames further apart than this are not smoothed to
 
 class AttitudeFilter:
     def __init__(self, arw: float, sigma_bias_rw: float, bias_prior: float, period_s: float, delay_s: float = 0.0,
-                 lowpass_hz: float = 0.0):
+                 lowpass_hz: float = 0.0, rate_error: float = 0.0, rate_error_horizon_s: float = 5.0):
         self.q = np.array([0.0, 0.0, 0.0, 1.0])   # ACQUIRE: gyro-relative attitude from the start
         self.b = np.zeros(3)
         self.P = np.zeros((6, 6))
@@ -46,7 +46,12 @@ class AttitudeFilter:
         self.hist_t = np.full(HIST, -np.inf)
         self.hist_q = np.zeros((HIST, 4))
         self.ih = np.array([HIST - 1, 0], np.int64)   # [ring head, output seq]
-        self.prm = np.array([period_s, arw, sigma_bias_rw, (1e-4) ** 2, delay_s])
+        # rate-proportional gyro error left after calibration (scale factor and misalignment,
+        # 1σ per axis, rad per rad): a constant error, folded into the rate noise as a walk
+        # whose variance matches its linear growth (σ_s |ω| t)² at t = rate_error_horizon_s
+        # and exceeds it before, so a coast at speed is never over-confident
+        self.prm = np.array([period_s, arw, sigma_bias_rw, (1e-4) ** 2, delay_s,
+                             rate_error ** 2 * rate_error_horizon_s])
         # the gyro's 2nd-order low-pass takes the rate noise above f_c out of every finite
         # window: the angle walk over Δ is N²(Δ − κ), κ = 1/(2√2 π f_c) (Δ ≫ 1/f_c)
         self.kappa = 1.0 / (2.0 * math.sqrt(2.0) * math.pi * lowpass_hz) if lowpass_hz > 0 else 0.0

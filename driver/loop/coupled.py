@@ -69,6 +69,7 @@ class LoopParams:
     gyro_delay_s: float = 0.0         # group delay of the gyro's low-pass filter, s (compensated)
     gyro_lowpass_hz: float = 47.0     # the gyro's 2nd-order low-pass cut-off, Hz (BMI088 at 400 Hz ODR: 47)
     sigma_bias_rw: float = 1e-6       # drift random walk, rad/s/√s
+    gyro_rate_error: float = 0.0      # rate-proportional gyro error after calibration (scale, misalignment), 1σ
     psf_sigma_px: float = 0.85        # PSF σ of the optics (px), for the smeared-spot fit
     bias_prior: float = 0.02          # initial drift uncertainty, rad/s (≈ 1.1 °/s: BMI088 offset ±1 °/s)
     min_signal: float = 30.0          # window flux (DN above background) to accept a centroid
@@ -138,7 +139,7 @@ class CoupledLoop:
         self.samples = GyroSamples(256)
         self.filter = AttitudeFilter(params.gyro_arw, params.sigma_bias_rw, params.bias_prior,
                                      1.0 / gyro.odr_hz if gyro.odr_hz else 0.0025, params.gyro_delay_s,
-                                     params.gyro_lowpass_hz)
+                                     params.gyro_lowpass_hz, params.gyro_rate_error, params.coast_timeout_s)
         self.tracks = StarTracks(params, camera, star_index)
         self.image = ImagePipeline(params, camera, identifier)
         self.outputs = OutputStage(sinks, self.lat_clock)

@@ -38,7 +38,8 @@ def predict_batch(smp_t, smp_rate, smp_flags, n, q, b, P, ts, hist_t, hist_q, ih
     q, b, P: filter state, in place. ts (4,): [t of the last sample (s, nan: none), ω̂ (rad/s)]
     in place. hist_t (H,), hist_q (H, 4): history ring; ih (2,) int64: [ring head, output seq]
     in place. prm: [gyro period s, σ_v rad/s/√Hz, σ_u rad/s/√s, bias-converged variance
-    (rad/s)², gyro group delay τ s]. A sample stamped t measured the rate at t − τ: the
+    (rad/s)², gyro group delay τ s, σ_s² T_s s (rate-proportional error: the rate noise
+    density used is √(σ_v² + σ_s² T_s |ω̂|²))]. A sample stamped t measured the rate at t − τ: the
     filter and its history run on t − τ, and each record's attitude is carried on to t
     with the current rate (``t`` stays the sample's stamp). flags_first: flags only the
     first output carries (overrun, gyro gap); flags_base: flags every output carries.
@@ -68,7 +69,11 @@ def predict_batch(smp_t, smp_rate, smp_flags, n, q, b, P, ts, hist_t, hist_q, ih
         ts[0] = t
         for j in range(3):
             w[j] = smp_rate[i, j]
-        mekf_predict_blocks(q, b, P, w, dt, prm[1], prm[2], E, T)
+        sv = prm[1]
+        if prm[5] > 0.0:
+            wn2 = (w[0] - b[0]) ** 2 + (w[1] - b[1]) ** 2 + (w[2] - b[2]) ** 2
+            sv = np.sqrt(sv * sv + prm[5] * wn2)
+        mekf_predict_blocks(q, b, P, w, dt, sv, prm[2], E, T)
         h = (ih[0] + 1) % H
         ih[0] = h
         hist_t[h] = t

@@ -108,6 +108,7 @@ CASES = [
     ("cal-dark-corrupt-fits", ["calibrate", "dark", "{d}/fits"], USAGE,
      ["INPUT", "dark1.fits"]),
     ("cal-dark-frames-0", ["calibrate", "dark", "--simulate", "--frames", "0"], USAGE, ["--frames"]),
+    ("cal-dark-frames-1", ["calibrate", "dark", "--simulate", "--frames", "1"], USAGE, ["--frames"]),
     ("cal-dark-exposures", ["calibrate", "dark", "--simulate", "--exposures", "0,-1"], USAGE, ["--exposures"]),
     ("cal-dark-empty-npz", ["calibrate", "dark", "{d}/empty.npz"], USAGE, ["INPUT"]),
     ("cal-unknown-target", ["calibrate", "compass"], USAGE, ["compass"]),
@@ -122,6 +123,12 @@ CASES = [
     ("bench-unknown-suite", ["bench", "nosuch"], USAGE, ["nosuch"]),
     ("fw-ping-no-device", ["fw", "ping", "{d}/no-such-tty", "-n", "1"], DEVICE, ["no-such-tty"]),
     ("fw-unknown-target", ["fw", "flash"], USAGE, ["flash"]),
+    ("fw-host-no-sensor", ["fw", "host"], USAGE, ["--sensor"]),
+    ("fw-arm-run-no-sensor", ["fw", "arm", "--run"], USAGE, ["--sensor"]),
+    ("fw-build-unknown-flag", ["fw", "build", "--bogus"], USAGE, ["--bogus"]),
+    ("sim-frame-rate-dps", ["sim", "frame", "--out", "{d}/x.fits", "--rate-dps", "1,2"], USAGE, ["--rate-dps"]),
+    ("eval-centroid-window", ["eval", "centroid", "--window-k", "0"], USAGE, ["window"]),
+    ("eval-starcount-fov", ["eval", "starcount", "--fov-deg", "-1", "--trials", "10"], USAGE, ["fov"]),
 ]
 
 

@@ -114,3 +114,25 @@ def test_gyro_delay_shifts_the_history_and_carries_outputs_on():
     assert f.t_last == pytest.approx(1.005 - tau)              # the filter runs on t − τ
     np.testing.assert_allclose(out["q"][2], quat_propagate(f.q, f.omega, tau), atol=1e-12)
     np.testing.assert_allclose(f.q_at(1.005 - tau), f.q, atol=1e-15)
+
+
+def test_rate_proportional_error_grows_the_coast_covariance_to_its_linear_bound():
+    """A scale/misalignment error σ_s: at rate ω the attitude variance grows by
+    (σ_v² + σ_s² T ω²) per second, so at t = T it holds the error's linear growth (σ_s ω T)²."""
+    sv, ss, horizon, w = 1.7e-4, 0.005, 5.0, 0.6          # rad/√s, rad/rad, s, rad/s (34 °/s)
+    f = AttitudeFilter(sv, 0.0, 0.0, 0.0025, rate_error=ss, rate_error_horizon_s=horizon)
+    f.P[:] = 0.0
+    n = 400
+    t = 20.0 + np.arange(1, n + 1) * 0.0025
+    f.ts[0] = 20.0
+
+    class Smp:
+        pass
+    smp = Smp()
+    smp.t, smp.rate, smp.flags, smp.n = t, np.tile([0.0, 0.0, w], (n, 1)), np.zeros(n, np.uint8), n
+    f.predict(smp, 0, 0, R.MODE_COAST, np.zeros((0, 3)), np.zeros(0, np.int32),
+              np.array([6666.6, 511.5, 511.5, 0, 0, 0, 0, 0, 1024, 1024]), np.zeros((0, 2)), R.empty(n))
+    per_s = sv ** 2 + ss ** 2 * horizon * w ** 2
+    assert np.allclose(np.diag(f.P[:3, :3]), per_s * 1.0, rtol=1e-9)
+    # after the horizon the walk's variance equals the linear bound of a constant scale error
+    assert per_s * horizon >= (ss * w * horizon) ** 2
