@@ -26,7 +26,8 @@ Pyramid is given the measured magnitudes with the centroids (its per-star check 
 them; a peer gets them as brightness). ``--peer`` (Pyramid only): each worker also solves its fields with a peer of
 :mod:`gyrostar.starid.peers` (tetra3rs, or cedar-solve), after ours, on the same centroids
 (with their brightness) and a database built for the same field; reported with the ratios
-of its median and p99 time to ours.
+of its median and p99 time to ours, wall and CPU (the process's CPU time for the peer:
+under load its wall time waits on thread wake-ups).
 
 Trials run in chunks on a Dask cluster: a LocalCluster (``--workers`` processes, one
 thread each) unless ``--scheduler ADDRESS`` names an existing one.
@@ -125,8 +126,8 @@ def configure(parser) -> None:
                              "default %(default)s)")
     parser.add_argument("--xi", type=int, default=d.xi, help="grid: minimum shared cells ξ (default %(default)s)")
     parser.add_argument("--peer", nargs="?", const="tetra3rs", default="", choices=PEERS,
-                        help="pyramid: also solve every field with this peer (default tetra3rs; or cedar-solve) "
-                             "in the same worker, after ours")
+                        help="pyramid: also solve every field with this peer (tetra3rs when given alone, or "
+                             "cedar-solve) in the same worker, after ours (default: none)")
     parser.add_argument("--trials", type=int, default=1000,
                         help="Monte Carlo trials (per sweep point with --sweep; default %(default)s)")
     parser.add_argument("--seed", type=int, default=1, help="random seed (default %(default)s)")
@@ -253,7 +254,7 @@ def run_chunk(cfg: TrialConfig, seed: int, n: int) -> dict:
     rng = np.random.default_rng(seed)
     pn, mn = cfg.total_pos_noise, cfg.total_mag_noise
     keys = ("success", "wrong", "n_stars", "ms", "cpu_ms", "nb_ok", "nb_total", "gyro_err_px", "peer_solved",
-            "peer_correct", "peer_ms", "labels", "wrong_labels")
+            "peer_correct", "peer_ms", "peer_cpu_ms", "labels", "wrong_labels")
     res = {k: [] for k in keys}
     tracking = cfg.method.startswith("extended")
     # every field first (same random stream as one trial after another: identifying draws
@@ -303,11 +304,12 @@ def run_chunk(cfg: TrialConfig, seed: int, n: int) -> dict:
         peer = s["peer"]
         peer.solve(peer_frames[0].uv, peer_frames[0].mag, cam)  # untimed: loads the peer's code and data
     for frame in peer_frames:
-        solved, ids, r_est, ms = peer.solve(frame.uv, frame.mag, cam)
+        solved, ids, r_est, ms, cpu = peer.solve(frame.uv, frame.mag, cam)
         solved, correct = score_peer(peer, solved, ids, r_est, frame, cam)
         res["peer_solved"].append(solved)
         res["peer_correct"].append(correct)
         res["peer_ms"].append(ms)
+        res["peer_cpu_ms"].append(cpu)
     out = {k: np.asarray(v) for k, v in res.items()}
     if cfg.peer and isinstance(s.get("peer"), str):
         out["peer_reason"] = s["peer"]
@@ -384,11 +386,13 @@ def summarize(chunks: list[dict]) -> dict:
         out["gyro_error_px_rms"] = float(np.sqrt(np.nanmean(g ** 2)))
     if cat["peer_ms"].size:
         pm, p99 = float(np.median(cat["peer_ms"])), float(np.percentile(cat["peer_ms"], 99))
+        pc, pc99 = float(np.median(cat["peer_cpu_ms"])), float(np.percentile(cat["peer_cpu_ms"], 99))
         out["peer"] = {"name": next(c["peer_name"] for c in chunks if "peer_name" in c),
                        "success_rate": float(cat["peer_correct"].mean()),
                        "wrong_rate": float(np.mean(cat["peer_solved"] & ~cat["peer_correct"])),
-                       "median_ms": pm, "p99_ms": p99,
-                       "median_ratio": pm / out["median_ms"], "p99_ratio": p99 / out["p99_ms"]}
+                       "median_ms": pm, "p99_ms": p99, "median_cpu_ms": pc, "p99_cpu_ms": pc99,
+                       "median_ratio": pm / out["median_ms"], "p99_ratio": p99 / out["p99_ms"],
+                       "median_cpu_ratio": pc / out["median_cpu_ms"], "p99_cpu_ratio": pc99 / out["p99_cpu_ms"]}
     reasons = [c["peer_reason"] for c in chunks if "peer_reason" in c]
     if reasons:
         out["peer"] = {"skipped": reasons[0]}
@@ -486,8 +490,11 @@ def _text(r: dict) -> str:
         p = r["peer"]
         lines.append(f"  peer: skipped ({p['skipped']})" if "skipped" in p else
                      f"  peer {p['name']}: success {100 * p['success_rate']:.2f} %  wrong "
-                     f"{100 * p['wrong_rate']:.2f} %  median {p['median_ms']:.3f} ms ({p['median_ratio']:.2f}× ours)  "
-                     f"p99 {p['p99_ms']:.3f} ms ({p['p99_ratio']:.2f}× ours)")
+                     f"{100 * p['wrong_rate']:.2f} %\n"
+                     f"    time median {p['median_ms']:.3f} ms ({p['median_ratio']:.2f}× ours)  "
+                     f"p99 {p['p99_ms']:.3f} ms ({p['p99_ratio']:.2f}× ours) (wall);  "
+                     f"CPU median {p['median_cpu_ms']:.3f} ms ({p['median_cpu_ratio']:.2f}× ours)  "
+                     f"p99 {p['p99_cpu_ms']:.3f} ms ({p['p99_cpu_ratio']:.2f}× ours)")
     return "\n".join(lines)
 
 

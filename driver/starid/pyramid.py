@@ -35,7 +35,8 @@ star multiplies by ρ ε²/(π sin φ_r) and by the n − 3 spots that could hav
 every further labelled star by ρ' δ²/4 (δ = label_tol, a random spot landing on a star;
 ρ' counts every indexed star, not only navigation stars). ``p_false`` reported is that
 product times the number of triangles tried (a union bound over the search); the search
-stops when no triangle could still pass even in the sparsest sky with every spot labelled.
+skips a triangle that could not pass even in a sparse sky (the 5th percentile of the star
+density) with every spot labelled: that costs success only, never safety.
 A 3-star field is accepted on a unique triangle when E₃ allows it.
 """
 
@@ -48,18 +49,20 @@ import numpy as np
 from numba import njit
 
 from ..attitude import quat_to_dcm
+from ..camera import unproject_many
 from ..core.quest import quest
 from ..errors import ConfigError
 from .index import StarIndex, cone_query
 from .kvector import query
 from .result import StarIdResult, to_body_vectors
-from .star_check import StarCheck
+from .star_check import StarCheck, check_stars
 from .verify import verify_matches
 
-ST_OK, ST_TOO_FEW, ST_NO_MATCH, ST_REJECTED, ST_STAR_CHECK, ST_SPARSE = 0, 1, 2, 3, 4, 5
+ST_OK, ST_TOO_FEW, ST_NO_MATCH, ST_REJECTED, ST_STAR_CHECK, ST_SPARSE, ST_BAD = 0, 1, 2, 3, 4, 5, 6
 STATUS_TEXT = {ST_OK: "ok", ST_TOO_FEW: "fewer than 3 stars", ST_NO_MATCH: "no unique pyramid",
                ST_REJECTED: "rejected by verification", ST_STAR_CHECK: "fewer than 3 stars pass the per-star check",
-               ST_SPARSE: "every spot fits one pyramid but too few stars for p_false_max"}
+               ST_SPARSE: "every spot fits one pyramid but too few stars for p_false_max",
+               ST_BAD: "centroids must be finite pixel coordinates"}
 _MAX_CAND = 256
 
 
@@ -259,7 +262,7 @@ def _search(b, vec, vmag, is_nav, pt, pa, pb, kv, km, kq, vstart, vstars, vvec, 
             status):
     """Pyramid search over one navigation-star tier (pair table ``pt/pa/pb`` with its k-vector,
     ``is_nav``/``nnav`` its stars, ``nloc`` their local density as an all-sky count and ``nmin``
-    its least value; only the brightest ``max_spots`` spots form pyramids);
+    its 5th percentile (early rejection only); only the brightest ``max_spots`` spots form pyramids);
     ``tried``/``status`` carry over from earlier tiers.
     Returns ``(match (n,), q (4,), p_false, status, triangles_tried)``."""
     n = b.shape[0]
@@ -295,7 +298,7 @@ def _search(b, vec, vmag, is_nav, pt, pa, pb, kv, km, kq, vstart, vstars, vvec, 
                     sin_k = max(_sin_vertex(b[k], b[i], b[j]), 0.05)
                     # E₃ with the local density ρ (an all-sky count) for the stars around x
                     g3 = nnav * eps ** 3 * np.sin(tij) / (np.pi * sin_k)
-                    # early rejection: even in the sparsest sky, with the best-placed confirming star
+                    # early rejection: even in a sparse sky (5th percentile), with the best-placed confirming star
                     # and every other spot labelled, this triangle's pyramid could not pass the bound
                     if n == 3:
                         best = g3 * nmin * nmin * (tried + 1)
@@ -391,7 +394,7 @@ def pyramid_core(b, vec, vmag, tiers, lab_nloc, vstart, vstars, vvec, vh, vg, ep
     """Numba core. ``b`` (n,3) body unit vectors, brightest first; ``mark`` int32 (N,) zeros (work, left zeroed).
 
     ``tiers``: tuple of navigation-star tiers, searched in order, each
-    ``(is_nav, pair_theta, pair_a, pair_b, kv, nloc, (kv_m, kv_q, n_nav, max_spots, nloc_min))``
+    ``(is_nav, pair_theta, pair_a, pair_b, kv, nloc, (kv_m, kv_q, n_nav, max_spots, nloc_p5))``
     over the same star numbering (a thinned tier of the brightest stars per field, on the brightest few
     spots, first; then all stars on all spots).
     Adaptive spot budget: triangles and confirming stars come from the brightest
@@ -491,6 +494,43 @@ def label_rest(b, q, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, tol, m
                 match[best] = s
 
 
+@njit(cache=True)
+def pyramid_identify_uv(uv, cam, tiers, lab_nloc, vec, vmag, ids, vstart, vstars, vvec, vh, vg, eps, label_tol, max_sep,
+                        fov_radius, p_false_max, max_triangles, mark, budgets, mag, check):
+    """One compiled call: centroids ``uv`` (n, 2) px → body vectors → :func:`pyramid_core` →
+    the per-star check :func:`gyrostar.starid.star_check.check_stars` (scalars ``check`` from
+    ``StarCheck.settings()``; empty: no check here). ``mag`` (n,) measured V or empty.
+    Returns ``(match, catalog ids, q, status, p_false, n_ok)``; status ``ST_BAD`` for a
+    non-finite centroid."""
+    n = uv.shape[0]
+    for i in range(n):
+        if not (np.isfinite(uv[i, 0]) and np.isfinite(uv[i, 1])):
+            none = -np.ones(n, dtype=np.int64)
+            return none, none.copy(), np.array([0.0, 0.0, 0.0, 1.0]), ST_BAD, np.inf, 0
+    b = unproject_many(cam, uv)
+    match, q, pf, st, _ = pyramid_core(b, vec, vmag, tiers, lab_nloc, vstart, vstars, vvec, vh, vg, eps, label_tol,
+                                       max_sep, fov_radius, p_false_max, max_triangles, mark, budgets)
+    n_ok = 0
+    for i in range(n):
+        if match[i] >= 0:
+            n_ok += 1
+    if st == ST_OK and check.shape[0] > 0:
+        m = mag if mag.shape[0] == n else np.full(n, np.nan)
+        qc, n_ok = check_stars(b, m, vec, vmag, match, check[0], check[1], check[2], check[3], check[4],
+                               int(check[5]), int(check[6]))
+        if n_ok == 0:
+            st = ST_STAR_CHECK
+        else:
+            q = qc
+    if st != ST_OK:
+        match[:] = -1
+    out_ids = -np.ones(n, dtype=np.int64)
+    for i in range(n):
+        if match[i] >= 0:
+            out_ids[i] = ids[match[i]]
+    return match, out_ids, q, st, pf, n_ok
+
+
 def local_density(index: StarIndex) -> np.ndarray:
     """Per star: the navigation stars within the pair radius around it, scaled to an all-sky
     count (the N a uniform sky of that density would have; at least one star per cap)."""
@@ -553,13 +593,16 @@ class Pyramid:
         dens = [local_density(t) for t in tiers]
         self._tiers = tuple((t.is_nav, t.pair_theta, t.pair_a, t.pair_b, t.kv, d,
                              (float(t.kv_m), float(t.kv_q), float(np.count_nonzero(t.is_nav)), cap,
-                              float(d[t.is_nav].min())))
+                              float(np.percentile(d[t.is_nav], 5))))
                             for t, cap, d in zip(tiers, caps, dens))
         # every indexed star (labels): the full tier's navigation density scaled to all stars
         self._lab_nloc = dens[-1] * (len(self.index) / np.count_nonzero(self.index.is_nav))
         if self.check is None:
             self.check = StarCheck(self.sigma_px, self.camera.focal_length_px, mag_limit=self.index.mag_limit,
                                    min_stars=3)
+        # a StarCheck runs inside the compiled call; another stage runs after it
+        self._fused = self.check.settings() if isinstance(self.check, StarCheck) else np.empty(0)
+        self._no_mag = np.empty(0)
 
     def identify_vectors(self, b: np.ndarray, mag=None) -> StarIdResult:
         """Identify body unit vectors (n, 3), brightest first; ``mag`` (n,) measured V or None."""
@@ -569,18 +612,41 @@ class Pyramid:
             b, ix.vectors, ix.vmag, self._tiers, self._lab_nloc, ix.vox_start, ix.vox_stars, ix.vox_vec, ix.vox_h,
             ix.vox_g, self.eps, self.label_tol, ix.max_sep, self.fov_radius, self.p_false_max, self.max_triangles,
             self._mark, self._budgets)
-        text = STATUS_TEXT[int(st)]
+        n_ok = 0
         if st == ST_OK:
             q, full, n_ok = self.check.apply(b, mag, ix.vectors, ix.vmag, full)
             if n_ok == 0:
                 st = ST_STAR_CHECK
-                text = STATUS_TEXT[ST_STAR_CHECK]
-            elif n_ok <= 4:
-                # a sparse field, accepted because the bound allowed it at p_false_max
-                text = f"ok: sparse field, {n_ok} stars (p_false {pf:.1e})"
-        return StarIdResult.make(ix, full, q, st == ST_OK, text, pf, "pyramid")
+        return StarIdResult.make(ix, full, q, st == ST_OK, self._status(st, n_ok, pf), pf, "pyramid")
 
     def identify(self, uv: np.ndarray, mag=None) -> StarIdResult:
         """Identify centroids ``uv`` (n, 2) [col, row] px, brightest first; ``mag`` (n,)
-        their calibrated measured V (None: position-only per-star check)."""
-        return self.identify_vectors(to_body_vectors(self._params, uv), mag)
+        their calibrated measured V (None: position-only per-star check). One compiled call
+        when the check is a :class:`StarCheck`."""
+        if self._fused.shape[0] == 0:
+            return self.identify_vectors(to_body_vectors(self._params, uv), mag)
+        pts = uv
+        if not (isinstance(pts, np.ndarray) and pts.dtype == np.float64 and pts.ndim == 2 and pts.shape[1] == 2
+                and pts.flags.c_contiguous):
+            pts = np.asarray(uv, dtype=np.float64)
+            pts = np.ascontiguousarray(pts.reshape(-1, 2) if pts.size else np.empty((0, 2)))
+        m = self._no_mag
+        if mag is not None:
+            m = np.ascontiguousarray(mag, dtype=np.float64).reshape(-1)
+            if m.shape[0] != pts.shape[0]:
+                raise ConfigError(f"{m.shape[0]} magnitudes for {pts.shape[0]} centroids")
+        ix = self.index
+        match, ids, q, st, pf, n_ok = pyramid_identify_uv(
+            pts, self._params, self._tiers, self._lab_nloc, ix.vectors, ix.vmag, ix.ids, ix.vox_start, ix.vox_stars,
+            ix.vox_vec, ix.vox_h, ix.vox_g, self.eps, self.label_tol, ix.max_sep, self.fov_radius, self.p_false_max,
+            self.max_triangles, self._mark, self._budgets, m, self._fused)
+        if st == ST_BAD:
+            raise ConfigError(STATUS_TEXT[ST_BAD])
+        return StarIdResult(match, ids, q, st == ST_OK, self._status(st, n_ok, pf), float(pf), "pyramid")
+
+    @staticmethod
+    def _status(st, n_ok, pf) -> str:
+        if st == ST_OK and n_ok <= 4:
+            # a sparse field, accepted because the bound allowed it at p_false_max
+            return f"ok: sparse field, {n_ok} stars (p_false {pf:.1e})"
+        return STATUS_TEXT[int(st)]

@@ -73,3 +73,14 @@ def test_a_far_off_track_attitude_is_wrong_but_an_honest_coast_is_not():
     # ... but outside its own covariance (σ 5″) it is
     out["cov"][:, 0, 0] = out["cov"][:, 1, 1] = (5 * ARC) ** 2
     assert run_metrics(out, truth, 99.5, CAM, vec)["wrong_attitude"]
+
+
+def test_an_attitude_error_moves_all_labels_alike_and_is_not_a_wrong_id():
+    out, truth, vec = _records(err_arcsec=(120.0, -80.0))
+    # the loop tracks each label where its estimated attitude puts it: 4 px off, all alike
+    icrs = np.array([vec[11], vec[22], vec[33]])
+    uv_est, _ = CAM.project(icrs @ quat_to_dcm(out["q"][0]).T)
+    out["centroid_px"][:, :3] = uv_est
+    m = run_metrics(out, truth, 99.5, CAM, vec)
+    assert not m["wrong_id"]
+    assert m["wrong_attitude"]          # 144″ off with a stated σ of 5″

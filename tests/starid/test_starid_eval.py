@@ -30,3 +30,21 @@ def test_sweep_fig16_plot(tmp_path, capsys):
 def test_bad_arguments_exit_2():
     assert main(["eval", "-q", "starid", "--position-noise-px", "-1", "--trials", "5"]) == 2
     assert main(["eval", "-q", "starid", "--trials", "0"]) == 2
+
+
+def test_peer_tetra3rs_same_fields(capsys):
+    """`--peer` solves the same fields with tetra3rs (database built for the field) after
+    ours in the worker; both scored against the simulator's truth."""
+    import pytest
+
+    pytest.importorskip("tetra3rs", reason="tetra3rs not installed (pip install tetra3rs)")
+    rc = main(["eval", "-q", "starid", "--method", "pyramid", "--fov-deg", "10", "--pixels", "1024", "--mag-limit",
+               "6.5", "--position-noise-px", "0.5", "--mag-noise", "0", "--catalog-position-noise-px", "0",
+               "--catalog-mag-noise", "0", "--false-stars", "2", "--trials", "30", "--seed", "5", "--workers", "1",
+               "--peer", "--json"])
+    assert rc == 0
+    out = json.loads(capsys.readouterr().out)
+    peer = out["peer"]
+    assert peer["name"].startswith("tetra3rs") and "10.00°" in peer["name"]
+    assert out["success_rate"] >= 0.95 and out["false_ids"] == 0 and peer["success_rate"] >= 0.85
+    assert peer["median_ratio"] == peer["median_ms"] / out["median_ms"] and peer["wrong_rate"] <= 0.05

@@ -147,3 +147,27 @@ def test_sparse_field_follows_the_configured_confidence():
         if seen == 5:
             break
     assert seen >= 3 and n_loose >= 1
+
+
+def test_swapped_check_stage_runs_after_the_compiled_search(setup10):
+    """A check that is not a StarCheck runs from Python after the search (the fused call is
+    only for StarCheck); with the same StarCheck inside, both paths give the same answer."""
+    cam, ix, sky, pyr = setup10
+
+    class Wrapped:
+        def __init__(self, inner):
+            self.inner, self.calls = inner, 0
+
+        def apply(self, b, mag, ref, vmag, match):
+            self.calls += 1
+            return self.inner.apply(b, mag, ref, vmag, match)
+
+    wrapped = Wrapped(pyr.check)
+    slow = Pyramid(ix, cam, sigma_px=0.5, check=wrapped)
+    rng = np.random.default_rng(13)
+    for q in random_attitudes(10, rng):
+        f = sky.observe(cam, q, 6.5, 0.5, 0.0, 2, rng)
+        a, b = pyr.identify(f.uv, mag=f.mag), slow.identify(f.uv, mag=f.mag)
+        assert a.ok == b.ok and np.array_equal(a.ids, b.ids) and np.allclose(a.q, b.q)
+        assert a.status == b.status
+    assert wrapped.calls >= 9
