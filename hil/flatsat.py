@@ -211,10 +211,24 @@ def make_gyro(cfg: hc.FlatsatConfig, regs, clock):
 
 
 def make_head(cfg: hc.FlatsatConfig, link, clock, reconnect=None, head_clock=None, poll_log=None,
-              replay_polls=None, replay_reconnects=None):
-    """The head port the loop drives (see :mod:`gyrostar.hil.headport`), on a packet link."""
+              replay_polls=None, replay_reconnects=None, fast: bool = False, replay_records=None):
+    """The head port the loop drives (see :mod:`gyrostar.hil.headport`), on a packet link:
+    a streaming port (:mod:`gyrostar.hil.streamport`) with ``head.mode = "stream"`` (fast
+    mode's lock-step head serves request/response only)."""
     from .headport import HeadPort
 
+    if cfg.head.mode == "stream" and not fast:
+        from ..protocol.defs import PixelFormat
+        from ..transport.linkrate import PRESETS
+        from .streamport import StreamPort, StreamReplay
+
+        replay = StreamReplay(replay_records) if replay_records is not None else None
+        return StreamPort(link, clock, pixel_format=int(PixelFormat[cfg.head.pixel_format.upper()]),
+                          frame_hz=cfg.loop.frame_hz, link_preset=PRESETS.get(cfg.head.link), replay=replay,
+                          timeout_s=cfg.head.timeout_s, retries=cfg.head.retries,
+                          exposure_s=cfg.head.exposure_ms * 1e-3, gain=cfg.head.gain, reconnect=reconnect,
+                          head_clock=head_clock, poll_log=poll_log, replay_polls=replay_polls,
+                          replay_reconnects=replay_reconnects)
     return HeadPort(link, clock, timeout_s=cfg.head.timeout_s, retries=cfg.head.retries,
                     exposure_s=cfg.head.exposure_ms * 1e-3, gain=cfg.head.gain, reconnect=reconnect,
                     head_clock=head_clock, poll_log=poll_log, replay_polls=replay_polls,
@@ -235,8 +249,14 @@ def make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock=None, e_per_dn=No
 
     idx = star_index(cfg, camera)
     ident = Pyramid(idx, camera)
+    budget = None
+    if getattr(head, "streaming", False) and cfg.head.link != "none":
+        from ..loop.linkbudget import LinkBudget
+        from ..transport.linkrate import preset
+
+        budget = LinkBudget(preset(cfg.head.link), cfg.loop.frame_hz)
     return CoupledLoop(loop_params(cfg, e_per_dn, scen), clock, gyro, head, camera, idx, ident, sinks,
-                       lat_clock=lat_clock, irq=irq)
+                       lat_clock=lat_clock, irq=irq, link_budget=budget)
 
 
 # ---------------------------------------------------------------------------- flatsat
@@ -418,7 +438,7 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
         return taps.RecordingLink(link, writer, clock=rec_clock) if writer else link
 
     head = make_head(cfg, connect(), rec_clock, reconnect=connect, head_clock=head_clock,
-                     poll_log=writer)
+                     poll_log=writer, fast=fast)
     closers.insert(0, head.close)
     closers.append(lambda: current["link"].close())
     wiring["loop"] = ("gyrostar.loop.coupled: attitude MEKF (gyrostar.core.mekf) with star-vector updates, "
@@ -498,7 +518,7 @@ def _head_devices(cfg, scen, sim, truth, seed, faults, lockstep=None):
             warm.render_windows(np.array([[0, 10, 10, 16]], np.int32), truth.q0, np.zeros(3), frame=0)
             return emu, truth
 
-        emu = EmulatorProcess(make)
+        emu = EmulatorProcess(make, link=None if h.link == "none" else h.link)
         emu.start()
         faults.head_emulator = emu
         truth.on_restart.append(emu.set_origin)
@@ -508,18 +528,21 @@ def _head_devices(cfg, scen, sim, truth, seed, faults, lockstep=None):
                 raise DeviceError("head emulator is disconnected (pty closed)")
             return SerialLink(emu.path, baudrate=h.baudrate)
 
-        return open_link, f"Python head emulator (mocks) in a child process, on pty {emu.path}", [emu.stop]
+        return open_link, (f"Python head emulator (mocks) in a child process, on pty {emu.path} "
+                           f"(link {h.link})"), [emu.stop]
     if scen.false_spots:
         raise ConfigError(f"scenario '{scen.name}': false_spots are rendered by the head emulator only "
                           f"(head.kind = 'emulator'), not by head.kind = '{h.kind}'")
     if h.kind == "firmware-host":
         from .fwhead import FirmwareHead
 
-        fw = FirmwareHead(h.program or None, sim, truth, seed, cfg.sim, scen.mag_limit or cfg.sim.mag_limit)
+        fw = FirmwareHead(h.program or None, sim, truth, seed, cfg.sim, scen.mag_limit or cfg.sim.mag_limit,
+                          link=None if h.link == "none" else h.link)
         fw.start()
         faults.firmware_head = fw
         truth.on_restart.append(fw.set_origin)
-        return fw.open_link, f"firmware host program {fw.program} on a pty (relay {fw.path})", [fw.stop]
+        wiring = f"firmware host program {fw.program} on a pty (relay {fw.path}, link {h.link})"
+        return fw.open_link, wiring, [fw.stop]
 
     def open_serial():
         return SerialLink(h.url, baudrate=h.baudrate)
@@ -637,7 +660,7 @@ def replay_loop(meta: dict, records, sinks):
     irq = taps.ReplayClock(irq_t) if irq_t else None
     gyro = make_gyro(cfg, regs, clock)
     head = make_head(cfg, link, clock, reconnect=None, head_clock=head_clock, replay_polls=polls,
-                     replay_reconnects=reconnects)
+                     replay_reconnects=reconnects, fast=bool(meta.get("fast")), replay_records=records)
     loop = make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock, e_per_dn, irq, scen)
 
     def run_all():

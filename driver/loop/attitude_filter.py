@@ -4,7 +4,7 @@ State (frames of :mod:`gyrostar.attitude`): ``q`` ICRS → body, gyro drift ``b`
 ``P`` the 6×6 covariance of [δθ body rad, Δb rad/s]. Every FIFO batch goes through one
 numba call (:func:`gyrostar.loop.kernels.predict_batch`) that predicts each sample and
 writes each output record; the attitude of every sample is kept in a ring (``HIST``
-samples, 5 s at 400 Hz) so an image, which arrives after its exposure, is applied at its
+samples, 20 s at 400 Hz) so an image, which arrives after its exposure, is applied at its
 mid-exposure time: the measured directions are carried to now along the gyro-propagated
 attitude (:meth:`update`).
 
@@ -28,7 +28,8 @@ from ..core.mekf import mekf_update
 from . import record as R
 from .kernels import predict_batch
 
-HIST = 2048              # gyro samples of history (5 s at 400 Hz) for delayed measurements
+HIST = 8192              # gyro samples of history (20 s at 400 Hz) for delayed measurements: a lost-in-
+                         # space full frame takes 14 s to come over a 921.6 kBd UART (1.3 MB packed)
 GATE = 13.815510557964274  # χ² 2 dof, P = 0.001
 SMOOTH_GAP_S = 0.1       # s: frames further apart than this are not smoothed together
 
