@@ -48,6 +48,8 @@ from .outputs import OutputStage
 from .tracks import MODEL, StarTracks
 
 log = logging.getLogger(__name__)
+CONSISTENT_SIGMA = 6.0     # a star this many median centroid σ off the others' attitude is dropped
+CONSISTENT_MIN_PX = 1.5    # ... but never for less than this (px)
 
 ARCSEC = math.pi / 180.0 / 3600.0
 
@@ -109,6 +111,7 @@ class Counters:
     updates: int = 0
     rejected_updates: int = 0
     wrong_ids_dropped: int = 0
+    inconsistent_stars: int = 0      # measured stars dropped before the update: off the others' attitude
     head_errors: int = 0
     head_reconnects: int = 0
     outputs: int = 0
@@ -543,7 +546,13 @@ class CoupledLoop:
         updated = 0
         if len(slots):
             acc = np.zeros(len(slots), np.uint8)
-            updated = self.filter.update(res.t_mid, b_mid[use], tr.ref[slots], sig[use], acc, self.p.min_stars)
+            ok = self._consistent(b_mid[use], tr.ref[slots], sig[use])
+            if np.any(ok):
+                sub = np.zeros(int(ok.sum()), np.uint8)
+                updated = self.filter.update(res.t_mid, b_mid[use][ok], tr.ref[slots][ok], sig[use][ok], sub,
+                                             self.p.min_stars)
+                acc[ok] = sub
+            self.c.inconsistent_stars += int(np.count_nonzero(~ok))
             self.c.updates += updated
             good = acc.astype(np.bool_)
             if updated:
@@ -559,6 +568,24 @@ class CoupledLoop:
                     self.c.wrong_ids_dropped += 1
         self.id_verified = updated >= 3 and updated == len(slots)
         self._after_image(now, int(updated))
+
+    def _consistent(self, b_mid, refs, sig) -> np.ndarray:
+        """Which measured stars agree with each other, whatever the prior says (bool (n,)).
+
+        With ≥ 3 stars, QUEST over them and iterative rejection of the worst residual beyond
+        ``CONSISTENT_SIGMA`` × the median centroid σ (at least ``CONSISTENT_MIN_PX``): a window
+        that caught another star, a hot pixel or a smeared neighbour is dropped before the
+        χ² gates see it — right after an acquisition those gates are wide enough to take it."""
+        from ..starid.verify import verify_matches
+
+        n = len(sig)
+        if n < 3:
+            return np.ones(n, np.bool_)
+        tol = max(CONSISTENT_SIGMA * float(np.median(sig)), CONSISTENT_MIN_PX / self.f_px)
+        _, match, n_ok, _ = verify_matches(np.ascontiguousarray(b_mid, np.float64),
+                                           np.ascontiguousarray(refs, np.float64), np.arange(n, dtype=np.int64),
+                                           tol)
+        return match >= 0 if n_ok else np.zeros(n, np.bool_)
 
     def _after_image(self, now: float, updated: int) -> None:
         self.few_run = self.few_run + 1 if updated < self.p.min_stars else 0
