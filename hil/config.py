@@ -138,6 +138,7 @@ class LoopConfig:
     confirm_images: int = 20           # ACQUIRE: images that may fail to confirm an identification
     wrong_id_rejects: int = 5          # filter-gate rejections in a row that drop a star
     neighbour_sep_px: float = 12.0     # skip a catalog star closer than this (px, per axis) to a tracked one
+    max_track_rate_dps: float = 20.0   # above this body rate (deg/s) images are not measured: the loop coasts
     reconnect_every_s: float = 0.25    # s between reconnection attempts while the head is away
     head_timeouts_lost: int = 3        # head jobs in a row without an answer that mean the link is lost
     # gyro angle random walk N (IEEE, deg/sqrt(s)) for the filter's process noise; a simulated
@@ -170,6 +171,8 @@ class LoopConfig:
             raise ValueError("loop.gyro_lowpass_hz must be in [0, 10000)")
         if not 0.0 <= self.gyro_delay_ms < 100.0:
             raise ValueError("loop.gyro_delay_ms must be in [0, 100)")
+        if not 0.0 < self.max_track_rate_dps <= 200.0:
+            raise ValueError("loop.max_track_rate_dps must be in (0, 200]")
         if not 0.0 < self.gyro_bias_prior_dps <= 10.0:
             raise ValueError("loop.gyro_bias_prior_dps must be in (0, 10]")
         if not 0.0 <= self.gyro_rate_error_ppm <= 1e5:

@@ -193,6 +193,7 @@ def loop_params(cfg: hc.FlatsatConfig, e_per_dn: float | None = None, scen: hc.S
                    wrong_id_rejects=lc.wrong_id_rejects, neighbour_sep_px=lc.neighbour_sep_px,
                    reconnect_every_s=lc.reconnect_every_s, head_timeouts_lost=lc.head_timeouts_lost, gyro_arw=arw,
                    gyro_delay_s=delay, gyro_lowpass_hz=lowpass, gyro_rate_error=rate_error,
+                   max_track_rate=lc.max_track_rate_dps * DEG,
                    bias_prior=bias_prior)
     if e_per_dn:
         p.e_per_dn = e_per_dn

@@ -84,6 +84,7 @@ class LoopParams:
     confirm_images: int = 20          # ACQUIRE: images that may fail to confirm an identification
     wrong_id_rejects: int = 5         # gate rejections in a row that drop a star (wrong or lost id)
     neighbour_sep_px: float = 12.0    # a catalog star closer than this (px, per axis) to a tracked one is skipped
+    max_track_rate: float = 0.349     # rad/s (20 °/s): faster, the smeared spots are not measured (coast)
     reconnect_every_s: float = 0.25   # s between reconnection attempts while the head is away
     head_timeouts_lost: int = 3       # head jobs in a row without an answer that mean the link is lost
 
@@ -542,6 +543,8 @@ class CoupledLoop:
         live = tr.active[wins] & (tr.nav[wins] == pend["nav"])   # dropped/replaced meanwhile: skip
         tr.misses[wins[live & (state == MEAS_MISS)]] += 1
         use = live & (state == MEAS_OK)
+        if float(np.linalg.norm(self.filter.omega)) > self.p.max_track_rate:
+            use[:] = False          # spots smeared past what the centroid model holds: coast on the gyro
         slots = wins[use]
         updated = 0
         if len(slots):
