@@ -246,10 +246,99 @@ def bench_fifo(quick: bool) -> dict:
             "note": "Bmi088Gyro.read, polled (time-base solve amortised); numba vs per-sample Python; replay bus"}
 
 
+def _stream_bytes(spans) -> tuple[int, int]:
+    """Wire bytes of one streamed frame (FRAME, PACKED10, head → host) and of its SET_WINDOWS
+    (host → head) for a span table, built by the protocol's own encoders."""
+    from gyrostar.protocol import MsgType, encode_frame
+    from gyrostar.protocol.defs import REPLY_FLAG
+    from gyrostar.protocol.payloads import WindowPixels, encode_reply, encode_spans, encode_windows_tail
+
+    wins = []
+    for wid in np.unique(spans[:, 0]):
+        rows = spans[spans[:, 0] == wid]
+        n = int((rows[:, 3] - rows[:, 2]).sum())
+        px = np.random.default_rng(int(wid)).integers(0, 1024, n)   # noise: COBS sees few zeros
+        wins.append(WindowPixels(int(wid), int(px.sum()), px))
+    n_px = sum(len(w.pixels) for w in wins)
+    head = encode_reply(MsgType.FRAME, frame=1, set_frame=1, t_start_us=0, t_end_us=10_000, exposure_us=10_000,
+                        late_sets=0, dropped=0, backpressure=0, n_pixels=n_px, start=0, count=len(wins),
+                        total=len(wins), pixel_format=1)
+    down = len(encode_frame(MsgType.FRAME | REPLY_FLAG, 1, head + encode_windows_tail(wins, 1))) + 1
+    up = len(encode_frame(MsgType.SET_WINDOWS, 1, encode_spans(spans, frame=1))) + 1
+    return down, up
+
+
+def _measured_rate(preset_name: str, spans, seconds: float) -> dict:
+    """Stream the windows at 100 Hz from the firmware host program through a relay paced at
+    the preset: frames received per second and the head's drops (back-pressure)."""
+    import time
+
+    from gyrostar.head import HeadClient
+    from gyrostar.mocks.firmware_host import FirmwareHost, is_built
+    from gyrostar.mocks.paced_relay import RelayProcess
+    from gyrostar.transport import SerialLink
+
+    if not is_built():
+        return {"note": "firmware host program not built (make fw-host)"}
+    host = FirmwareHost(1024, 1024, planes=1)
+    host.pixels.write_frame(np.random.default_rng(3).integers(0, 1024, (1024, 1024)).astype(np.uint16))
+    host.start()
+    relay = RelayProcess(host.path, preset_name)
+    link = SerialLink(relay.path)
+    try:
+        head = HeadClient(link, timeout=1.0)
+        head.set_windows(spans)
+        head.sync(4)
+        head.start_stream(10_000, 10_000, 1)
+        n, t_end = 0, time.monotonic() + seconds
+        while time.monotonic() < t_end:
+            n += head.next_frame(0.1) is not None
+        stop = head.stop_stream()
+    finally:
+        link.close()
+        relay.close()
+        host.close()
+    return {"frames_per_s": n / seconds, "head_dropped": stop["dropped"], "head_backpressure": stop["backpressure"]}
+
+
+def bench_link(quick: bool) -> dict:
+    """Per link preset: bytes per frame at rest and at 5 °/s with 10 stars (paper 000's 6×6
+    trajectory windows, PACKED10), link utilisation at 100 Hz, the highest frame rate the
+    link carries within the loop's 0.8 budget, and the rate a paced stream really sustains."""
+    from gyrostar.fwtools.wirecount import star_trajectory_windows
+    from gyrostar.loop.linkbudget import frame_bytes, windows_bytes
+    from gyrostar.transport.linkrate import PRESETS
+
+    out = {}
+    sets = {"rest": star_trajectory_windows(10, rate_dps=0.0, seed=2)[0],
+            "5dps": star_trajectory_windows(10, rate_dps=5.0, seed=2)[0]}
+    sizes = {k: _stream_bytes(v) for k, v in sets.items()}
+    for k, sp in sets.items():   # the loop's budget model must not under-count the real bytes
+        n_px = int((sp[:, 3] - sp[:, 2]).sum())
+        assert frame_bytes(n_px, len(np.unique(sp[:, 0]))) >= sizes[k][0] - 2
+        assert windows_bytes(len(sp)) >= sizes[k][1] - 1
+    for name, p in PRESETS.items():
+        per = max(sizes["5dps"])
+        fig = {"bytes_per_frame_rest": {"down": sizes["rest"][0], "up": sizes["rest"][1]},
+               "bytes_per_frame_5dps": {"down": sizes["5dps"][0], "up": sizes["5dps"][1]},
+               "utilisation_100hz_rest": p.utilisation(max(sizes["rest"]), 100.0),
+               "utilisation_100hz_5dps": p.utilisation(per, 100.0),
+               "max_frame_hz_5dps_budget_0.8": p.max_frame_hz(per, 0.8)}
+        if not quick:
+            fig["measured_5dps_at_100hz"] = _measured_rate(name, sets["5dps"], 2.0)
+        m = fig.get("measured_5dps_at_100hz", {})
+        fig["note"] = (f"{name}: {sizes['rest'][0]}/{sizes['5dps'][0]} B down at rest/5°/s, "
+                       f"util@100Hz {fig['utilisation_100hz_5dps']:.2f}, "
+                       f"max {fig['max_frame_hz_5dps_budget_0.8']:.0f} Hz"
+                       + (f", paced stream {m['frames_per_s']:.0f} fps" if "frames_per_s" in m else ""))
+        out[f"link_{name}"] = fig
+    return out
+
+
 def run(quick: bool = False) -> dict:
     return {"decode_10_window_frame": bench_decode(quick, 0),          # the head client's default format
             "decode_10_window_frame_packed10": bench_decode(quick, 1),
-            "read_convert_40_fifo_frames": bench_fifo(quick)}
+            "read_convert_40_fifo_frames": bench_fifo(quick)} | bench_link(quick)
 
 
 if __name__ == "__main__":

@@ -2,7 +2,8 @@
 
 A **flatsat config** says which devices the loop talks to and where outputs go::
 
-    [head]    kind = "emulator" | "firmware-host" | "serial";  url, baudrate, program
+    [head]    kind = "emulator" | "firmware-host" | "serial";  url, baudrate, program,
+              link (preset: uart-921k | uart-3m | usb-fs), mode (stream | request), pixel_format
     [gyro]    kind = "emulator" | "i2c" | "spi";  model, i2c_bus, i2c_address, spi_bus, ...
     [sim]     preset, gyro_errors, catalog, mag_limit        (simulated devices only)
     [loop]    rates, window size, identification settings
@@ -36,13 +37,20 @@ class HeadConfig:
     retries: int = 2
     exposure_ms: float = 10.0
     gain: int = 1
-    # line-rate model of the link (gyrostar.transport.linkrate) for simulated links: a 100 Hz
-    # head moves 0.3-0.5 MB/s, within USB full speed (0.9 MB/s), beyond a 921.6 kBd UART
-    link: Literal["uart-921k", "uart-3m", "usb-fs"] = "usb-fs"
+    # the head link (gyrostar.transport.linkrate preset): simulated links are paced at its line
+    # rate and the loop budgets its windows with it. A 100 Hz head moves 0.3-0.5 MB/s, within
+    # USB full speed (0.9 MB/s), beyond a 921.6 kBd UART. "none": unpaced (head tests only)
+    link: Literal["uart-921k", "uart-3m", "usb-fs", "none"] = "usb-fs"
+    mode: Literal["stream", "request"] = "stream"   # streaming head, or CAPTURE request by request
+    pixel_format: Literal["packed10", "u16"] = "packed10"
 
     def validate(self):
+        from ..transport.linkrate import PRESETS
+
         if self.kind == "serial" and not self.url:
             raise ValueError("head.kind = 'serial' needs head.url (e.g. /dev/ttyACM0)")
+        if self.link not in PRESETS and self.link != "none":
+            raise ValueError(f"head.link {self.link!r} is not a link preset ({', '.join(PRESETS)}, or none)")
         if not 0 < self.exposure_ms <= 100:
             raise ValueError(f"head.exposure_ms {self.exposure_ms} outside (0, 100]")
         if self.baudrate <= 0 or self.timeout_s <= 0 or self.retries < 0:
@@ -133,6 +141,7 @@ class LoopConfig:
     confirm_images: int = 20           # ACQUIRE: images that may fail to confirm an identification
     wrong_id_rejects: int = 5          # filter-gate rejections in a row that drop a star
     neighbour_sep_px: float = 12.0     # skip a catalog star closer than this (px, per axis) to a tracked one
+    max_track_rate_dps: float = 20.0   # above this body rate (deg/s) images are not measured: the loop coasts
     reconnect_every_s: float = 0.25    # s between reconnection attempts while the head is away
     head_timeouts_lost: int = 3        # head jobs in a row without an answer that mean the link is lost
     # gyro angle random walk N (IEEE, deg/sqrt(s)) for the filter's process noise; a simulated
@@ -167,6 +176,8 @@ class LoopConfig:
             raise ValueError("loop.gyro_lowpass_hz must be in [0, 10000)")
         if not 0.0 <= self.gyro_delay_ms < 100.0:
             raise ValueError("loop.gyro_delay_ms must be in [0, 100)")
+        if not 0.0 < self.max_track_rate_dps <= 200.0:
+            raise ValueError("loop.max_track_rate_dps must be in (0, 200]")
         if not 0.0 < self.gyro_bias_prior_dps <= 10.0:
             raise ValueError("loop.gyro_bias_prior_dps must be in (0, 10]")
         if not 0.0 <= self.gyro_rate_error_ppm <= 1e5:

@@ -34,6 +34,7 @@ MEANING = {
     "min_track_fraction": "HIL acceptance: least fraction of the run in TRACK",
     "must_reacquire": "HIL acceptance: a full-frame re-acquisition must happen",
     "head.baudrate": "UART line rate, Bd (ignored by USB-CDC)",
+    "head.pixel_format": "window pixels on the link: packed10 (10-bit packed) or u16",
     "head.retries": "retries after a timeout or a corrupt reply",
     "head.exposure_ms": "exposure time, ms",
     "head.gain": "sensor gain setting",

@@ -70,15 +70,20 @@ def _child(conn, make, parent_pid):
 
 
 class EmulatorProcess:
-    """Parent-side handle. ``make()`` runs in the child and returns (emulator, truth)."""
+    """Parent-side handle. ``make()`` runs in the child and returns (emulator, truth).
+    With ``link`` (a :mod:`gyrostar.transport.linkrate` preset or its name) the client's pty
+    is a :class:`gyrostar.mocks.paced_relay.RelayProcess` carrying bytes at that line rate."""
 
-    def __init__(self, make):
+    def __init__(self, make, link=None):
         ctx = mp.get_context("fork")
         self.conn, child = ctx.Pipe()
         self.proc = ctx.Process(target=_child, args=(child, make, os.getpid()), name="head-emulator", daemon=True)
         with sigint_blocked():   # the child ignores SIGINT before any can reach it
             self.proc.start()
         self.path = None
+        self.emulator_path = None
+        self.link = link
+        self.relay = None
         self.connected = False
         self.faults = None
 
@@ -94,12 +99,20 @@ class EmulatorProcess:
         return reply
 
     def start(self) -> str:
-        self.path = self._call("start")
+        self.path = self.emulator_path = self._call("start")
+        if self.link is not None:
+            from ..mocks.paced_relay import RelayProcess
+
+            self.relay = RelayProcess(self.emulator_path, self.link)
+            self.path = self.relay.path
         self.connected = True
         return self.path
 
     def disconnect(self) -> None:
         self.connected = False
+        if self.relay is not None:
+            self.relay.close()
+            self.relay = None
         self._call("disconnect")
 
     def set_corruption(self, p: float | None) -> None:
@@ -125,6 +138,9 @@ class EmulatorProcess:
         self._call("origin", float(t0))
 
     def stop(self) -> None:
+        if self.relay is not None:
+            self.relay.close()
+            self.relay = None
         try:
             if self.proc.is_alive():
                 self._call("stop")

@@ -199,6 +199,7 @@ def loop_params(cfg: hc.FlatsatConfig, e_per_dn: float | None = None, scen: hc.S
                    wrong_id_rejects=lc.wrong_id_rejects, neighbour_sep_px=lc.neighbour_sep_px,
                    reconnect_every_s=lc.reconnect_every_s, head_timeouts_lost=lc.head_timeouts_lost, gyro_arw=arw,
                    gyro_delay_s=delay, gyro_lowpass_hz=lowpass, gyro_rate_error=rate_error,
+                   max_track_rate=lc.max_track_rate_dps * DEG,
                    bias_prior=bias_prior,
                    camera_sigma_px=lc.camera_sigma_px if camera_sigma_px is None else camera_sigma_px)
     if e_per_dn:
@@ -218,10 +219,24 @@ def make_gyro(cfg: hc.FlatsatConfig, regs, clock):
 
 
 def make_head(cfg: hc.FlatsatConfig, link, clock, reconnect=None, head_clock=None, poll_log=None,
-              replay_polls=None, replay_reconnects=None):
-    """The head port the loop drives (see :mod:`gyrostar.hil.headport`), on a packet link."""
+              replay_polls=None, replay_reconnects=None, fast: bool = False, replay_records=None):
+    """The head port the loop drives (see :mod:`gyrostar.hil.headport`), on a packet link:
+    a streaming port (:mod:`gyrostar.hil.streamport`) with ``head.mode = "stream"`` (fast
+    mode's lock-step head serves request/response only)."""
     from .headport import HeadPort
 
+    if cfg.head.mode == "stream" and not fast:
+        from ..protocol.defs import PixelFormat
+        from ..transport.linkrate import PRESETS
+        from .streamport import StreamPort, StreamReplay
+
+        replay = StreamReplay(replay_records) if replay_records is not None else None
+        return StreamPort(link, clock, pixel_format=int(PixelFormat[cfg.head.pixel_format.upper()]),
+                          frame_hz=cfg.loop.frame_hz, link_preset=PRESETS.get(cfg.head.link), replay=replay,
+                          timeout_s=cfg.head.timeout_s, retries=cfg.head.retries,
+                          exposure_s=cfg.head.exposure_ms * 1e-3, gain=cfg.head.gain, reconnect=reconnect,
+                          head_clock=head_clock, poll_log=poll_log, replay_polls=replay_polls,
+                          replay_reconnects=replay_reconnects)
     return HeadPort(link, clock, timeout_s=cfg.head.timeout_s, retries=cfg.head.retries,
                     exposure_s=cfg.head.exposure_ms * 1e-3, gain=cfg.head.gain, reconnect=reconnect,
                     head_clock=head_clock, poll_log=poll_log, replay_polls=replay_polls,
@@ -251,8 +266,14 @@ def make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock=None, e_per_dn=No
 
     idx = star_index(cfg, camera)
     ident = Pyramid(idx, camera)
+    budget = None
+    if getattr(head, "streaming", False) and cfg.head.link != "none":
+        from ..loop.linkbudget import LinkBudget
+        from ..transport.linkrate import preset
+
+        budget = LinkBudget(preset(cfg.head.link), cfg.loop.frame_hz)
     return CoupledLoop(loop_params(cfg, e_per_dn, scen, camera_sigma_px), clock, gyro, head, camera, idx, ident, sinks,
-                       lat_clock=lat_clock, irq=irq)
+                       lat_clock=lat_clock, irq=irq, link_budget=budget)
 
 
 # ---------------------------------------------------------------------------- flatsat
@@ -547,7 +568,7 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
         return taps.RecordingLink(link, writer, clock=rec_clock) if writer else link
 
     head = make_head(cfg, connect(), rec_clock, reconnect=connect, head_clock=head_clock,
-                     poll_log=writer)
+                     poll_log=writer, fast=fast)
     head = with_hot_pixels(head, calib, camera, wiring)
     closers.insert(0, head.close)
     closers.append(lambda: current["link"].close())
@@ -626,7 +647,7 @@ def _head_devices(cfg, scen, sim, truth, seed, faults, lockstep=None):
             emu.warm_up(truth.q0)        # render once up front (numba load, fixed-pattern noise)
             return emu, truth
 
-        emu = EmulatorProcess(make)
+        emu = EmulatorProcess(make, link=None if h.link == "none" else h.link)
         emu.start()
         faults.head_emulator = emu
         truth.on_restart.append(emu.set_origin)
@@ -636,18 +657,21 @@ def _head_devices(cfg, scen, sim, truth, seed, faults, lockstep=None):
                 raise DeviceError("head emulator is disconnected (pty closed)")
             return SerialLink(emu.path, baudrate=h.baudrate)
 
-        return open_link, f"Python head emulator (mocks) in a child process, on pty {emu.path}", [emu.stop]
+        return open_link, (f"Python head emulator (mocks) in a child process, on pty {emu.path} "
+                           f"(link {h.link})"), [emu.stop]
     if scen.false_spots:
         raise ConfigError(f"scenario '{scen.name}': false_spots are rendered by the head emulator only "
                           f"(head.kind = 'emulator'), not by head.kind = '{h.kind}'")
     if h.kind == "firmware-host":
         from .fwhead import FirmwareHead
 
-        fw = FirmwareHead(h.program or None, sim, truth, seed, cfg.sim, scen.mag_limit or cfg.sim.mag_limit)
+        fw = FirmwareHead(h.program or None, sim, truth, seed, cfg.sim, scen.mag_limit or cfg.sim.mag_limit,
+                          link=None if h.link == "none" else h.link)
         fw.start()
         faults.firmware_head = fw
         truth.on_restart.append(fw.set_origin)
-        return fw.open_link, f"firmware host program {fw.program} on a pty (relay {fw.path})", [fw.stop]
+        wiring = f"firmware host program {fw.program} on a pty (relay {fw.path}, link {h.link})"
+        return fw.open_link, wiring, [fw.stop]
 
     def open_serial():
         return SerialLink(h.url, baudrate=h.baudrate)
@@ -767,7 +791,7 @@ def replay_loop(meta: dict, records, sinks):
     irq = taps.ReplayClock(irq_t) if irq_t else None
     gyro = calib.gyro(make_gyro(cfg, regs, clock))
     head = make_head(cfg, link, clock, reconnect=None, head_clock=head_clock, replay_polls=polls,
-                     replay_reconnects=reconnects)
+                     replay_reconnects=reconnects, fast=bool(meta.get("fast")), replay_records=records)
     head = with_hot_pixels(head, calib, camera, {})
     loop = make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock, e_per_dn, irq, scen,
                      camera_sigma(cfg, scen, calib))

@@ -15,8 +15,10 @@ Pixels within 16 px of every star's path are rendered fresh with their noise eac
 the rest of the sensor is one rendered star-less frame (its noise frozen), since only the
 pixels around stars are ever read while tracking.
 
-Link corruption is injected by a relay: the client talks to a second pty whose bytes from
-the firmware pass through :class:`gyrostar.mocks.faults.ByteFaults`.
+The client talks to a relay pty: :class:`gyrostar.mocks.paced_relay.RelayProcess` carrying
+bytes at the configured link preset's line rate (or, with no preset, an unpaced relay);
+link corruption is injected there on the firmware → client bytes
+(:class:`gyrostar.mocks.faults.ByteFaults`).
 """
 
 from __future__ import annotations
@@ -177,7 +179,7 @@ class FirmwareHead:
     """The firmware host program plus its sensor process; same control surface as
     :class:`gyrostar.hil.emuproc.EmulatorProcess` (start, disconnect, corruption, eclipse)."""
 
-    def __init__(self, program, sim, truth, seed, simcfg, mag_limit: float):
+    def __init__(self, program, sim, truth, seed, simcfg, mag_limit: float, link=None):
         from pathlib import Path
 
         from ..mocks.firmware_host import FirmwareHost
@@ -186,6 +188,7 @@ class FirmwareHead:
         self.host = FirmwareHost(cam.width_px, cam.height_px, binary=Path(program) if program else None,
                                  expose=True)
         self.program = self.host.binary
+        self.link = link
         self.relay = None
         self.connected = False
         self.path = None
@@ -216,7 +219,12 @@ class FirmwareHead:
 
     def start(self) -> str:
         fw_path = self.host.start()
-        self.relay = _Relay(fw_path)
+        if self.link is not None:
+            from ..mocks.paced_relay import RelayProcess
+
+            self.relay = RelayProcess(fw_path, self.link)
+        else:
+            self.relay = _Relay(fw_path)
         self.set_corruption(self._corrupt)
         self.path = self.relay.path
         self.connected = True
@@ -233,8 +241,10 @@ class FirmwareHead:
         from ..mocks.faults import ByteFaults
 
         self._corrupt = p
-        if self.relay is not None:
+        if isinstance(self.relay, _Relay):
             self.relay.faults = None if p is None else ByteFaults(seed=7, corrupt_p=float(p))
+        elif self.relay is not None:
+            self.relay.set_faults(p)
 
     def eclipse(self, on: bool) -> None:
         self._call("eclipse", on)

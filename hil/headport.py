@@ -116,6 +116,8 @@ class HeadPort:
         self.client = HeadClient(link, timeout=1.0, retries=self.retries, clock=self.head_clock,   # set-up: patient
                                  first_seq=first)
         self.info = self.client.get_info()
+        if getattr(self, "streaming", False):
+            self.client.stop_stream()     # a head that kept streaming for an earlier client stops
         self.client.set_exposure(int(round(self.exposure_s * 1e6)))
         self.client.sync(8)
         self.client.timeout = self.timeout_s + 0.2

@@ -311,6 +311,13 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
     client = getattr(loop.head, "client", None)
     if client is not None:
         res_top["link"] = dict(client.stats)
+    if getattr(loop, "streaming", False):
+        res_top.update(loop.stream_summary())
+        res_top["stream"] = loop.head.stats()
+        res_top["link_utilisation"] = res_top["stream"].get("link_utilisation")
+        res_top["head_mode"] = "stream"
+    else:
+        res_top["head_mode"] = "request"
     res_top["calibration"] = {"path": calib.path, "sha256": calib.sha256} if calib.cal is not None else None
     from .health import health
 

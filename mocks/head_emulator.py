@@ -445,40 +445,60 @@ class HeadEmulator:
         s = self.stream
         if s is None:
             return []
-        now = time.monotonic() if now is None else now
+        now = self.clock.now() if now is None else now
         t_end = s.t_start + s.exposure_us * 1e-6
         if now < t_end:
+            if s.prepared is None and now >= s.t_start:
+                self._prepare(s)
             return []
         out = self._read_stream_frame(s, t_end)
         s.next_frame(self)
-        now = time.monotonic()
+        now = self.clock.now()
         while s.t_start + (s.exposure_us + s.period_us) * 1e-6 <= now:
             s.dropped += 1        # more than a period overdue (the emulator was held up): never read
             s.next_frame(self)
+        if now >= s.t_start:
+            self._prepare(s)
         return out
 
     @property
     def next_due(self) -> float | None:
         s = self.stream
-        return None if s is None else s.t_start + s.exposure_us * 1e-6
+        if s is None:
+            return None
+        return s.t_start if s.prepared is None else s.t_start + s.exposure_us * 1e-6
+
+    def _render(self, s, active) -> np.ndarray:
+        """The pixels of the windows ``active`` over frame ``s.frame``'s exposure (the scene is
+        known ahead, so this may run while the frame integrates)."""
+        spans, ids, _ = active
+        if not ids:
+            return np.zeros(0, np.uint16)
+        q_start, omega = self.scene.at(s.t_start)
+        self.sensor_frame += 1
+        pixels, _ = self._sky_for(s.exposure_us).render_windows(spans, q_start, omega, frame=self.sensor_frame,
+                                                                noise=self.noise)
+        self.rendered_pixels += len(pixels)
+        return np.minimum(pixels, 0x3FF).astype(np.uint16)
+
+    def _prepare(self, s) -> None:
+        """Render frame ``s.frame`` with the window set due for it as known now."""
+        active = s.due_set()
+        s.prepared = (active, self._render(s, active))
 
     def _read_stream_frame(self, s, t_end: float) -> list[bytes]:
         s.install_due()
+        prepared, s.prepared = s.prepared, None
         if self.tx_backlog() > LIMITS["stream_tx_backlog_max"]:
             s.dropped += 1
             s.backpressure += 1
             return []
         spans, ids, slices = s.active[:3]
         self.has_capture = False
-        if ids:
-            q_start, omega = self.scene.at(s.t_start)
-            self.sensor_frame += 1
-            pixels, _ = self._sky_for(s.exposure_us).render_windows(spans, q_start, omega, frame=self.sensor_frame,
-                                                                    noise=self.noise)
-            self.rendered_pixels += len(pixels)
-            pixels = np.minimum(pixels, 0x3FF).astype(np.uint16)
+        if prepared is not None and prepared[0][1] is ids:
+            pixels = prepared[1]          # rendered during the exposure with this very set
         else:
-            pixels = np.zeros(0, np.uint16)
+            pixels = self._render(s, s.active)
         self.last_exposure_host = (s.t_start, t_end)
         wins = [WindowPixels(wid, int(pixels[sl].sum()), pixels[sl]) for wid, sl in zip(ids, slices)]
         t0_us, t1_us = self.mcu_us(s.t_start), self.mcu_us(t_end)
@@ -542,7 +562,7 @@ class HeadEmulator:
                 for msg in self.poll_stream():
                     self._emit(msg)
                 due = self.next_due
-                wait = 0.05 if due is None else min(0.05, max(0.0, due - time.monotonic()))
+                wait = 0.05 if due is None else min(0.05, max(0.0, due - self.clock.now()))
                 r, _, _ = select.select([fd], [], [], wait)
                 if not r or self._stop.is_set():
                     continue
@@ -618,6 +638,7 @@ class _Stream:
         self.frame, self.t_start = frame, t_start
         self.active = active            # (spans, ids, slices) in use
         self.set_frame = 0
+        self.prepared = None            # (set, pixels) of the frame integrating now, rendered ahead
         self.pending: list = []         # [first frame, named frame, (spans, ids, slices, total)]
         self.frames = self.late_sets = self.dropped = self.backpressure = self.last_frame = 0
 
@@ -631,6 +652,11 @@ class _Stream:
         if late:
             self.late_sets += 1
         return first
+
+    def due_set(self) -> tuple:
+        """The set frame ``self.frame`` would be read with if no other set came."""
+        due = [p for p in self.pending if p[0] <= self.frame]
+        return due[-1][2][:3] if due else self.active
 
     def install_due(self) -> None:
         while self.pending and self.pending[0][0] <= self.frame:

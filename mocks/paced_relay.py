@@ -6,7 +6,12 @@ between them: the client opens the relay's pty, the relay opens the head's pty, 
 direction is a :class:`gyrostar.transport.linkrate.Wire` — bytes are taken from the sender
 only when the wire is free (so a sender that writes faster than the line sees its own queue
 fill: the head's back-pressure is real) and handed to the receiver when their wire time
-and the transfer latency have passed. Bytes move in slices of ``SLICE_S`` of wire time.
+and the transfer latency have passed. Bytes move in slices of ``SLICE_S`` of wire time; a
+slice is handed over when its last byte has arrived (so the last byte of a message arrives
+exactly on time, earlier ones up to a slice late: never earlier than on the wire). When the
+relay wakes late while the sender's queue was not empty at its previous read (that read got a
+whole slice), the wire is taken to have kept sending: it reads the bytes of the missed time
+too, so the relay's own scheduling delays (a loaded host) do not lower the line rate.
 
 :func:`start_relay` runs it in a forked child process, away from the loop's interpreter
 lock; ``set_faults`` corrupts the head → client bytes (:class:`~gyrostar.mocks.faults.ByteFaults`).
@@ -24,7 +29,7 @@ from collections import deque
 from gyrostar.errors import DeviceError
 from gyrostar.transport.linkrate import LinkPreset, Wire, preset
 
-SLICE_S = 250e-6     # wire time per read from a sender (UART 921k: 23 B; usb-fs: 225 B)
+SLICE_S = 1e-3       # wire time per read from a sender (UART 921k: 92 B; usb-fs: 900 B, one USB frame)
 
 
 class _Direction:
@@ -34,6 +39,7 @@ class _Direction:
         self.chunk = max(1, int(link.bytes_per_s * SLICE_S))
         self.pending: deque = deque()       # (delivery time, bytes)
         self.mangle = None
+        self.full = False                    # the last read got all it asked: the sender had more
 
 
 class PacedRelay:
@@ -76,13 +82,20 @@ class PacedRelay:
                 return
             for d in dirs:
                 if d.src in r:
+                    t = time.monotonic()
+                    late = t - d.wire.busy_until
+                    n = d.chunk
+                    if d.full and late >= 0.0:     # the line kept sending while we slept
+                        n += min(int(late * d.wire.link.bytes_per_s), 1 << 16)
+                        t = d.wire.busy_until
                     try:
-                        data = os.read(d.src, d.chunk)
+                        data = os.read(d.src, n)
                     except OSError:
                         return
                     if not data:
                         return
-                    d.pending.append((d.wire.transmit(len(data), time.monotonic()), data))
+                    d.full = len(data) == n
+                    d.pending.append((d.wire.transmit(len(data), t), data))
             if ctl and control in r:
                 try:
                     cmd, arg = control.recv()

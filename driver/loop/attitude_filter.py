@@ -4,7 +4,7 @@ State (frames of :mod:`gyrostar.attitude`): ``q`` ICRS → body, gyro drift ``b`
 ``P`` the 6×6 covariance of [δθ body rad, Δb rad/s]. Every FIFO batch goes through one
 numba call (:func:`gyrostar.loop.kernels.predict_batch`) that predicts each sample and
 writes each output record; the attitude of every sample is kept in a ring (``HIST``
-samples, 5 s at 400 Hz) so an image, which arrives after its exposure, is applied at its
+samples, 20 s at 400 Hz) so an image, which arrives after its exposure, is applied at its
 mid-exposure time: the measured directions are carried to now along the gyro-propagated
 attitude (:meth:`update`).
 
@@ -28,7 +28,8 @@ from ..core.mekf import mekf_update
 from . import record as R
 from .kernels import predict_batch
 
-HIST = 2048              # gyro samples of history (5 s at 400 Hz) for delayed measurements
+HIST = 8192              # gyro samples of history (20 s at 400 Hz) for delayed measurements: a lost-in-
+                         # space full frame takes 14 s to come over a 921.6 kBd UART (1.3 MB packed)
 GATE = 13.815510557964274  # χ² 2 dof, P = 0.001
 SMOOTH_GAP_S = 0.1       # s: frames further apart than this are not smoothed together
 
@@ -88,10 +89,12 @@ class AttitudeFilter:
             return self.q.copy()
         return quat_propagate(self.hist_q[best], self.omega, t - best_t)
 
-    def update(self, t_mid: float, b_mid, refs, sigmas, accepted) -> int:
+    def update(self, t_mid: float, b_mid, refs, sigmas, accepted, min_used: int = 1) -> int:
         """Star directions measured at mid-exposure ``t_mid`` (body unit vectors (n, 3)),
         catalog vectors (n, 3), σ (n,) rad, applied now (χ² gated per star; ``accepted``
-        (n,) uint8 written). Returns the count used.
+        (n,) uint8 written). Returns the count used; an image in which fewer than
+        ``min_used`` stars pass their gates is not applied at all (returns 0): one star
+        alone, at speed, can carry a smeared or confused centroid that its gate admits.
 
         A delayed measurement: the state now is the state at ``t_mid`` carried by the gyro
         (rotation R from the attitude history) plus the gyro's random walk since then,
@@ -118,8 +121,12 @@ class AttitudeFilter:
         else:
             qd = 0.0
         p_prior_mid = rot.T @ P[:3, :3] @ rot
+        saved = (self.q.copy(), self.b.copy(), P.copy()) if min_used > 1 else None
         n = int(mekf_update(self.q, self.b, P, bvecs, np.ascontiguousarray(refs),
                             np.ascontiguousarray(sigmas), GATE, accepted))
+        if saved is not None and 0 < n < min_used:
+            self.q[:], self.b[:], P[:, :] = saved
+            n = 0
         if n:
             q_mid = quat_mult(quat_conj(rq), self.q)
             p_mid = rot.T @ P[:3, :3] @ rot

@@ -48,6 +48,8 @@ from .outputs import OutputStage
 from .tracks import MODEL, StarTracks
 
 log = logging.getLogger(__name__)
+CONSISTENT_SIGMA = 6.0     # a star this many median centroid σ off the others' attitude is dropped
+CONSISTENT_MIN_PX = 1.5    # ... but never for less than this (px)
 
 ARCSEC = math.pi / 180.0 / 3600.0
 
@@ -83,6 +85,7 @@ class LoopParams:
     confirm_images: int = 20          # ACQUIRE: images that may fail to confirm an identification
     wrong_id_rejects: int = 5         # gate rejections in a row that drop a star (wrong or lost id)
     neighbour_sep_px: float = 12.0    # a catalog star closer than this (px, per axis) to a tracked one is skipped
+    max_track_rate: float = 0.349     # rad/s (20 °/s): faster, the smeared spots are not measured (coast)
     reconnect_every_s: float = 0.25   # s between reconnection attempts while the head is away
     head_timeouts_lost: int = 3       # head jobs in a row without an answer that mean the link is lost
 
@@ -102,12 +105,15 @@ class Counters:
     gyro_register_faults: int = 0  # gyro configuration found lost in flight and restored (silent reset)
     frames: int = 0
     frames_failed: int = 0
+    frames_unmatched: int = 0      # streamed frames whose window plan was gone (stream mode)
+    frames_stale_windows: int = 0  # streamed frames read with an earlier frame's windows, not used
     full_frames: int = 0
     acquisitions: int = 0
     acquisition_failures: int = 0
     updates: int = 0
     rejected_updates: int = 0
     wrong_ids_dropped: int = 0
+    inconsistent_stars: int = 0      # measured stars dropped before the update: off the others' attitude
     head_errors: int = 0
     head_reconnects: int = 0
     outputs: int = 0
@@ -118,7 +124,7 @@ class CoupledLoop:
     """The loop. ``sinks`` get each step's output records (``put(records, t_ns)``)."""
 
     def __init__(self, params: LoopParams, clock, gyro, head, camera, star_index, identifier, sinks=(),
-                 lat_clock=None, irq=None):
+                 lat_clock=None, irq=None, link_budget=None):
         from ..gyro import GyroSamples
 
         self.irq = irq           # FIFO-watermark interrupt line: irq.now() = host time of the last edge
@@ -161,6 +167,18 @@ class CoupledLoop:
         self._tracks_version = -1
         self.gyro_path_s = 0.0         # host s in the 400 Hz path after the FIFO read (filter, outputs, sinks)
         self.floor = FloorInputs()     # what the run's attitude floor depends on (per update)
+        # streaming head (gyrostar.hil.streamport): plans by stream frame, link budget,
+        # exposure → output latency (mid-exposure to the first output holding its update)
+        self.streaming = bool(getattr(head, "streaming", False))
+        self.budget = link_budget
+        self.plans: dict = {}
+        self.last_commanded = 0
+        self.stream_start_wait = -np.inf
+        self._mids: list = []
+        self.e2o = np.zeros(1 << 16)
+        self.n_e2o = 0
+        self.frame_t = [np.nan, np.nan]        # mid-exposure of the first and last frame used
+        self.few_run = 0                       # consecutive streamed images that updated too few stars
 
     # ------------------------------------------------------------------ views
     @property
@@ -215,6 +233,10 @@ class CoupledLoop:
             self.overruns += 1
             self.flags_pending |= R.FLAG_OVERRUN
         self.t_step_prev = t_step
+        if self.streaming:
+            # frames the stream port already measured update the filter before this step's samples
+            self._guarded(self._stream_phase, t_step)
+            return self._gyro_phase()
         done = self.image.result()       # the readout handed over last step: apply it before this
         if done is not None:             # step's samples, so their outputs are the first to carry it
             self._process_windows(*done, t_step)
@@ -225,6 +247,13 @@ class CoupledLoop:
             self._count_head_error(exc)
             self._head_failed(exc)
         return n_out
+
+    def _guarded(self, phase, now: float) -> None:
+        try:
+            phase(now)
+        except DeviceError as exc:
+            self._count_head_error(exc)
+            self._head_failed(exc)
 
     def _kernel_stars(self):
         """Tracked stars as the kernel wants them (rebuilt only when the set changes)."""
@@ -277,6 +306,12 @@ class CoupledLoop:
         self.c.gyro_saturated += int(smp.saturated)
         self.outputs.emit(out, t_read, float(smp.t[n - 1]))
         self.c.outputs += n
+        if self._mids:                   # streamed frames whose update these outputs are the first to hold
+            t_out = self.lat_clock.now()
+            for t_mid in self._mids:
+                self.e2o[self.n_e2o % len(self.e2o)] = t_out - t_mid
+                self.n_e2o += 1
+            self._mids.clear()
         self.gyro_path_s += time.perf_counter() - w0
         return n
 
@@ -340,6 +375,94 @@ class CoupledLoop:
             self.next_frame_t = max(self.next_frame_t + 1.0 / self.p.frame_hz, now)
             self._command_windows(now)
 
+    def _stream_phase(self, now: float) -> None:
+        """Streaming head: take in the frames the port has measured, command the windows of
+        the frame two ahead of the newest one (while the next one integrates)."""
+        head = self.head
+        while True:
+            res = head.poll()
+            if res is None:
+                break
+            if res.kind == "reconnect":
+                if res.error is None:
+                    self.c.head_reconnects += 1
+                    log.info("head link back after %.2f s", now - (self.head_down_since or now))
+                    self.head_down_since = None
+                    self.timeouts = 0
+                else:
+                    log.debug("head still away: %s", res.error)
+                continue
+            if res.error is not None:
+                self.c.frames_failed += 1
+                self.last_image_flags |= R.FLAG_LINK_ERROR
+                self._count_head_error(res.error)
+                if res.kind == "frame" or isinstance(res.error, (LinkLostError, HeadTimeoutError)):
+                    self._head_failed(res.error)
+                    return
+                continue
+            if res.kind == "frame":
+                self.timeouts = 0
+                self.c.full_frames += 1
+                self._acquire(res, now)
+                continue
+            pend = self.plans.get(res.set_frame)
+            if pend is None or res.measured is None:
+                self.c.frames_unmatched += 1
+                continue
+            # read with an earlier frame's windows (its own set came late): the stars have moved
+            # since; past half a pixel a window may clip its star and bias the centroid
+            late = res.frame - res.set_frame if res.set_frame else 0
+            speed = math.sqrt(float(self.filter.omega @ self.filter.omega)) * self.f_px
+            if late > 0 and late * head.period_s * speed > 0.5:
+                self.c.frames_stale_windows += 1
+                self._after_image(now, updated=0)
+                continue
+            self._process_windows(pend, res, res.measured, now)
+            self._mids.append(res.t_mid)
+            if self.frame_t[0] != self.frame_t[0]:
+                self.frame_t[0] = res.t_mid
+            self.frame_t[1] = res.t_mid
+        if self.head_down_since is not None:
+            if not head.busy and now >= self.next_reconnect_t:
+                self.next_reconnect_t = now + self.p.reconnect_every_s
+                self.plans.clear()
+                self.last_commanded = 0
+                head.submit_reconnect()
+            return
+        if head.busy:
+            return
+        if self.state.mode == R.MODE_ACQUIRE and not self.filter.valid:
+            if now >= self.next_acquire_t:
+                self.next_acquire_t = now + self.p.acquire_every_s
+                self.plans.clear()
+                self.last_commanded = 0
+                head.submit_frame(self.image.lost_in_space)
+            return
+        frame, t_exp = head.next_target(now)
+        if frame == 0:
+            if now >= self.stream_start_wait:              # the set that starts the stream
+                self.stream_start_wait = now + 0.2
+                self.last_commanded = 0
+                self._command_windows(now, 0, t_exp)
+        elif frame > self.last_commanded:
+            self.last_commanded = frame
+            self._command_windows(now, frame, t_exp)
+
+    def stream_summary(self) -> dict:
+        """Frame rate, exposure → output latency and the link budget's actions (streaming)."""
+        out: dict = {}
+        n = min(self.n_e2o, len(self.e2o))
+        if n:
+            lat = self.e2o[:n] * 1e3
+            out["exposure_to_output_ms_p50"] = float(np.median(lat))
+            out["exposure_to_output_ms_p99"] = float(np.percentile(lat, 99))
+        t0, t1 = self.frame_t
+        if self.c.frames > 1 and t1 > t0:
+            out["frame_rate_hz"] = (self.c.frames - 1) / (t1 - t0)
+        if self.budget is not None:
+            out["link_budget"] = self.budget.summary()
+        return out
+
     def _count_head_error(self, exc: Exception) -> None:
         self.c.head_errors += 1
         log.debug("head error: %s", exc)
@@ -374,17 +497,37 @@ class CoupledLoop:
         self.next_frame_t = now
 
     # -- TRACK / COAST --------------------------------------------------------------
-    def _command_windows(self, now: float) -> None:
+    def _command_windows(self, now: float, frame: int | None = None, t_exp: float | None = None) -> None:
+        """Plan and command windows: for the next CAPTURE, or (streaming) for stream frame
+        ``frame`` whose exposure starts at host time ``t_exp`` (on the head's own timer: no
+        command-to-exposure jitter to cover)."""
         f = self.filter
         if f.valid:
             self.tracks.fill_from_catalog(f.q)
         sig = math.sqrt(max(f.P[0, 0], f.P[1, 1]))
-        plan = self.tracks.plan(f.q, f.omega, f.b, sig, self.exposure_lag, self.lag_jitter, self.gyro.odr_hz)
+        if self.streaming:
+            lag, jitter = max(t_exp - now, 0.0), 0.0
+        else:
+            lag, jitter = self.exposure_lag, self.lag_jitter
+        plan = self.tracks.plan(f.q, f.omega, f.b, sig, lag, jitter, self.gyro.odr_hz, budget=self.budget)
         if plan is None:
             self._after_image(now, updated=0)
             return
-        self.head.submit_windows(plan["spans"])
         plan["t_submit"] = now
+        if self.budget is not None:
+            sp = plan["spans"]
+            div = self.budget.after_plan(now, plan["n_stars"], len(plan["wins"]), int(np.sum(sp[:, 3] - sp[:, 2])),
+                                         len(sp))
+            if div is not None and self.streaming:
+                log.info("link %s: frame rate → %.1f Hz", self.budget.link.name, self.budget.frame_hz)
+                self.head.set_period(1.0 / self.budget.frame_hz)
+        if self.streaming:
+            self.plans[frame] = plan
+            for old in [k for k in self.plans if k < frame - 8]:
+                del self.plans[old]
+            self.head.submit_windows(plan["spans"], frame, lambda values, pl=plan: self.image.measure(pl, values))
+            return
+        self.head.submit_windows(plan["spans"])
         self.pending = plan
 
     def _process_windows(self, pend: dict, res, measured: tuple, now: float) -> None:
@@ -403,11 +546,19 @@ class CoupledLoop:
         live = tr.active[wins] & (tr.nav[wins] == pend["nav"])   # dropped/replaced meanwhile: skip
         tr.misses[wins[live & (state == MEAS_MISS)]] += 1
         use = live & (state == MEAS_OK)
+        if float(np.linalg.norm(self.filter.omega)) > self.p.max_track_rate:
+            use[:] = False          # spots smeared past what the centroid model holds: coast on the gyro
         slots = wins[use]
         updated = 0
         if len(slots):
             acc = np.zeros(len(slots), np.uint8)
-            updated = self.filter.update(res.t_mid, b_mid[use], tr.ref[slots], sig[use], acc)
+            ok = self._consistent(b_mid[use], tr.ref[slots], sig[use])
+            if np.any(ok):
+                sub = np.zeros(int(ok.sum()), np.uint8)
+                updated = self.filter.update(res.t_mid, b_mid[use][ok], tr.ref[slots][ok], sig[use][ok], sub,
+                                             self.p.min_stars)
+                acc[ok] = sub
+            self.c.inconsistent_stars += int(np.count_nonzero(~ok))
             self.c.updates += updated
             good = acc.astype(np.bool_)
             if updated:
@@ -424,7 +575,30 @@ class CoupledLoop:
         self.id_verified = updated >= 3 and updated == len(slots)
         self._after_image(now, int(updated))
 
+    def _consistent(self, b_mid, refs, sig) -> np.ndarray:
+        """Which measured stars agree with each other, whatever the prior says (bool (n,)).
+
+        With ≥ 3 stars, QUEST over them and iterative rejection of the worst residual beyond
+        ``CONSISTENT_SIGMA`` × the median centroid σ (at least ``CONSISTENT_MIN_PX``): a window
+        that caught another star, a hot pixel or a smeared neighbour is dropped before the
+        χ² gates see it — right after an acquisition those gates are wide enough to take it."""
+        from ..starid.verify import verify_matches
+
+        n = len(sig)
+        if n < 3:
+            return np.ones(n, np.bool_)
+        tol = max(CONSISTENT_SIGMA * float(np.median(sig)), CONSISTENT_MIN_PX / self.f_px)
+        _, match, n_ok, _ = verify_matches(np.ascontiguousarray(b_mid, np.float64),
+                                           np.ascontiguousarray(refs, np.float64), np.arange(n, dtype=np.int64),
+                                           tol)
+        return match >= 0 if n_ok else np.zeros(n, np.bool_)
+
     def _after_image(self, now: float, updated: int) -> None:
+        self.few_run = self.few_run + 1 if updated < self.p.min_stars else 0
+        if self.streaming and self.state.mode == R.MODE_TRACK and 0 < self.few_run < STREAM_FEW_FRAMES:
+            # streaming at 100 Hz: one frame read with a late window set is no reason to coast
+            self.last_image_flags = (R.FLAG_IMAGE_UPDATE if updated else 0) | R.FLAG_FEW_STARS
+            return
         prev = self.state.mode
         state, act = modes.on_image(self.state, now, updated, self.mp)
         self._set_state(state, now)
@@ -461,6 +635,8 @@ class CoupledLoop:
         """Host µs per gyro sample in the 400 Hz path after the FIFO read (wall clock)."""
         return self.gyro_path_s / self.c.gyro_samples * 1e6 if self.c.gyro_samples else None
 
+
+STREAM_FEW_FRAMES = 3       # streaming: consecutive images with too few stars before COAST (30 ms)
 
 _NO_REFS = np.zeros((0, 3))
 _NO_IDS = np.zeros(0, np.int32)

@@ -47,6 +47,11 @@ class ImagePipeline:
         self._job = None
         return plan, res, (job.result() if self.threaded else job)
 
+    def measure(self, plan: dict, values) -> tuple:
+        """``(state, b_mid, σ)`` of a readout, on the caller's thread (a streaming head port
+        measures each frame on its own worker with this)."""
+        return self._measure(plan, values)
+
     def _measure(self, plan: dict, values) -> tuple:
         p = self.p
         vals = np.ascontiguousarray(values, dtype=np.float64)

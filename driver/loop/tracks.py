@@ -123,10 +123,14 @@ class StarTracks:
         return [int(s) for s in bad[self.rejects[bad] >= self.p.wrong_id_rejects]]
 
     # -- windows -------------------------------------------------------------------------
-    def plan(self, q, omega, bias, sigma_att_rad: float, lag_s: float, lag_jitter_s: float, odr_hz: float):
+    def plan(self, q, omega, bias, sigma_att_rad: float, lag_s: float, lag_jitter_s: float, odr_hz: float,
+             budget=None):
         """Windows of the next exposure for every tracked star, brightest first within the
         head's budgets: ``(spans, window slots, per-window trajectory offsets...)`` as a dict,
-        or None when no star gets a window. ``lag_s``: commanding → exposure start (s)."""
+        or None when no star gets a window. ``lag_s``: commanding → exposure start (s).
+        ``budget`` (:class:`gyrostar.loop.linkbudget.LinkBudget`): the link's per-frame pixel
+        and span budgets too, and no uncertainty margin while it says windows are tightened;
+        the plan then holds ``n_stars`` (tracked stars it was made for)."""
         from ..core.motion import substeps_for
 
         act = self.tracked()
@@ -144,10 +148,16 @@ class StarTracks:
         speed = math.sqrt(float(omega @ omega)) * self.f_px          # px/s near the boresight
         margin = 3.0 * sig_px + speed * lag_jitter_s
         k = min(p.window_k + 2 * int(math.ceil(margin)), 40)
+        pixel_budget, max_spans = p.pixel_budget, p.max_spans
+        if budget is not None:
+            if not budget.margin_allowed():
+                k = p.window_k                      # degrade step 2: tighter windows
+            px, sp = budget.limits(len(order))
+            pixel_budget, max_spans = min(pixel_budget, px), min(max_spans, sp)
         spans, wins, off, off_start, off_len = plan_windows(
             uv, order.astype(np.int64), rates, dt, bias, self.cam, MODEL, sub, m_lat * sub, k,
-            self.camera.height_px, self.camera.width_px, p.pixel_budget, p.max_window_pixels, p.max_spans)
+            self.camera.height_px, self.camera.width_px, pixel_budget, p.max_window_pixels, max_spans)
         if not len(wins):
             return None
         return {"spans": spans, "wins": wins, "nav": self.nav[wins].copy(), "off": off, "off_start": off_start,
-                "off_len": off_len}
+                "off_len": off_len, "n_stars": len(order)}

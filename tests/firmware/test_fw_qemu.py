@@ -75,3 +75,43 @@ def test_requests_racing_the_boot_are_answered(tmp_path):
             finally:
                 link.close()
     pixels.close()
+
+
+def test_arm_image_streams_200_frames_on_its_timer(tmp_path):
+    """The mps2 image streams: TIMER1 wakes it at every exposure end, it reads the window by
+    semihosting and pushes the frame. Under QEMU a semihosted read costs ~0.26 ms and a UART
+    byte ~17 µs (docs), so one 8×8 window at 50 Hz; every one of 220 frames must come, in
+    sequence, on the 20 ms grid of the MCU clock, none dropped."""
+    W, H = 256, 256
+    pixels = PixelFile(tmp_path / "sensor.gspx", W, H, planes=1)
+    rng = np.random.default_rng(5)
+    light = rng.integers(0, 1024, (H, W)).astype(np.uint16)
+    pixels.write_frame(light)
+    spans = np.array([[3, 100 + r, 40, 48] for r in range(8)], np.int32)
+    want = light[100:108, 40:48].ravel()
+    with qemu.QemuHead(pixels.path) as q:
+        link = q.link(timeout=10.0)
+        try:
+            client = HeadClient(link, timeout=2.0)
+            client.set_windows(spans)
+            client.sync(4)
+            rep = client.start_stream(20_000, 10_000, PixelFormat.PACKED10)
+            frames = []
+            t_end = time.monotonic() + 30.0
+            while len(frames) < 220 and time.monotonic() < t_end:
+                fr = client.next_frame(1.0)
+                if fr is not None:
+                    frames.append(fr)
+            stop = client.stop_stream()
+        finally:
+            link.close()
+    pixels.close()
+    assert len(frames) == 220
+    ks = np.array([f.frame for f in frames])
+    assert ks[0] == rep["first_frame"] and np.all(np.diff(ks) == 1)
+    assert frames[-1].dropped == 0 and stop["dropped"] == 0 and stop["frames"] >= 220
+    t0 = np.array([f.t_start_us for f in frames])
+    assert np.all(np.diff(t0) == 20_000)                      # exposures on the timer grid
+    assert all(f.t_end_us - f.t_start_us == 10_000 for f in frames)
+    for f in frames[::50]:
+        assert len(f.windows) == 1 and np.array_equal(f.windows[0].pixels, want)

@@ -23,9 +23,12 @@ def orekit(tmp_path_factory):
 
     orekit_jpype.initVM()
     folder = tmp_path_factory.mktemp("orekit-data")
+    from astropy.time import Time
+
     with open(folder / "tai-utc.dat", "w") as f:
         for r in LeapSeconds.auto_open():
-            f.write(f" {int(r['year'])} {MON[int(r['month']) - 1]} {int(r['day']):2d} =JD {r['mjd'] + 2400000.5:.1f}"
+            d = Time(float(r["mjd"]), format="mjd").datetime
+            f.write(f" {d.year} {MON[d.month - 1]} {d.day:2d} =JD {float(r['mjd']) + 2400000.5:.1f}"
                     f"  TAI-UTC= {float(r['tai_utc']):5.1f}       S + (MJD - 41317.) X 0.0      S\n")
     from java.io import File
     from org.orekit.data import DataContext, DirectoryCrawler

@@ -29,6 +29,12 @@
 #define TIMER0_CTRL REG(0x40000000u)
 #define TIMER0_VALUE REG(0x40000004u)
 #define TIMER0_RELOAD REG(0x40000008u)
+/* CMSDK APB timer 1: one-shot alarm for the stream's exposure ends (IRQ 9 on AN385) */
+#define TIMER1_CTRL REG(0x40001000u)
+#define TIMER1_VALUE REG(0x40001004u)
+#define TIMER1_RELOAD REG(0x40001008u)
+#define TIMER1_INTCLR REG(0x4000100Cu)
+#define TIMER1_IRQ 9u
 /* CMSDK APB watchdog */
 #define WDOG_LOAD REG(0x40008000u)
 #define WDOG_CTRL REG(0x40008008u)
@@ -59,6 +65,29 @@ static uint64_t time_us(void *ctx);
  * TIMER0 accumulation current; time itself comes from TIMER0, so ticks lost while the host
  * (or QEMU) is late do not slow the clock. */
 void SysTick_Handler(void) { (void)time_us(NULL); }
+
+/* The stream's alarm: the exposure ending now is read out by the main loop (gs_head_poll);
+ * the interrupt only wakes the core from wfi. One-shot: stopped until set again. */
+void TIMER1_Handler(void)
+{
+    TIMER1_INTCLR = 1u;
+    TIMER1_CTRL = 0u;
+}
+
+void mps2_alarm_at(uint64_t t_us)
+{
+    TIMER1_CTRL = 0u;
+    if (t_us == UINT64_MAX)
+        return;
+    uint64_t now = time_us(NULL);
+    uint64_t us = t_us > now ? t_us - now : 1u;
+    if (us > 100000000u)
+        us = 100000000u; /* 100 s: the counter holds 171 s of 25 MHz ticks */
+    TIMER1_RELOAD = (uint32_t)(us * CYCLES_PER_US);
+    TIMER1_VALUE = (uint32_t)(us * CYCLES_PER_US);
+    TIMER1_INTCLR = 1u;
+    TIMER1_CTRL = 0x9u; /* enable, interrupt enable */
+}
 
 void UART0_RX_Handler(void)
 {
@@ -234,7 +263,8 @@ void mps2_hal_init(gs_hal *hal, mps2_sensor *s, const char *sensor_path)
     UART0_BAUDDIV = MPS2_SYSCLK_HZ / MPS2_BAUD;
     UART0_CTRL = UART_CTRL_TXEN | UART_CTRL_RXEN | UART_CTRL_RXIE;
     (void)UART0_DATA; /* dummy read: QEMU re-polls the chardev once RX is enabled */
-    NVIC_ISER0 = 1u << 0;
+    NVIC_ISER0 = (1u << 0) | (1u << TIMER1_IRQ);
+    TIMER1_CTRL = 0u;
 
     memset(s, 0, sizeof *s);
     s->handle = -1;

@@ -1,4 +1,5 @@
-/* hal_mps2.h - HAL for QEMU mps2-an385/an386: CMSDK APB UART0 (RX interrupt), SysTick
+/* hal_mps2.h - HAL for QEMU mps2-an385/an386: CMSDK APB UART0 (RX interrupt), TIMER1 alarm
+ * pacing a stream's exposures, SysTick
  * 1 ms wake-up tick, TIMER0 free-running microsecond clock (25 MHz), CMSDK APB watchdog, sensor array read from a
  * host pixel file (firmware/README.md layout) through semihosting. */
 #ifndef HAL_MPS2_H
@@ -28,5 +29,7 @@ uint32_t mps2_uart_overruns(void);
 /* Sleep until an interrupt if nothing was received. */
 void mps2_idle(void);
 void mps2_watchdog_start(uint32_t timeout_ms);
+/* Wake the core (TIMER1 interrupt) at MCU time t_us; UINT64_MAX: no alarm. */
+void mps2_alarm_at(uint64_t t_us);
 
 #endif

@@ -1,5 +1,6 @@
 /* main.c - mps2 entry: find the sensor file on the semihosting command line
- * ("... --sensor PATH"), boot the head, then serve the UART and sleep on wfi when idle. */
+ * ("... --sensor PATH"), boot the head, then serve the UART and the stream's timer (TIMER1
+ * wakes the core at each exposure end) and sleep on wfi when idle. */
 #include <string.h>
 
 #include "gs_head.h"
@@ -36,6 +37,7 @@ int main(void)
     uint32_t overruns = 0;
     for (;;) {
         g_hal.watchdog_kick(g_hal.ctx);
+        mps2_alarm_at(gs_head_poll(&g_head)); /* stream: read out due frames, wake at the next */
         uint32_t n = mps2_uart_take(buf, sizeof buf);
         if (n)
             gs_head_rx(&g_head, buf, n);

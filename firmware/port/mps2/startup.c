@@ -8,6 +8,7 @@ void Reset_Handler(void);
 void Default_Handler(void);
 void SysTick_Handler(void);
 void UART0_RX_Handler(void);
+void TIMER1_Handler(void);
 
 void Default_Handler(void)
 {
@@ -24,14 +25,15 @@ void Reset_Handler(void)
     }
 }
 
-/* 16 system exceptions + 32 external interrupts (UART0 RX is IRQ 0 on AN385) */
+/* 16 system exceptions + 32 external interrupts (UART0 RX is IRQ 0, TIMER1 IRQ 9 on AN385) */
 __attribute__((section(".isr_vector"), used)) static void (*const vectors[48])(void) = {
     (void (*)(void))(&_estack), Reset_Handler, Default_Handler, Default_Handler, Default_Handler,
     Default_Handler, Default_Handler, 0, 0, 0, 0, Default_Handler, Default_Handler, 0, Default_Handler,
     SysTick_Handler,
     UART0_RX_Handler, /* IRQ 0 */
     Default_Handler, Default_Handler, Default_Handler, Default_Handler, Default_Handler, Default_Handler,
-    Default_Handler, Default_Handler, Default_Handler, Default_Handler, Default_Handler, Default_Handler,
+    Default_Handler, Default_Handler, TIMER1_Handler /* IRQ 9 */, Default_Handler, Default_Handler,
+    Default_Handler,
     Default_Handler, Default_Handler, Default_Handler, Default_Handler, Default_Handler, Default_Handler,
     Default_Handler, Default_Handler, Default_Handler, Default_Handler, Default_Handler, Default_Handler,
     Default_Handler, Default_Handler, Default_Handler, Default_Handler, Default_Handler, Default_Handler,

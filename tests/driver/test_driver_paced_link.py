@@ -1,0 +1,115 @@
+"""Links paced at their line rate (mocks.paced_relay over linkrate.Wire), with the firmware
+host program as the head: wire times against hand-computed ones, and a stream too heavy for
+its link dropping frames at the head (back-pressure) instead of building a backlog."""
+
+import time
+
+import numpy as np
+import pytest
+from gyrostar.head import HeadClient
+from gyrostar.protocol import PixelFormat
+from gyrostar.transport import SerialLink
+from gyrostar.transport.linkrate import Wire, preset
+
+
+def test_wire_queues_bytes_behind_each_other():
+    w = Wire(preset("uart-921k"))
+    t1 = w.transmit(921, 0.0)                  # 921 B at 92,160 B/s: 9.99 ms + 3 char times
+    assert t1 == pytest.approx(921 / 92_160 + 30 / 921_600)
+    t2 = w.transmit(100, 0.001)                # queued behind the first
+    assert t2 == pytest.approx((921 + 100) / 92_160 + 30 / 921_600)
+    assert w.queued_bytes(0.005) == pytest.approx(1021 - 0.005 * 92_160)
+    assert w.queued_bytes(1.0) == 0.0
+
+
+@pytest.fixture(scope="module")
+def fw():
+    from gyrostar.mocks.firmware_host import FirmwareHost, is_built
+
+    if not is_built():
+        pytest.skip("firmware host program not built (make -C firmware host)")
+    host = FirmwareHost(1024, 1024, planes=1)
+    host.pixels.write_frame(np.random.default_rng(2).integers(0, 1024, (1024, 1024)).astype(np.uint16))
+    host.start()
+    yield host
+    host.close()
+
+
+def _client(fw, link):
+    from gyrostar.mocks.paced_relay import RelayProcess
+
+    relay = RelayProcess(fw.path, link)
+    serial = SerialLink(relay.path)
+    return relay, serial, HeadClient(serial, timeout=1.0)
+
+
+def test_ping_takes_its_wire_time(fw):
+    relay, serial, head = _client(fw, "uart-921k")
+    try:
+        echo = bytes(range(200))
+        rtts = [head.ping(echo) for _ in range(10)]
+        # request and reply: 6 B header + 200 + 4 B CRC, COBS +1..2, delimiter: ≥ 212 B each way
+        wire = 2 * preset("uart-921k").wire_time(212)
+        assert min(rtts) >= wire
+        assert np.median(rtts) < wire + 0.004
+    finally:
+        serial.close()
+        relay.close()
+
+
+def _stream(head, spans, seconds):
+    head.set_windows(spans)
+    head.sync(4)
+    head.start_stream(10_000, 10_000, PixelFormat.PACKED10)
+    frames, t_end = [], time.monotonic() + seconds
+    try:
+        while time.monotonic() < t_end:
+            fr = head.next_frame(0.2)
+            if fr is not None:
+                frames.append(fr)
+    finally:
+        stop = head.stop_stream()
+    return frames, stop
+
+
+def test_stream_over_a_slow_uart_drops_at_the_head_never_queues(fw):
+    """Windows of 1,600 px: about 2 kB per frame packed, 200 kB/s at 100 Hz, twice what a
+    921.6 kBd UART carries. The head must drop frames (back-pressure) and the frames that
+    come must arrive a bounded time after their exposure, not later and later."""
+    spans = np.array([[w, 200 + r, 50 * w, 50 * w + 20] for w in range(10) for r in range(8)], np.int32)
+    relay, serial, head = _client(fw, "uart-921k")
+    try:
+        frames, stop = _stream(head, spans, 3.0)
+    finally:
+        serial.close()
+        relay.close()
+    per_frame = np.median([f.wire_bytes for f in frames])
+    assert 1900 < per_frame < 2200
+    rate = len(frames) / 3.0
+    capacity = preset("uart-921k").bytes_per_s / per_frame          # ~45 frames/s
+    assert 0.4 * capacity < rate <= 1.05 * capacity     # a frame leaves only onto an idle line
+    assert stop["backpressure"] > 0 and stop["dropped"] >= stop["backpressure"]
+    lag = np.array([f.t_rx - f.t_mid_host for f in frames])
+    # mid-exposure → received: half an exposure + the frame's wire time (+ a little of the
+    # previous frame); a backlog would grow by ~20 ms a frame to seconds within 3 s. Bounds
+    # are loose for a shared, loaded machine: the median is the model, the tail the load.
+    wire = preset("uart-921k").wire_time(per_frame)
+    assert 0.005 + wire < np.median(lag) < 0.005 + wire + 0.012
+    assert np.percentile(lag, 90) < 0.005 + 3 * wire + 0.03
+    assert np.median(lag[-15:]) < np.median(lag[:15]) + 0.01
+
+
+def test_stream_over_usb_fs_keeps_every_frame(fw):
+    spans = np.array([[w, 200 + r, 50 * w, 50 * w + 20] for w in range(10) for r in range(8)], np.int32)
+    relay, serial, head = _client(fw, "usb-fs")
+    try:
+        frames, stop = _stream(head, spans, 2.0)
+    finally:
+        serial.close()
+        relay.close()
+    # 2.1 kB in 2.4 ms of a 10 ms period: nothing to drop, but a shared, loaded machine may
+    # hold the relay or the head up now and then (then the simulation is slower, never faster)
+    assert stop["backpressure"] <= 6 and stop["dropped"] <= 8
+    assert len(frames) >= 2.0 * 100 - stop["dropped"] - 10
+    lag = np.array([f.t_rx - f.t_mid_host for f in frames])
+    assert np.median(lag) < 0.005 + preset("usb-fs").wire_time(2100) + 0.002
