@@ -21,6 +21,8 @@ from __future__ import annotations
 
 import json
 import logging
+import signal
+import threading
 import time
 from datetime import UTC, datetime
 from pathlib import Path
@@ -131,19 +133,27 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
     # fast mode: the simulated clock's start (flatsat.FAST_T0) is mapped to this instant
     timemap = timescale.from_pair(flatsat.FAST_T0, time.time()) if fast else timescale.capture()
     folder = Path(folder)
+    meta = {"format": "gyrostar flatsat log 1", "config": _cfg_dict(cfg), "scenario": _cfg_dict(scen),
+            "duration_s": duration, "seed": seed, "realtime": realtime, "fast": fast, "output": describe(),
+            "started_utc": datetime.now(UTC).isoformat(), "calibration": calib.meta(), "time": timemap.meta()}
+    # the log file and its META record come into being together: a Ctrl-C in between is held
+    # until META is on disk, so a log never exists without saying what run it was
+    main_thread = threading.current_thread() is threading.main_thread()
+    if main_thread:
+        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
     try:
         folder.mkdir(parents=True, exist_ok=True)
         writer = lf.LogWriter(folder / "flatsat.gslog", background=True) if record else None
+        if writer:
+            writer.meta(meta)
+            writer.flush()      # on disk before anything can fail: a failed run's log still says what it was
     except FileExistsError as exc:
         raise ConfigError(f"{folder} already holds a log (flatsat.gslog): choose another run folder") from exc
     except OSError as exc:
         raise ConfigError(f"run folder {folder}: {exc.strerror or exc}") from exc
-    meta = {"format": "gyrostar flatsat log 1", "config": _cfg_dict(cfg), "scenario": _cfg_dict(scen),
-            "duration_s": duration, "seed": seed, "realtime": realtime, "fast": fast, "output": describe(),
-            "started_utc": datetime.now(UTC).isoformat(), "calibration": calib.meta(), "time": timemap.meta()}
-    if writer:
-        writer.meta(meta)
-        writer.flush()          # on disk before anything can fail: a failed run's log still says what it was
+    finally:
+        if main_thread:
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT, signal.SIGTERM})
     try:
         return _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer, on_output, probe,
                         fast, keep_arrays, calib=calib, timemap=timemap)

@@ -26,6 +26,7 @@ import time
 import tty
 from collections import deque
 
+from gyrostar.cli.interrupt import ignore_in_child, sigint_blocked
 from gyrostar.errors import DeviceError
 from gyrostar.transport.linkrate import LinkPreset, Wire, preset
 
@@ -119,6 +120,7 @@ class PacedRelay:
 
 
 def _relay_child(conn, target, link, parent_pid):
+    ignore_in_child()
     try:
         relay = PacedRelay(target, link)
     except OSError as exc:
@@ -138,7 +140,8 @@ class RelayProcess:
         self.link = preset(link) if isinstance(link, str) else link
         self.proc = ctx.Process(target=_relay_child, args=(child, target, self.link, os.getpid()),
                                 name="link-relay", daemon=True)
-        self.proc.start()
+        with sigint_blocked():      # the child ignores SIGINT before any can reach it (the parent stops it)
+            self.proc.start()
         if not self.conn.poll(10.0):
             self.close()
             raise DeviceError("the link relay did not start")
