@@ -74,10 +74,18 @@ def run(args) -> int:
         raise ConfigError(f"--out {folder}: {exc.strerror}") from None
     seeds = run_seeds(args.seed, args.runs)
     t0 = time.perf_counter()
+    rows: list[dict] = []
+    interrupted = False
     with Cluster(args.workers, args.scheduler, tls, args.config) as cluster:
-        rows = _with_progress(args, cluster, seeds)
         n_workers = cluster.n_workers
+        try:
+            _with_progress(args, cluster, seeds, rows)
+        except KeyboardInterrupt:       # keep and report the runs that finished
+            interrupted = True
     wall = time.perf_counter() - t0
+    rows.sort(key=lambda r: r["seed"])
+    if interrupted and not rows:
+        raise KeyboardInterrupt
     res = summarize(rows)
     res.update(wall_s=round(wall, 2), runs_per_minute=round(60.0 * len(rows) / wall, 2), workers=n_workers,
                duration_s=args.duration, seed=args.seed,
@@ -87,11 +95,20 @@ def run(args) -> int:
     write_table(rows, folder / "results.parquet")
     res["plots"] = [str(p) for p in write_plots(rows, Path(args.plot) if args.plot else folder)]
     (folder / "summary.json").write_text(json.dumps(_clean(res), indent=2))
+    if interrupted:
+        res["interrupted"] = True
+        (folder / "summary.json").write_text(json.dumps(_clean(res), indent=2))
+        import logging
+
+        logging.getLogger("gyrostar").error("interrupted after %d of %d runs: their results are in %s",
+                                            len(rows), len(seeds), folder)
+        emit(args, res)
+        return 130
     emit(args, res, _text(res))
     return 1 if res["wrong_attitude_runs"] or res["wrong_id_runs"] else 0
 
 
-def _with_progress(args, cluster, seeds):
+def _with_progress(args, cluster, seeds, rows):
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
@@ -109,7 +126,7 @@ def _with_progress(args, cluster, seeds):
             failed[0] += bool(row["failed"])
             bar.update(task, advance=1, failed=failed[0])
 
-        return run_campaign(cluster, seeds, args.duration, on_row)
+        return run_campaign(cluster, seeds, args.duration, on_row, rows)
 
 
 def _fmt(v, spec=".2f") -> str:

@@ -109,15 +109,16 @@ class Cluster:
             self.cluster.close()
 
 
-def run_campaign(cluster: Cluster, seeds, duration_s: float, on_row=None) -> list[dict]:
-    """Rows of every seed (sorted by seed); ``on_row(row)`` as each completes."""
+def run_campaign(cluster: Cluster, seeds, duration_s: float, on_row=None, rows: list | None = None) -> list[dict]:
+    """Rows of every seed (sorted by seed); ``on_row(row)`` as each completes. ``rows``: a
+    list the rows are collected into as they come (what ran is kept if the wait is interrupted)."""
     from dask.distributed import as_completed
 
     from .worker import run_case
 
     futures = [cluster.client.submit(run_case, int(s), float(duration_s), cluster.config_path, pure=False,
                                      key=f"mc-{duration_s:g}-{int(s)}", retries=1) for s in seeds]
-    rows = []
+    rows = [] if rows is None else rows
     try:
         for fut in as_completed(futures):
             row = fut.result()

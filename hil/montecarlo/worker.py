@@ -53,6 +53,13 @@ def preload_plugin(config_path: str | None = None):
         name = "gyrostar-montecarlo-preload"
 
         def setup(self, worker=None):
+            import signal
+            import threading
+
+            # Ctrl-C in a terminal reaches the whole process group: the campaign's own process
+            # stops the runs and closes the cluster; a worker ignores it (no traceback of its own)
+            if threading.current_thread() is threading.main_thread():
+                signal.signal(signal.SIGINT, signal.SIG_IGN)
             preload(config_path)
 
     return Preload()
