@@ -172,14 +172,9 @@ def render() -> str:
 
 
 def main(argv=None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    text = render()
-    if argv:
-        with open(argv[0], "w") as fh:
-            fh.write(text)
-    else:
-        sys.stdout.write(text)
-    return 0
+    from ..cli.output import write_or_print
+
+    return write_or_print(render(), sys.argv[1:] if argv is None else argv)
 
 
 if __name__ == "__main__":

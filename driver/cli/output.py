@@ -68,3 +68,13 @@ def emit_error(as_json: bool, message: str, exit_code: int) -> None:
     if as_json:
         sys.stdout.write(json.dumps({"error": message, "exit_code": int(exit_code)}) + "\n")
         sys.stdout.flush()
+
+
+def write_or_print(text: str, argv: list[str]) -> int:
+    """A generator's ``main``: ``text`` to the file named by ``argv[0]``, or to stdout."""
+    if argv:
+        with open(argv[0], "w") as fh:
+            fh.write(text)
+    else:
+        sys.stdout.write(text)
+    return 0

@@ -63,14 +63,9 @@ def xml(apid: int = packets.APID_ATTITUDE) -> str:
 
 
 def main(argv=None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    text = xml()
-    if argv:
-        with open(argv[0], "w") as fh:
-            fh.write(text)
-    else:
-        sys.stdout.write(text)
-    return 0
+    from ..cli.output import write_or_print
+
+    return write_or_print(xml(), sys.argv[1:] if argv is None else argv)
 
 
 if __name__ == "__main__":
