@@ -176,7 +176,7 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
     import sys
 
     from ..loop.scheduler import PeriodicScheduler, StepGate, realtime_setup
-    from ..loop.sinks import CallbackSink, RecorderSink, SpacePacketSink, UdpSink
+    from ..loop.sinks import ArraySink, CallbackSink, RecorderSink, SpacePacketSink, UdpSink
     from ..recording import logfile as lf
     from . import flatsat
     from .analysis import summarize
@@ -197,8 +197,9 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
     warm = warmup()
     warm["seconds"] = time.perf_counter() - t_w
 
-    chunks: list[np.ndarray] = []
-    sinks = [CallbackSink(lambda recs: chunks.append(recs.copy()))]
+    # every output of the run, for its figures: room for the run at the gyro's ODR (grows past 2^20)
+    kept = ArraySink(min(int(duration * cfg.gyro.odr_hz * 1.05) + 4096, 1 << 20))
+    sinks = [kept]
     if on_output is not None:
         sinks.append(CallbackSink(on_output))
     if writer:
@@ -268,7 +269,7 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
         gc.unfreeze()
     wall = time.perf_counter() - t_wall0
     cpu_proc = time.process_time() - cpu0
-    out = np.concatenate(chunks) if chunks else np.zeros(0, loop.out_buf.dtype)
+    out = kept.records
     truth = fs.truth_rows(out["t"]) if len(out) else None
     if writer and truth is not None:
         writer.append(lf.TRUTH, truth.tobytes(), t_ns=0)

@@ -165,6 +165,7 @@ class CoupledLoop:
         self._slots = np.zeros(0, np.int64)
         self._uv = np.zeros((0, 2))
         self._tracks_version = -1
+        self._uv_dirty = False         # the kernel's predicted centroids are not yet in self.tracks.uv
         self.gyro_path_s = 0.0         # host s in the 400 Hz path after the FIFO read (filter, outputs, sinks)
         self.floor = FloorInputs()     # what the run's attitude floor depends on (per update)
         # streaming head (gyrostar.hil.streamport): plans by stream frame, link budget,
@@ -266,6 +267,13 @@ class CoupledLoop:
             self._uv = np.zeros((len(self._slots), 2))
         return self._refs, self._ids, self._uv
 
+    def _sync_uv(self) -> None:
+        """Put the last batch's predicted centroids (the kernel's ``uv``) into the tracks:
+        once before an image stage reads or changes them, not on every gyro step."""
+        if self._uv_dirty:
+            self._uv_dirty = False
+            self.tracks.uv[self._slots] = self._uv
+
     def _gyro_phase(self) -> int:
         smp = self.samples
         smp.clear()
@@ -300,8 +308,7 @@ class CoupledLoop:
         out = self.outputs.batch(n)
         self.c.gyro_stuck += f.predict(smp, self.flags_pending, base, self.state.mode, refs, ids, self.cam, uv, out)
         self.flags_pending = 0
-        if len(uv):
-            self.tracks.uv[self._slots] = uv
+        self._uv_dirty = len(uv) > 0     # copied to the tracks when an image stage next looks at them
         self.c.gyro_samples += n
         self.c.gyro_saturated += int(smp.saturated)
         self.outputs.emit(out, t_read, float(smp.t[n - 1]))
@@ -317,6 +324,7 @@ class CoupledLoop:
 
     # ------------------------------------------------------------------ images
     def _image_phase(self) -> None:
+        self._sync_uv()
         now = self.clock.now()
         res = self.head.poll()
         if res is not None and res.kind == "reconnect":
@@ -378,6 +386,7 @@ class CoupledLoop:
     def _stream_phase(self, now: float) -> None:
         """Streaming head: take in the frames the port has measured, command the windows of
         the frame two ahead of the newest one (while the next one integrates)."""
+        self._sync_uv()
         head = self.head
         while True:
             res = head.poll()
@@ -533,6 +542,7 @@ class CoupledLoop:
     def _process_windows(self, pend: dict, res, measured: tuple, now: float) -> None:
         from .image_kernels import MEAS_MISS, MEAS_OK
 
+        self._sync_uv()
         self.c.frames += 1
         lag = res.t_start - pend["t_submit"]
         if 0.0 <= lag < 0.1:

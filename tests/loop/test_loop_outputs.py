@@ -22,6 +22,22 @@ def test_record_layout_is_fixed_little_endian():
     assert record.flag_names(record.FLAG_ATTITUDE_VALID | record.FLAG_GYRO_GAP) == ["attitude_valid", "gyro_gap"]
 
 
+def test_array_sink_keeps_every_record_across_growth():
+    rng = np.random.default_rng(3)
+    recs = record.empty(37)
+    recs["t"] = rng.normal(size=37)
+    recs["q"] = rng.normal(size=(37, 4))
+    recs["star_id"][:, :3] = rng.integers(0, 9000, size=(37, 3))
+    recs["cov"] = rng.normal(size=(37, 6, 6))
+    sink = sinks.ArraySink(capacity=5)              # grows several times
+    for a, b in ((0, 1), (1, 4), (4, 4), (4, 20), (20, 37)):
+        sink.put(recs[a:b])
+    kept = sink.records
+    assert len(kept) == 37 and kept.dtype == record.OUTPUT_DTYPE
+    assert kept.tobytes() == recs.tobytes()           # bit for bit, every field
+    assert kept[-1]["star_id"][0] == recs[-1]["star_id"][0]
+
+
 def test_udp_stream_roundtrip_on_loopback():
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     rx.bind(("127.0.0.1", 0))
