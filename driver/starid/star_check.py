@@ -36,7 +36,7 @@ def chi2_gate(p_reject: float, dof: int) -> float:
     """The χ² value a true star exceeds with probability ``p_reject`` (2 or 3 dof)."""
     if not (0.0 < p_reject < 1.0) or dof not in (2, 3):
         raise ConfigError(f"chi2_gate needs 0 < p_reject < 1 and 2 or 3 dof, got {p_reject}, {dof}")
-    from scipy.special import chdtri    # χ² inverse survival function (scipy.stats costs ~2 s to import)
+    from scipy.special import chdtri  # χ² inverse survival function (scipy.stats costs ~2 s to import)
 
     return float(chdtri(dof, p_reject))
 
