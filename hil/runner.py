@@ -304,7 +304,8 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
         "frames": counters["frames"],
         "gyro_samples": counters["gyro_samples"],
         "samples_lost": counters["samples_lost"],
-        "host_us_per_gyro_sample": loop.host_us_per_gyro_sample(),
+        "host_us_per_gyro_sample": loop.host_us_per_gyro_sample(),            # CPU of the loop thread
+        "host_us_per_gyro_sample_wall": loop.host_us_per_gyro_sample_wall(),  # + other threads' turns
     }
     res_top.update({k: v for k, v in res.items() if k not in res_top})
     if floor.get("floor_inputs"):

@@ -167,6 +167,7 @@ class CoupledLoop:
         self._tracks_version = -1
         self._uv_dirty = False         # the kernel's predicted centroids are not yet in self.tracks.uv
         self.gyro_path_s = 0.0         # host s in the 400 Hz path after the FIFO read (filter, outputs, sinks)
+        self.gyro_path_cpu_s = 0.0     # ... its CPU seconds on the loop's thread (without other threads' turns)
         self.floor = FloorInputs()     # what the run's attitude floor depends on (per update)
         # streaming head (gyrostar.hil.streamport): plans by stream frame, link budget,
         # exposure → output latency (mid-exposure to the first output holding its update)
@@ -293,6 +294,7 @@ class CoupledLoop:
             self.c.samples_lost += int(smp.gap_frames)
             self.c.gyro_gaps += int(smp.gaps)
         w0 = time.perf_counter()
+        c0 = time.thread_time()
         f = self.filter
         base = self.last_image_flags
         if f.valid and self.state.mode != R.MODE_ACQUIRE:
@@ -319,6 +321,7 @@ class CoupledLoop:
                 self.e2o[self.n_e2o % len(self.e2o)] = t_out - t_mid
                 self.n_e2o += 1
             self._mids.clear()
+        self.gyro_path_cpu_s += time.thread_time() - c0
         self.gyro_path_s += time.perf_counter() - w0
         return n
 
@@ -642,7 +645,13 @@ class CoupledLoop:
         return self.floor.summary(self.p.gyro_arw, self.filter.kappa)
 
     def host_us_per_gyro_sample(self) -> float | None:
-        """Host µs per gyro sample in the 400 Hz path after the FIFO read (wall clock)."""
+        """Host CPU µs per gyro sample in the 400 Hz path after the FIFO read (filter kernel,
+        output stage, sinks), on the loop's thread: what the path costs."""
+        return self.gyro_path_cpu_s / self.c.gyro_samples * 1e6 if self.c.gyro_samples else None
+
+    def host_us_per_gyro_sample_wall(self) -> float | None:
+        """The same path in wall-clock µs per sample: its cost plus the turns other threads of
+        the process (head worker, link reader, measuring thread) took inside it."""
         return self.gyro_path_s / self.c.gyro_samples * 1e6 if self.c.gyro_samples else None
 
 
