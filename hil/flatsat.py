@@ -219,10 +219,11 @@ def make_gyro(cfg: hc.FlatsatConfig, regs, clock):
 
 
 def make_head(cfg: hc.FlatsatConfig, link, clock, reconnect=None, head_clock=None, poll_log=None,
-              replay_polls=None, replay_reconnects=None, fast: bool = False, replay_records=None):
+              replay_polls=None, replay_reconnects=None, fast: bool = False, replay_records=None, lockstep=None):
     """The head port the loop drives (see :mod:`gyrostar.hil.headport`), on a packet link:
     a streaming port (:mod:`gyrostar.hil.streamport`) with ``head.mode = "stream"`` (fast
-    mode's lock-step head serves request/response only)."""
+    mode's lock-step head serves request/response only). ``lockstep``: fast mode's schedule,
+    which runs the port's jobs at once on their own simulated time (no worker thread)."""
     from .headport import HeadPort
 
     if cfg.head.mode == "stream" and not fast:
@@ -237,10 +238,12 @@ def make_head(cfg: hc.FlatsatConfig, link, clock, reconnect=None, head_clock=Non
                           exposure_s=cfg.head.exposure_ms * 1e-3, gain=cfg.head.gain, reconnect=reconnect,
                           head_clock=head_clock, poll_log=poll_log, replay_polls=replay_polls,
                           replay_reconnects=replay_reconnects)
+    if lockstep is not None:
+        lockstep.inline_jobs = True
     return HeadPort(link, clock, timeout_s=cfg.head.timeout_s, retries=cfg.head.retries,
                     exposure_s=cfg.head.exposure_ms * 1e-3, gain=cfg.head.gain, reconnect=reconnect,
                     head_clock=head_clock, poll_log=poll_log, replay_polls=replay_polls,
-                    replay_reconnects=replay_reconnects)
+                    replay_reconnects=replay_reconnects, inline=lockstep)
 
 
 def star_index(cfg: hc.FlatsatConfig, camera):
@@ -323,6 +326,12 @@ class Flatsat:
         """Fast mode: the faults and eclipses due at scenario time ``t`` (s), from the runner."""
         if self.faults is not None:
             self.faults.apply(t)
+
+    def apply_head_faults(self, t: float) -> None:
+        """Fast mode: the head's faults and eclipses due at scenario time ``t`` (s), from a
+        head job that runs ahead of the loop on its own time line."""
+        if self.faults is not None:
+            self.faults.apply_head(t)
 
     def loop_stalled(self, t: float) -> bool:
         return self.faults is not None and self.faults.stalled(t)
@@ -511,7 +520,9 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
         if emulated_head(cfg):
             e_per_dn = sim.detector.gain_e_per_adu
     rec_clock = taps.RecordingClock(base, writer) if writer else base
-    head_clock = taps.RecordingClock(base, writer, channel=CH_HEAD_CLOCK) if writer else base
+    # fast mode: the head client reads its job's own time (gyrostar.hil.lockstep.Lockstep.now)
+    head_base = lockstep if lockstep is not None else base
+    head_clock = taps.RecordingClock(head_base, writer, channel=CH_HEAD_CLOCK) if writer else head_base
     closers = []
     faults = FaultPlan(scen)
 
@@ -568,7 +579,7 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
         return taps.RecordingLink(link, writer, clock=rec_clock) if writer else link
 
     head = make_head(cfg, connect(), rec_clock, reconnect=connect, head_clock=head_clock,
-                     poll_log=writer, fast=fast)
+                     poll_log=writer, fast=fast, lockstep=lockstep)
     head = with_hot_pixels(head, calib, camera, wiring)
     closers.insert(0, head.close)
     closers.append(lambda: current["link"].close())
@@ -690,6 +701,7 @@ class FaultPlan:
         self.firmware_head = None
         self.active: set = set()
         self.in_eclipse = False
+        self._head_t = -math.inf     # the head's faults are applied up to here (only forward)
 
     def start(self, t0: float, clock) -> None:
         """Apply the faults from their own thread (device calls may block; the loop must not)."""
@@ -719,11 +731,25 @@ class FaultPlan:
         return any(a <= t < b for a, b in self.eclipse)
 
     def apply(self, t: float) -> None:
+        self._apply(t, head=False)
+        self.apply_head(t)
+
+    def apply_head(self, t: float) -> None:
+        """The head's faults and eclipses due by ``t``: a head job that ran ahead of the loop
+        (fast mode) has applied them up to its own time already, and they never go back."""
+        if t <= self._head_t:
+            return
+        self._head_t = t
         ecl = self.eclipsed(t)
         if ecl != self.in_eclipse:
             self.in_eclipse = ecl
             self._set_eclipse(ecl)
+        self._apply(t, head=True)
+
+    def _apply(self, t: float, head: bool) -> None:
         for i, f in enumerate(self.faults):
+            if (f.kind in HEAD_FAULTS) != head:
+                continue
             on = f.at_s <= t < f.at_s + f.seconds
             if on and i not in self.active:
                 self.active.add(i)

@@ -81,7 +81,7 @@ class HeadPort:
     """Jobs for the head on a worker thread; ``poll()`` returns finished results."""
 
     def __init__(self, link, clock, timeout_s=0.05, retries=2, exposure_s=0.010, gain=1, reconnect=None,
-                 head_clock=None, poll_log=None, replay_polls=None, replay_reconnects=None):
+                 head_clock=None, poll_log=None, replay_polls=None, replay_reconnects=None, inline=None):
         self.link = link
         self.clock = clock
         self.head_clock = head_clock if head_clock is not None else clock
@@ -102,6 +102,11 @@ class HeadPort:
         self._result: ImageResult | None = None
         # real-time runs: the loop's StepGate (gyrostar.loop.scheduler; see _GatedLink); None: off
         self.step_gate = None
+        # fast mode: the lock-step schedule (gyrostar.hil.lockstep.Lockstep) runs each job at
+        # once, no worker thread, on the job's own simulated time line (``run_job(fn)`` →
+        # finish time, ``now()``); its result is polled from that finish time on
+        self.inline = inline
+        self._ready_at: float | None = None
 
     # ------------------------------------------------------------------ set-up
     def start(self, exposure_s: float | None = None) -> None:
@@ -121,7 +126,7 @@ class HeadPort:
         self.client.set_exposure(int(round(self.exposure_s * 1e6)))
         self.client.sync(8)
         self.client.timeout = self.timeout_s + 0.2
-        if threading.current_thread() is not self._thread:
+        if self.inline is None and threading.current_thread() is not self._thread:
             self._start_worker()          # now, not inside the loop's first step
 
     def limits(self) -> dict:
@@ -180,7 +185,7 @@ class HeadPort:
     @property
     def job_done(self) -> bool:
         """The job in flight has finished (its result waits for :meth:`poll`)."""
-        return self._done.is_set()
+        return self._done.is_set() and (self._ready_at is None or self.inline.now() >= self._ready_at)
 
     def submit_windows(self, spans: np.ndarray) -> None:
         self._submit("windows", spans)
@@ -197,6 +202,9 @@ class HeadPort:
         self._job = (kind, spans)
         self._done.clear()
         self._result = None
+        if self.inline is not None:
+            self._ready_at = self.inline.run_job(lambda: self._run_job(kind, spans))
+            return
         self._start_worker()
         self._jobs.put((kind, spans))
 
@@ -214,27 +222,30 @@ class HeadPort:
             job = self._jobs.get()
             if job is None:
                 return
-            kind, spans = job
-            post = None
-            if kind == "frame":
-                post, spans = spans, None
-            gate = self.step_gate
+            self._run_job(*job)
+
+    def _run_job(self, kind, spans) -> None:
+        """One job (on the worker, or at once in fast mode): its result, then done."""
+        post = None
+        if kind == "frame":
+            post, spans = spans, None
+        gate = self.step_gate
+        if gate is not None:
+            gate.worker_enter()
+        try:
+            self._result = self._do(kind, spans)
+        except Exception as exc:  # noqa: BLE001 - every failure goes back to the loop as a result
+            self._result = ImageResult(kind, np.nan, np.nan, np.nan, error=exc)
+        finally:
             if gate is not None:
-                gate.worker_enter()
+                gate.worker_exit()
+        res = self._result
+        if post is not None and res is not None and res.error is None and res.image is not None:
             try:
-                self._result = self._do(kind, spans)
-            except Exception as exc:  # noqa: BLE001 - every failure goes back to the loop as a result
-                self._result = ImageResult(kind, np.nan, np.nan, np.nan, error=exc)
-            finally:
-                if gate is not None:
-                    gate.worker_exit()
-            res = self._result
-            if post is not None and res is not None and res.error is None and res.image is not None:
-                try:
-                    res.measured = post(res.image)
-                except Exception as exc:  # noqa: BLE001 - reported to the loop like a device failure
-                    res.error = exc
-            self._done.set()
+                res.measured = post(res.image)
+            except Exception as exc:  # noqa: BLE001 - reported to the loop like a device failure
+                res.error = exc
+        self._done.set()
 
     def _gate_held(self) -> bool:
         """Inside a job the worker holds the gate (set-up on the loop's thread does not)."""
@@ -286,11 +297,12 @@ class HeadPort:
             if done:
                 self._done.wait()
         else:
-            done = self._done.is_set()
+            done = self.job_done
             self._log_poll(int(done))
         if not done:
             return None
         res = self._result
         self._job = None
         self._result = None
+        self._ready_at = None
         return res

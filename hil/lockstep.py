@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import heapq
 import threading
+import time
 
 from ..errors import DeviceError, LinkLostError
 
@@ -51,6 +52,11 @@ class Lockstep:
         # the runner's next event (its next step): a worker wait that ends no later than
         # this moves the clock itself, as the runner would at once (no hand-over)
         self.horizon = -float("inf")
+        # inline jobs (see run_job): the running job's own time, None outside a job
+        self._job_t: float | None = None
+        self.inline_jobs = False       # the head port runs its jobs through run_job (no worker)
+        self.on_time = None            # f(t): the head's faults due by simulated time t (inline jobs)
+        self.job_cpu_s = 0.0           # CPU s the inline jobs took (the head's and its client's work)
 
     # -- StepGate interface (called by the head port) ----------------------------------
     def loop_enter(self) -> None:
@@ -80,6 +86,31 @@ class Lockstep:
         with self._cv:
             self._state = OUT
             self._cv.notify_all()
+
+    # -- inline jobs -------------------------------------------------------------------------
+    def now(self) -> float:
+        """Simulated time: the running inline job's own time, else the clock's."""
+        t = self._job_t
+        return self.clock.now() if t is None else t
+
+    def sleep(self, dt: float) -> None:
+        if dt > 0:
+            self.wait_until(self.now() + dt)
+
+    def run_job(self, fn) -> float:
+        """Run a head job at once, on the runner's thread, on its own time line from now: its
+        waits move only that job time (and apply the head's faults due by then), never the
+        clock the loop steps on. Returns the job's finish time: the loop takes its result at
+        its first step from then on, as it would from a worker woken at the same times —
+        without two thread hand-overs per reply."""
+        self._job_t = self.clock.now()
+        c0 = time.thread_time()
+        try:
+            fn()
+        finally:
+            t, self._job_t = self._job_t, None
+            self.job_cpu_s += time.thread_time() - c0
+        return t
 
     # -- the runner's side ---------------------------------------------------------------
     def begin(self) -> None:
@@ -130,7 +161,14 @@ class Lockstep:
     # -- waits (called by the link) --------------------------------------------------------
     def wait_until(self, t: float) -> None:
         """Block the calling thread until simulated time ``t`` (the runner's own waits and
-        every wait outside the schedule move the clock instead)."""
+        every wait outside the schedule move the clock instead; an inline job's waits move
+        its own time)."""
+        if self._job_t is not None:
+            if t > self._job_t:
+                if self.on_time is not None:
+                    self.on_time(t)
+                self._job_t = t
+            return
         with self._cv:
             if not self._running or threading.current_thread() is self.runner or t <= self.horizon:
                 if t > self.clock.now():
@@ -242,7 +280,7 @@ class SimLink:
     def __init__(self, head: SimHead):
         self.head = head
         self.url = head.url
-        self.clock = head.lockstep.clock
+        self.clock = head.lockstep       # its now(): an inline job's own time, else the simulated clock
         self._arrivals: list = []       # heap of (t, n, bytes chunk)
         self._n = 0
         self._buf = bytearray()

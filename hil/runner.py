@@ -233,7 +233,7 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
     gate = fs.lockstep if fs.lockstep is not None else StepGate()
     sched = None
     interrupted = False
-    if hasattr(loop.head, "step_gate"):
+    if hasattr(loop.head, "step_gate") and not (fs.lockstep is not None and fs.lockstep.inline_jobs):
         loop.head.step_gate = gate
     try:
         fs.start_scenario(fs.clock_now())
@@ -415,20 +415,26 @@ def _run_realtime(fs, loop, gate, sched, duration: float, step_wall: list, line,
 
 
 def _run_lockstep(fs, loop, duration: float, period: float, step_wall: list, line) -> float:
-    """Fast mode: step the loop every gyro period of simulated time; between steps let the
-    head worker run at the simulated times its replies (or timeouts) are due. Returns the
-    CPU seconds of this thread (the loop's steps and the few µs of scheduling per step)."""
+    """Fast mode: step the loop every gyro period of simulated time. A request-mode head
+    port's jobs run at once on their own time line (:meth:`Lockstep.run_job`); a worker
+    thread (other head ports) runs between steps at the simulated times its replies (or
+    timeouts) are due. Returns the loop's CPU seconds on this thread (its steps and the
+    few µs of scheduling per step, not the head jobs')."""
     lk = fs.lockstep
     clock = fs.base_clock
     head = loop.head
     lk.begin()
     t_start = t_start_of(fs)
+    # a request-mode port runs each job at once on the job's own time (Lockstep.run_job): the
+    # head's faults follow that time line; there is no worker to wake or settle
+    inline = lk.inline_jobs
+    lk.on_time = lambda t: fs.apply_head_faults(t - t_start)
     t_next = clock.now() + period
     cpu0 = time.thread_time()      # this thread runs only the loop and the schedule: one reading
     shown = time.perf_counter()
     while True:
         lk.horizon = t_next
-        while True:
+        while not inline:
             w = lk.wake_time
             if w is None or w > t_next:
                 break
@@ -446,12 +452,14 @@ def _run_lockstep(fs, loop, duration: float, period: float, step_wall: list, lin
         w0 = time.perf_counter()
         loop.step()
         step_wall.append(time.perf_counter() - w0)
-        lk.settle(head)
+        if not inline:
+            lk.settle(head)
         if line is not None and loop.last_output is not None and w0 - shown > 0.2:
             shown = w0
             line.update(loop.last_output, fs.truth_at(loop.last_output["t"]), step_wall[-1] * 1e6, 0, duration,
                         t0=t_start)
-    return time.thread_time() - cpu0
+    # the loop's CPU: the head jobs ran on this thread too (the emulated head and its client)
+    return time.thread_time() - cpu0 - lk.job_cpu_s
 
 
 def t_start_of(fs) -> float:

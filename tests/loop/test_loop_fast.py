@@ -125,3 +125,31 @@ def test_fast_head_disconnect_coasts_and_reconnects(tmp_path):
     lost = [t for t, a, b in modes if (a, b) == ("TRACK", "COAST")][0]
     back = [t for t, a, b in modes if (a, b) == ("COAST", "TRACK")][0]
     assert 4.0 <= lost <= 4.2 and 6.0 <= back <= 6.6
+
+
+def test_inline_head_jobs_match_the_worker_thread_schedule(tmp_path, monkeypatch):
+    """Lock-step runs the request-mode head's jobs at once on their own time line (no worker
+    thread, no hand-overs): the loop sees every result at the same step as with the head
+    worker woken at each reply's time, so the outputs are the same bit for bit."""
+    import threading
+
+    from gyrostar.hil import flatsat
+
+    seen = set()
+    real_start = threading.Thread.start
+
+    def spy(self):
+        seen.add(self.name)
+        return real_start(self)
+
+    monkeypatch.setattr(threading.Thread, "start", spy)
+    r1, o1 = _fast_run(tmp_path, "inline", seconds=2.5)
+    assert "head-port" not in seen and r1["frames"] > 40
+    monkeypatch.setattr(threading.Thread, "start", real_start)
+
+    make_head = flatsat.make_head
+    monkeypatch.setattr(flatsat, "make_head", lambda *a, **k: make_head(*a, **(k | {"lockstep": None})))
+    r2, o2 = _fast_run(tmp_path, "worker", seconds=2.5)
+    assert r2["frames"] == r1["frames"]
+    for key in ("t", "q", "cov", "flags", "mode", "centroid_px", "t_mid", "q_mid"):
+        np.testing.assert_array_equal(o1[key], o2[key])
