@@ -41,7 +41,7 @@ from ..errors import DeviceError, GyrostarError, LinkLostError
 from ..head.client import HeadTimeoutError
 from . import modes
 from . import record as R
-from .attitude_filter import GATE, AttitudeFilter
+from .attitude_filter import GATE, AttitudeFilter, fix_covariance
 from .floor import FloorInputs
 from .image import ImagePipeline
 from .outputs import OutputStage
@@ -488,7 +488,10 @@ class CoupledLoop:
             self.c.acquisition_failures += 1
             log.debug("acquisition failed: %s", ident.status)
             return
-        self.filter.set_attitude(ident.q, res.t_mid, now, 2.0 * self.p.pyramid_sigma_px / self.f_px)
+        used = np.flatnonzero(ident.index >= 0)
+        body = self.camera.unproject(np.ascontiguousarray(spots[used, :2], np.float64))
+        cov = fix_covariance(body, 2.0 * self.p.pyramid_sigma_px / self.f_px)
+        self.filter.set_attitude(ident.q, res.t_mid, now, cov)
         self.tracks.clear()
         self.tracks.fill_from_catalog(self.filter.q)
         log.info("acquired: %d stars identified (p_false %.2g)", ident.n_identified, ident.p_false)
@@ -553,10 +556,15 @@ class CoupledLoop:
         if len(slots):
             acc = np.zeros(len(slots), np.uint8)
             ok = self._consistent(b_mid[use], tr.ref[slots], sig[use])
+            # the first image after a lost-in-space fix confirms it: only stars that checked
+            # each other (≥ 3, :meth:`_consistent`) may, since the fix's wide prior lets a
+            # wrong centroid through every gate and two stars alone would fit it exactly,
+            # attitude and bias (through their cross-covariance) alike
+            min_used = max(3, self.p.min_stars) if self.state.mode == R.MODE_ACQUIRE else self.p.min_stars
             if np.any(ok):
                 sub = np.zeros(int(ok.sum()), np.uint8)
                 updated = self.filter.update(res.t_mid, b_mid[use][ok], tr.ref[slots][ok], sig[use][ok], sub,
-                                             self.p.min_stars)
+                                             min_used)
                 acc[ok] = sub
             self.c.inconsistent_stars += int(np.count_nonzero(~ok))
             self.c.updates += updated
