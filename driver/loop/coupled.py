@@ -50,6 +50,7 @@ from .tracks import MODEL, StarTracks
 log = logging.getLogger(__name__)
 CONSISTENT_SIGMA = 6.0     # a star this many median centroid σ off the others' attitude is dropped
 CONSISTENT_MIN_PX = 1.5    # ... but never for less than this (px)
+CONFIRM_MIN_STARS = 4      # consistent stars the first image after a lost-in-space fix needs to confirm it
 
 ARCSEC = math.pi / 180.0 / 3600.0
 
@@ -557,10 +558,14 @@ class CoupledLoop:
             acc = np.zeros(len(slots), np.uint8)
             ok = self._consistent(b_mid[use], tr.ref[slots], sig[use])
             # the first image after a lost-in-space fix confirms it: only stars that checked
-            # each other (≥ 3, :meth:`_consistent`) may, since the fix's wide prior lets a
-            # wrong centroid through every gate and two stars alone would fit it exactly,
-            # attitude and bias (through their cross-covariance) alike
-            min_used = max(3, self.p.min_stars) if self.state.mode == R.MODE_ACQUIRE else self.p.min_stars
+            # each other (:meth:`_consistent`) may, and at least 4 — the fix's wide prior lets a
+            # wrong centroid (a blend, a star at a window's edge) through every gate, and with
+            # 3 stars the attitude's three angles absorb most of two such errors (Monte Carlo
+            # seed 100120: two of three centroids 3.5 and 4.8 px off passed the check); two
+            # stars alone would be fitted exactly, attitude and bias (through their
+            # cross-covariance) alike
+            min_used = max(CONFIRM_MIN_STARS, self.p.min_stars) if self.state.mode == R.MODE_ACQUIRE \
+                else self.p.min_stars
             if np.any(ok):
                 sub = np.zeros(int(ok.sum()), np.uint8)
                 updated = self.filter.update(res.t_mid, b_mid[use][ok], tr.ref[slots][ok], sig[use][ok], sub,
