@@ -51,6 +51,7 @@ log = logging.getLogger(__name__)
 CONSISTENT_SIGMA = 6.0     # a star this many median centroid σ off the others' attitude is dropped
 CONSISTENT_MIN_PX = 1.5    # ... but never for less than this (px)
 CONFIRM_MIN_STARS = 4      # consistent stars the first image after a lost-in-space fix needs to confirm it
+CONFIRM_PRIOR_PX = 3.0     # ... and a regain from COAST with an attitude σ above this (px, cross-boresight)
 
 ARCSEC = math.pi / 180.0 / 3600.0
 
@@ -563,9 +564,13 @@ class CoupledLoop:
             # 3 stars the attitude's three angles absorb most of two such errors (Monte Carlo
             # seed 100120: two of three centroids 3.5 and 4.8 px off passed the check); two
             # stars alone would be fitted exactly, attitude and bias (through their
-            # cross-covariance) alike
-            min_used = max(CONFIRM_MIN_STARS, self.p.min_stars) if self.state.mode == R.MODE_ACQUIRE \
-                else self.p.min_stars
+            # cross-covariance) alike. The same holds for a regain after a COAST that left the
+            # attitude uncertain by more than CONFIRM_PRIOR_PX (seed 100194: after a 21.6 °/s
+            # tumble, σ ≈ 35 px, two windows each caught the next star of a row of three)
+            wide = self.state.mode == R.MODE_ACQUIRE or (
+                self.state.mode == R.MODE_COAST
+                and math.sqrt(max(self.filter.P[0, 0], self.filter.P[1, 1])) * self.f_px > CONFIRM_PRIOR_PX)
+            min_used = max(CONFIRM_MIN_STARS, self.p.min_stars) if wide else self.p.min_stars
             if np.any(ok):
                 sub = np.zeros(int(ok.sum()), np.uint8)
                 updated = self.filter.update(res.t_mid, b_mid[use][ok], tr.ref[slots][ok], sig[use][ok], sub,

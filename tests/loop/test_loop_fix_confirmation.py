@@ -33,11 +33,13 @@ def test_fix_covariance_of_one_direction_leaves_its_axis_unobserved():
     assert p[0, 0] == pytest.approx(SIG ** 2)
 
 
-@pytest.mark.parametrize("seed", [100081, 100032, 100120])
+@pytest.mark.parametrize("seed", [100081, 100032, 100120, 100194])
 def test_monte_carlo_cases_that_gave_wrong_attitudes_no_longer_do(seed):
     """Seed 100081 (at rest, 2 glints): a 2-star update right after the fix pulled the roll
     0.65° and the bias 0.44 °/s; seed 100032 (a slew) gave a wrong output likewise; seed
-    100120 (at rest): two of the three stars confirming the fix were 3.5 and 4.8 px off."""
+    100120 (at rest): two of the three stars confirming the fix were 3.5 and 4.8 px off;
+    seed 100194 (a 21.6 °/s tumble): regaining from a 35 px COAST, two windows each caught
+    the next star of a row of three."""
     from gyrostar.hil.montecarlo.worker import run_case
 
     row = run_case(seed, 30.0)
