@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..cli import interrupt
 from ..cli.output import emit
 from ..errors import ConfigError
 from ..paths import runs_dir
@@ -92,8 +93,8 @@ def run(args) -> int:
     if result.get("interrupted"):
         result["exit_code"] = 130
         emit(args, result, human_summary(result))
-        log.error("interrupted at %.1f s of %.1f s: the summary and plots of the part that ran are in %s",
-                  result.get("ran_s") or 0.0, duration, folder)
+        log.error("%s at %.1f s of %.1f s: the summary and plots of the part that ran are in %s",
+                  interrupt.reason(), result.get("ran_s") or 0.0, duration, folder)
         return 130
     acc = acceptance.evaluate(scen, result, duration)
     result["acceptance"] = acc

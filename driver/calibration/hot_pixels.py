@@ -1,7 +1,8 @@
 """The dark calibration's hot-pixel map applied to every readout the loop gets.
 
 :class:`HotPixelRepair` wraps the loop's head port: each windows readout (pixels in span
-order, spans as submitted) and each full frame (before the job's ``post``, i.e. before
+order, spans as submitted; on the streaming head each pushed frame before the loop's
+``post`` measures it) and each full frame (before the job's ``post``, i.e. before
 lost-in-space detection) has its hot pixels replaced by the mean of their non-hot
 neighbours on the same row (one numba call per readout). A hot pixel inside a star's window
 would otherwise pull its centroid by up to its excess signal / the star's flux.
@@ -71,9 +72,25 @@ class HotPixelRepair:
         object.__setattr__(self, "pending", deque())
         object.__setattr__(self, "repaired", 0)
 
-    def submit_windows(self, spans):
-        self.pending.append(np.ascontiguousarray(spans, np.int32))
-        return self.head.submit_windows(spans)
+    def submit_windows(self, spans, *stream, post=None):
+        """Request mode ``(spans)``: the readout is repaired when :meth:`poll` returns it.
+        Streaming ``(spans, frame, post)``: the frame's pixels are repaired before ``post``
+        measures them."""
+        spans = np.ascontiguousarray(spans, np.int32)
+        if len(stream) > 1:
+            stream, post = stream[:1], stream[1]
+        if not stream and post is None:
+            self.pending.append(spans)
+            return self.head.submit_windows(spans)
+        if post is None:
+            return self.head.submit_windows(spans, *stream)
+        return self.head.submit_windows(spans, *stream, lambda values: post(self._repaired(spans, values)))
+
+    def _repaired(self, spans, values):
+        vals = np.array(values, dtype=np.float64)
+        n = repair_spans(spans, vals, self.keys, self.width)
+        object.__setattr__(self, "repaired", self.repaired + int(n))
+        return vals.astype(np.asarray(values).dtype) if n else values
 
     def submit_frame(self, post=None):
         if post is None:
@@ -85,10 +102,7 @@ class HotPixelRepair:
         if res is not None and res.kind == "windows" and self.pending:
             spans = self.pending.popleft()
             if res.error is None and res.values is not None:
-                vals = np.array(res.values, dtype=np.float64)
-                n = repair_spans(spans, vals, self.keys, self.width)
-                object.__setattr__(self, "repaired", self.repaired + int(n))
-                res.values = vals.astype(np.asarray(res.values).dtype) if n else res.values
+                res.values = self._repaired(spans, res.values)
         return res
 
     def __getattr__(self, name):

@@ -88,8 +88,8 @@ def main(argv: list[str] | None = None) -> int:
             parser = build_parser()
             args = parser.parse_args(argv)
         except KeyboardInterrupt:
-            sys.stderr.write("gyrostar: ERROR: interrupted\n")
-            emit_error(_argv_has_json(argv), "interrupted", 130)
+            sys.stderr.write(f"gyrostar: ERROR: {interrupt.reason()}\n")
+            emit_error(_argv_has_json(argv), interrupt.reason(), 130)
             return 130
         from .. import logs
 
@@ -100,10 +100,10 @@ def main(argv: list[str] | None = None) -> int:
         except GyrostarError as exc:
             return _fail(as_json, str(exc), exc.exit_code)
         except KeyboardInterrupt:
-            return _fail(as_json, "interrupted", 130)
+            return _fail(as_json, interrupt.reason(), 130)
         except Exception as exc:  # noqa: BLE001 - every failure is one line, never a traceback
             if interrupt.seen():     # a Ctrl-C surfacing from native code (SystemError, EOFError...)
-                return _fail(as_json, "interrupted", 130)
+                return _fail(as_json, interrupt.reason(), 130)
             if isinstance(exc, _PATH_ERRORS):
                 return _fail(as_json, _os_text(exc), 2)
             if isinstance(exc, OSError):

@@ -168,17 +168,33 @@ class AttitudeFilter:
         ps = p_k + c @ (p_post - p_prior) @ c.T
         self.smoothed[5:] = (0.5 * (ps + ps.T)).ravel()
 
-    def set_attitude(self, q_ident, t_mid: float, now: float, sigma_rad: float) -> None:
-        """A lost-in-space attitude ``q_ident`` measured at ``t_mid``: carried to now along
-        the history; its covariance adds the drift's unknown action since then."""
+    def set_attitude(self, q_ident, t_mid: float, now: float, cov_rad2: np.ndarray) -> None:
+        """A lost-in-space attitude ``q_ident`` measured at ``t_mid`` with covariance ``cov_rad2``
+        (3×3, rad², body axes; :func:`fix_covariance`): carried to now along the history; its
+        covariance adds the drift's unknown action since then."""
         dq = quat_mult(self.q, quat_conj(self.q_at(t_mid)))          # rotation mid → now
         self.q[:] = quat_normalize(quat_mult(dq, np.asarray(q_ident, np.float64)))
         self.valid = True
         lag = max(now - t_mid, 0.0)
         pbb = self.P[3:, 3:].copy()
-        self.P[:3, :3] = np.eye(3) * sigma_rad ** 2 + pbb * lag * lag
+        self.P[:3, :3] = np.asarray(cov_rad2, np.float64).reshape(3, 3) + pbb * lag * lag
         self.P[:3, 3:] = -pbb * lag
         self.P[3:, :3] = -pbb * lag
 
     def bias_converged(self) -> bool:
         return max(self.P[3, 3], self.P[4, 4], self.P[5, 5]) < self.prm[3]
+
+
+def fix_covariance(body: np.ndarray, sigma_rad: float) -> np.ndarray:
+    """Covariance (3×3, rad², body axes) of an attitude solved from the unit star directions
+    ``body`` (n, 3), each measured with ``sigma_rad`` per axis: the QUEST/Shuster measurement
+    model P = σ² [Σ (I − b bᵀ)]⁻¹. It carries the field's geometry: about the boresight (roll)
+    it grows as the stars crowd the centre, and a sparse field of close stars is uncertain
+    about every axis. A degenerate set (fewer than two distinct directions) gets a 1 rad σ on
+    its unobserved axis."""
+    info = np.zeros((3, 3))
+    for b in np.asarray(body, np.float64).reshape(-1, 3):
+        info += np.eye(3) - np.outer(b, b)
+    w, v = np.linalg.eigh(info)
+    w = np.maximum(w, sigma_rad ** 2)          # an unobserved axis: σ = 1 rad
+    return (v / w) @ v.T * sigma_rad ** 2

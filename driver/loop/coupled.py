@@ -41,7 +41,7 @@ from ..errors import DeviceError, GyrostarError, LinkLostError
 from ..head.client import HeadTimeoutError
 from . import modes
 from . import record as R
-from .attitude_filter import GATE, AttitudeFilter
+from .attitude_filter import GATE, AttitudeFilter, fix_covariance
 from .floor import FloorInputs
 from .image import ImagePipeline
 from .outputs import OutputStage
@@ -50,6 +50,8 @@ from .tracks import MODEL, StarTracks
 log = logging.getLogger(__name__)
 CONSISTENT_SIGMA = 6.0     # a star this many median centroid σ off the others' attitude is dropped
 CONSISTENT_MIN_PX = 1.5    # ... but never for less than this (px)
+CONFIRM_MIN_STARS = 4      # consistent stars the first image after a lost-in-space fix needs to confirm it
+CONFIRM_PRIOR_PX = 3.0     # ... and a regain from COAST with an attitude σ above this (px, cross-boresight)
 
 ARCSEC = math.pi / 180.0 / 3600.0
 
@@ -500,7 +502,10 @@ class CoupledLoop:
             self.c.acquisition_failures += 1
             log.debug("acquisition failed: %s", ident.status)
             return
-        self.filter.set_attitude(ident.q, res.t_mid, now, 2.0 * self.p.pyramid_sigma_px / self.f_px)
+        used = np.flatnonzero(ident.index >= 0)
+        body = self.camera.unproject(np.ascontiguousarray(spots[used, :2], np.float64))
+        cov = fix_covariance(body, 2.0 * self.p.pyramid_sigma_px / self.f_px)
+        self.filter.set_attitude(ident.q, res.t_mid, now, cov)
         self.tracks.clear()
         self.tracks.fill_from_catalog(self.filter.q)
         log.info("acquired: %d stars identified (p_false %.2g)", ident.n_identified, ident.p_false)
@@ -566,10 +571,23 @@ class CoupledLoop:
         if len(slots):
             acc = np.zeros(len(slots), np.uint8)
             ok = self._consistent(b_mid[use], tr.ref[slots], sig[use])
+            # the first image after a lost-in-space fix confirms it: only stars that checked
+            # each other (:meth:`_consistent`) may, and at least 4 — the fix's wide prior lets a
+            # wrong centroid (a blend, a star at a window's edge) through every gate, and with
+            # 3 stars the attitude's three angles absorb most of two such errors (Monte Carlo
+            # seed 100120: two of three centroids 3.5 and 4.8 px off passed the check); two
+            # stars alone would be fitted exactly, attitude and bias (through their
+            # cross-covariance) alike. The same holds for a regain after a COAST that left the
+            # attitude uncertain by more than CONFIRM_PRIOR_PX (seed 100194: after a 21.6 °/s
+            # tumble, σ ≈ 35 px, two windows each caught the next star of a row of three)
+            wide = self.state.mode == R.MODE_ACQUIRE or (
+                self.state.mode == R.MODE_COAST
+                and math.sqrt(max(self.filter.P[0, 0], self.filter.P[1, 1])) * self.f_px > CONFIRM_PRIOR_PX)
+            min_used = max(CONFIRM_MIN_STARS, self.p.min_stars) if wide else self.p.min_stars
             if np.any(ok):
                 sub = np.zeros(int(ok.sum()), np.uint8)
                 updated = self.filter.update(res.t_mid, b_mid[use][ok], tr.ref[slots][ok], sig[use][ok], sub,
-                                             self.p.min_stars)
+                                             min_used)
                 acc[ok] = sub
             self.c.inconsistent_stars += int(np.count_nonzero(~ok))
             self.c.updates += updated

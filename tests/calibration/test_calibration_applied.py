@@ -127,3 +127,27 @@ def test_hot_pixels_repaired_in_window_readouts_and_frames():
     head.submit_frame(lambda img: img[500, 500])
     assert head.poll().measured == 50
     assert repair_frame(frame, np.array([500]), np.array([500]))[500, 500] == 50
+
+
+def test_hot_pixels_repaired_in_streamed_frames_before_measuring():
+    """The streaming head's ``submit_windows(spans, frame, post)``: ``post`` sees the pixels
+    with the hot ones replaced (the head port measures on its worker, no poll-time hook)."""
+    from gyrostar.calibration.hot_pixels import HotPixelRepair
+
+    spans = np.array([[0, 10, 4, 9]], np.int32)
+    vals = np.array([10, 11, 900, 13, 14], np.uint16)      # col 6 of row 10 hot
+
+    class StreamingPort:
+        def __init__(self):
+            self.sent = []
+
+        def submit_windows(self, s, frame=0, post=None):
+            self.sent.append(frame)
+            return post(vals.copy()) if post is not None else frame
+
+    port = StreamingPort()
+    head = HotPixelRepair(port, np.array([[6, 10]]), 1024)
+    seen = head.submit_windows(spans, 7, lambda v: v.copy())
+    assert port.sent == [7]
+    assert list(seen) == [10, 11, 12, 13, 14] and head.repaired == 1
+    assert head.submit_windows(spans, 8) == 8 and port.sent == [7, 8]     # no post: passed through

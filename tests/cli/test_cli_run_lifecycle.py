@@ -92,9 +92,10 @@ def test_acceptance_not_applied_to_a_shortened_run(tmp_path):
     assert not acc["applied"] and "shorter" in acc["note"]
 
 
-def _interrupt(tmp_path, ready, extra=()):
+def _interrupt(tmp_path, ready, extra=(), sig=signal.SIGINT):
     """Start ``gyrostar run`` in its own process group, wait for ``ready(out)``, send SIGINT
-    to the group (as a terminal's Ctrl-C does) and return (result, out, seconds to ready)."""
+    to the group (as a terminal's Ctrl-C does) or SIGTERM to the main process only (as
+    ``kill PID`` does) and return (result, out, seconds to ready)."""
     out = tmp_path / "run"
     p = subprocess.Popen([GYROSTAR, "run", "--duration", "60", "--out", str(out), *extra], stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, text=True, start_new_session=True, stdin=subprocess.DEVNULL)
@@ -105,7 +106,10 @@ def _interrupt(tmp_path, ready, extra=()):
             assert time.monotonic() - t0 < 90, "run never got ready"
             time.sleep(0.01)
         waited = time.monotonic() - t0
-        os.killpg(p.pid, signal.SIGINT)
+        if sig == signal.SIGINT:
+            os.killpg(p.pid, signal.SIGINT)
+        else:
+            os.kill(p.pid, sig)
         stdout, stderr = p.communicate(timeout=60)
     finally:
         if p.poll() is None:
@@ -114,11 +118,11 @@ def _interrupt(tmp_path, ready, extra=()):
     return subprocess.CompletedProcess(p.args, p.returncode, stdout, stderr), out, waited
 
 
-def _one_interrupt_line(res):
+def _one_interrupt_line(res, word="interrupted"):
     assert res.returncode == 130, res.stderr
     for bad in ("Traceback", "SystemError", "KeyboardInterrupt"):
         assert bad not in res.stderr and bad not in res.stdout, res.stderr
-    lines = [ln for ln in res.stderr.splitlines() if "interrupted" in ln]
+    lines = [ln for ln in res.stderr.splitlines() if word in ln]
     assert len(lines) == 1, res.stderr
     return lines[0]
 
@@ -149,6 +153,24 @@ def test_ctrl_c_mid_run_keeps_summary_and_plots(tmp_path):
     for png in ("attitude_error.png", "latency_histogram.png"):
         assert (out / png).stat().st_size > 1000
     # the log is complete up to the interruption: it replays bit-exact
+    rep = gyrostar(["replay", out / "flatsat.gslog", "--check", "--json"])
+    assert rep.returncode == 0, rep.stderr
+    assert json.loads(rep.stdout)["verdict"] == "bit-exact"
+
+
+def test_sigterm_mid_run_ends_like_ctrl_c(tmp_path):
+    """``kill PID`` (SIGTERM to the main process, as a service manager stops a run): one line
+    saying so, exit 130, the summary of the part that ran, a log that replays bit-exact."""
+
+    def running(out):
+        log = out / "flatsat.gslog"
+        return log.exists() and log.stat().st_size > 400_000
+
+    res, out, _ = _interrupt(tmp_path, running, sig=signal.SIGTERM)
+    line = _one_interrupt_line(res, "terminated (SIGTERM)")
+    assert str(out) in line
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["interrupted"] is True and 0 < summary["ran_s"] < 60
     rep = gyrostar(["replay", out / "flatsat.gslog", "--check", "--json"])
     assert rep.returncode == 0, rep.stderr
     assert json.loads(rep.stdout)["verdict"] == "bit-exact"
