@@ -56,18 +56,31 @@ class HeadTap:
     def __init__(self, head):
         self.head = head
         self.pending: deque = deque()
+        self.sets: dict[int, np.ndarray] = {}     # streaming: window set by the frame it names
         self.frames: list[tuple[float, np.ndarray, np.ndarray]] = []
 
-    def submit_windows(self, spans):
+    def submit_windows(self, spans, *stream):
+        """Request mode ``(spans)``; streaming ``(spans, frame, post)``: the set is kept under
+        the frame it names and paired with the frame that used it (``res.set_frame``)."""
+        if stream:
+            self.sets[int(stream[0])] = np.array(spans, copy=True)
+            for old in [k for k in self.sets if k < int(stream[0]) - 16]:
+                del self.sets[old]
+            return self.head.submit_windows(spans, *stream)
         self.pending.append(np.array(spans, copy=True))
         return self.head.submit_windows(spans)
 
     def poll(self):
         res = self.head.poll()
-        if res is not None and res.kind == "windows" and self.pending:
-            spans = self.pending.popleft()
-            if res.error is None and res.values is not None:
-                self.frames.append((float(res.t_mid), spans, np.array(res.values, copy=True)))
+        if res is None or res.kind != "windows":
+            return res
+        set_frame = getattr(res, "set_frame", None)
+        if set_frame is not None:
+            spans = self.sets.get(int(set_frame))
+        else:
+            spans = self.pending.popleft() if self.pending else None
+        if spans is not None and res.error is None and res.values is not None:
+            self.frames.append((float(res.t_mid), spans, np.array(res.values, copy=True)))
         return res
 
     def __getattr__(self, name):
