@@ -121,13 +121,14 @@ class AttitudeFilter:
         else:
             qd = 0.0
         p_prior_mid = rot.T @ P[:3, :3] @ rot
-        saved = (self.q.copy(), self.b.copy(), P.copy()) if min_used > 1 else None
+        saved = (self.q.copy(), self.b.copy(), P.copy())
         n = int(mekf_update(self.q, self.b, P, bvecs, np.ascontiguousarray(refs),
                             np.ascontiguousarray(sigmas), GATE, accepted))
-        if saved is not None and 0 < n < min_used:
+        if 0 < n < min_used:
             self.q[:], self.b[:], P[:, :] = saved
             n = 0
         if n:
+            self._correct_history(t_mid, saved[0])
             q_mid = quat_mult(quat_conj(rq), self.q)
             p_mid = rot.T @ P[:3, :3] @ rot
             self._smooth_previous(t_mid, q_prior_mid, p_prior_mid, q_mid, p_mid)
@@ -139,6 +140,17 @@ class AttitudeFilter:
         for i in range(3):
             P[i, i] += back
         return n
+
+    def _correct_history(self, t_mid: float, q_old: np.ndarray) -> None:
+        """Carry this update's correction into the attitude history from ``t_mid`` on: each
+        entry keeps its gyro rotation to now, q_t ← q_t ⊗ q_old⁻¹ ⊗ q_new. A frame whose
+        mid-exposure falls before an update that was applied after it (the pixels of frame
+        n − 1 arriving later than frame n's mid-exposure, as at speed on the streaming head)
+        would otherwise be carried to now through the uncorrected history and apply the
+        same correction a second time."""
+        corr = quat_mult(quat_conj(q_old), self.q)
+        for i in np.flatnonzero(self.hist_t >= t_mid):
+            self.hist_q[i] = quat_normalize(quat_mult(self.hist_q[i], corr))
 
     def _smooth_previous(self, t_mid, q_prior, p_prior, q_post, p_post) -> None:
         """The previous frame's mid-exposure attitude smoothed with this frame (one-lag
