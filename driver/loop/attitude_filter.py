@@ -28,6 +28,7 @@ from ..core.mekf import mekf_update
 from . import record as R
 from .kernels import predict_batch
 
+QD_MARGIN = 1.1          # the prior at t_mid, P − Q_Δ, is used when P exceeds Q_Δ by this factor on every axis
 HIST = 8192              # gyro samples of history (20 s at 400 Hz) for delayed measurements: a lost-in-
                          # space full frame takes 14 s to come over a 921.6 kBd UART (1.3 MB packed)
 GATE = 13.815510557964274  # χ² 2 dof, P = 0.001
@@ -115,7 +116,7 @@ class AttitudeFilter:
         lag = max((self.t_last if self.t_last is not None else t_mid) - t_mid, 0.0)
         qd = self.prm[1] ** 2 * lag
         P = self.P
-        if qd > 0 and min(P[0, 0], P[1, 1], P[2, 2]) > 2.0 * qd:       # else: no usable prior at t_mid
+        if qd > 0 and min(P[0, 0], P[1, 1], P[2, 2]) > QD_MARGIN * qd:   # else: no usable prior at t_mid
             for i in range(3):
                 P[i, i] -= qd
         else:

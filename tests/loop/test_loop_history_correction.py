@@ -76,3 +76,28 @@ def test_a_frame_exposed_before_the_last_update_is_not_corrected_twice():
     # noise-free stars: A leaves ~1″ (its prior's share), B less; carried through the
     # uncorrected history B applies A's 29″ correction a second time (14.7″ off)
     assert np.linalg.norm(2 * err[:3]) * 206265 < 1.0
+
+
+def test_overlapping_updates_keep_the_walk_since_mid_exposure():
+    """Frame B is exposed before frame A's update is applied (100 frames/s, pixels ~9 ms late).
+    The prior at B's mid-exposure is P − N²·lag > 0 however small the posterior of A is, and
+    B's posterior carried to now holds the walk N²(lag − κ) since its mid-exposure: NEES after
+    an update was 2–2.5 in real time when a 2·N²·lag margin sent such updates down the
+    no-prior branch (no walk added back)."""
+    arw = 2e-4                                   # rad/√s
+    f = AttitudeFilter(arw, 1e-9, 1e-4, PERIOD, lowpass_hz=47.0)
+    f.ts[0] = -PERIOD
+    f.P[:3, :3] = np.eye(3) * (5 / 206265) ** 2
+    f.valid = True
+    _run(f, 0.0, 41)                             # samples up to 0.100 s
+    sig = 2 / 206265
+    body, refs = _stars(f.q_at(0.0925), seed=1)
+    f.update(0.0925, body, refs, np.full(len(body), sig), np.zeros(len(body), np.uint8))     # A
+    _run(f, 0.1025, 4)                           # up to 0.110 s
+    t_mid_b = 0.0975                             # B: exposed before A was applied at 0.100 s
+    body, refs = _stars(f.q_at(t_mid_b), seed=2)
+    lag = f.t_last - t_mid_b
+    assert f.update(t_mid_b, body, refs, np.full(len(body), sig), np.zeros(len(body), np.uint8)) == len(body)
+    p_mid = f.mid[5:].reshape(3, 3)
+    walk = arw ** 2 * (lag - f.kappa)
+    np.testing.assert_allclose(np.diag(f.P)[:3], np.diag(p_mid) + walk, rtol=0.02)
