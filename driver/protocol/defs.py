@@ -27,6 +27,9 @@ LIMITS = {
     'stream_period_max_us': 1000000,
     'stream_pending_sets': 2,
     'stream_tx_backlog_max': 256,
+    'spot_width_max': 2048,
+    'spot_box_max': 15,
+    'spot_grid': 7,
 }
 
 
@@ -62,6 +65,7 @@ class MsgType(IntEnum):
     START_STREAM = 0x0D
     STOP_STREAM = 0x0E
     FRAME = 0x0F
+    FIND_SPOTS = 0x10
     ERROR = 0xFF
 
 
@@ -95,6 +99,8 @@ class ErrorCode(IntEnum):
     RESERVED_NONZERO = 25
     STREAM_PERIOD = 26
     STREAMING = 27
+    SPOT_SETTINGS = 28
+    SENSOR_TOO_WIDE = 29
 
 
 ERROR_TEXT = {
@@ -125,6 +131,8 @@ ERROR_TEXT = {
     ErrorCode.RESERVED_NONZERO: 'a reserved field is not zero',
     ErrorCode.STREAM_PERIOD: 'stream period outside the limits or shorter than the exposure',
     ErrorCode.STREAMING: 'not available while the head streams (STOP_STREAM first)',
+    ErrorCode.SPOT_SETTINGS: 'FIND_SPOTS settings outside the limits (detail: 1 n_sigma, 2 max_spots, 3 box, 4 spans, 5 pixels)',
+    ErrorCode.SENSOR_TOO_WIDE: 'the sensor rows are wider than the FIND_SPOTS scan buffers (spot_width_max)',
 }
 
 # (struct format without byte-order prefix, field names) of each payload's fixed part.
@@ -163,6 +171,9 @@ REQUEST_LAYOUT = {
         'period_us', 'exposure_us', 'pixel_format', 'reserved', 'reserved2',
     )),
     MsgType.STOP_STREAM: ('', (
+    )),
+    MsgType.FIND_SPOTS: ('HHBBH', (
+        'n_sigma_x16', 'max_spots', 'box', 'reserved', 'reserved2',
     )),
 }
 REPLY_LAYOUT = {
@@ -216,6 +227,10 @@ REPLY_LAYOUT = {
         'frame', 'set_frame', 't_start_us', 't_end_us', 'exposure_us', 'late_sets', 'dropped',
         'backpressure', 'n_pixels', 'start', 'count', 'total', 'pixel_format', 'reserved',
     )),
+    MsgType.FIND_SPOTS: ('IIQQIHHIIIII', (
+        'capture_no', 'sensor_frame', 't_start_us', 't_end_us', 'exposure_us', 'gain_x16',
+        'n_windows', 'n_pixels', 'candidates', 'background_x16', 'sigma_x16', 'threshold_x16',
+    )),
     MsgType.ERROR: ('HBBI', (
         'code', 'request_type', 'reserved', 'detail',
     )),
@@ -226,4 +241,5 @@ TAIL = {
     MsgType.WINDOW_DATA: 'windows',
     MsgType.FULL_FRAME: 'pixels',
     MsgType.FRAME: 'windows',
+    MsgType.FIND_SPOTS: 'spots',
 }

@@ -324,6 +324,105 @@ static int32_t cmd_full_frame(gs_head *h, gs_fail *f, const uint8_t *q, size_t n
     return OK(len);
 }
 
+/* FIND_SPOTS: expose, scan the frame for spots and read a window around each, all inside
+ * one sequence lock so the list and the pixels come from the same sensor frame. */
+static gs_sensor_status locked_spots(gs_head *h, uint16_t n_sigma_x16, uint16_t max_spots, uint8_t box,
+                                     uint32_t *frame_out, uint16_t *code)
+{
+    const gs_hal *hal = h->hal;
+    gs_sensor_status st = GS_SENSOR_BUSY;
+    for (unsigned attempt = 0; attempt < GS_SENSOR_RETRIES; attempt++) {
+        if (attempt)
+            hal->sleep_until_us(hal->ctx, hal->time_us(hal->ctx) + GS_SENSOR_RETRY_US);
+        uint32_t frame = 0;
+        st = hal->sensor_begin(hal->ctx, &frame);
+        if (st == GS_SENSOR_BUSY)
+            continue;
+        if (st != GS_SENSOR_OK)
+            return st;
+        st = gs_spots_find(hal, GS_PLANE_LIGHT, h->geom.width, h->geom.height, n_sigma_x16, max_spots, box,
+                           &h->spot_scratch, &h->spots);
+        if (st == GS_SENSOR_OK) {
+            uint16_t n = gs_spots_spans(&h->spots, box, h->geom.width, h->geom.height, &h->spot_scratch);
+            uint32_t detail = 0;
+            *code = gs_windows_set(&h->ws, h->spot_scratch.spans, n, h->geom.width, h->geom.height, &detail);
+            if (*code)
+                return GS_SENSOR_IO; /* cannot happen: the settings check bounds the set */
+            st = gs_windows_read(&h->ws, hal, GS_PLANE_LIGHT, h->geom.width, h->store, h->sums);
+        }
+        if (st == GS_SENSOR_IO)
+            return st;
+        if (st == GS_SENSOR_OK)
+            st = hal->sensor_end(hal->ctx, frame);
+        if (st == GS_SENSOR_OK) {
+            *frame_out = frame;
+            return st;
+        }
+        if (st != GS_SENSOR_BUSY)
+            return st;
+    }
+    return st;
+}
+
+static int32_t cmd_find_spots(gs_head *h, gs_fail *f, const uint8_t *q, size_t n)
+{
+    if (n != GS_FIND_SPOTS_REQ_SIZE)
+        return FAIL(f, GS_ERR_PAYLOAD_LENGTH, n);
+    if (h->stream.on)
+        return FAIL(f, GS_ERR_STREAMING, 0);
+    uint16_t n_sigma = gs_get_u16(q + GS_FIND_SPOTS_REQ_N_SIGMA_X16);
+    uint16_t max_spots = gs_get_u16(q + GS_FIND_SPOTS_REQ_MAX_SPOTS);
+    uint8_t box = q[GS_FIND_SPOTS_REQ_BOX];
+    if (q[GS_FIND_SPOTS_REQ_RESERVED] || gs_get_u16(q + GS_FIND_SPOTS_REQ_RESERVED2))
+        return FAIL(f, GS_ERR_RESERVED_NONZERO, q[GS_FIND_SPOTS_REQ_RESERVED]);
+    uint32_t bad = gs_spots_check(n_sigma, max_spots, box);
+    if (bad)
+        return FAIL(f, GS_ERR_SPOT_SETTINGS, bad);
+    if (h->geom.width > GS_LIM_SPOT_WIDTH_MAX)
+        return FAIL(f, GS_ERR_SENSOR_TOO_WIDE, h->geom.width);
+    const gs_hal *hal = h->hal;
+    uint64_t t0 = hal->time_us(hal->ctx);
+    if (hal->sensor_expose)
+        hal->sensor_expose(hal->ctx, t0, h->exposure_us);
+    hal->sleep_until_us(hal->ctx, t0 + h->exposure_us);
+    uint64_t t1 = hal->time_us(hal->ctx);
+    uint32_t frame = 0;
+    uint16_t code = 0;
+    h->has_capture = 0;
+    gs_windows_clear(&h->ws); /* the old set's store layout is gone either way */
+    gs_sensor_status st = locked_spots(h, n_sigma, max_spots, box, &frame, &code);
+    if (st != GS_SENSOR_OK) {
+        gs_windows_clear(&h->ws);
+        return sensor_fail(f, st);
+    }
+    h->has_capture = 1;
+    h->capture_plane = GS_PLANE_LIGHT;
+    h->capture_no = ++h->cnt.captures;
+    const gs_spot_list *sl = &h->spots;
+    uint8_t *p = PAYLOAD(h);
+    memset(p, 0, GS_FIND_SPOTS_REP_SIZE);
+    gs_put_u32(p + GS_FIND_SPOTS_REP_CAPTURE_NO, h->capture_no);
+    gs_put_u32(p + GS_FIND_SPOTS_REP_SENSOR_FRAME, frame);
+    gs_put_u64(p + GS_FIND_SPOTS_REP_T_START_US, t0);
+    gs_put_u64(p + GS_FIND_SPOTS_REP_T_END_US, t1);
+    gs_put_u32(p + GS_FIND_SPOTS_REP_EXPOSURE_US, h->exposure_us);
+    gs_put_u16(p + GS_FIND_SPOTS_REP_GAIN_X16, h->gain_x16);
+    gs_put_u16(p + GS_FIND_SPOTS_REP_N_WINDOWS, h->ws.n_windows);
+    gs_put_u32(p + GS_FIND_SPOTS_REP_N_PIXELS, h->ws.n_pixels);
+    gs_put_u32(p + GS_FIND_SPOTS_REP_CANDIDATES, sl->candidates);
+    gs_put_u32(p + GS_FIND_SPOTS_REP_BACKGROUND_X16, sl->background_x16);
+    gs_put_u32(p + GS_FIND_SPOTS_REP_SIGMA_X16, sl->sigma_x16);
+    gs_put_u32(p + GS_FIND_SPOTS_REP_THRESHOLD_X16, sl->threshold_x16);
+    size_t len = GS_FIND_SPOTS_REP_SIZE;
+    for (uint16_t i = 0; i < sl->n && len + 6u <= GS_PROTO_MAX_PAYLOAD; i++) {
+        gs_put_u16(p + len, sl->spots[i].row);
+        gs_put_u16(p + len + 2u, sl->spots[i].col);
+        gs_put_u16(p + len + 4u, sl->spots[i].peak);
+        len += 6u;
+    }
+    return OK(len);
+}
+
 static int32_t cmd_time_sync(gs_head *h, gs_fail *f, const uint8_t *q, size_t n, uint64_t rx_us)
 {
     if (n != GS_TIME_SYNC_REQ_SIZE)
@@ -378,6 +477,8 @@ static int32_t dispatch(gs_head *h, gs_fail *f, uint8_t type, uint16_t seq, cons
         return cmd_window_data(h, f, q, n);
     case GS_MSG_FULL_FRAME:
         return cmd_full_frame(h, f, q, n);
+    case GS_MSG_FIND_SPOTS:
+        return cmd_find_spots(h, f, q, n);
     case GS_MSG_TIME_SYNC:
         return cmd_time_sync(h, f, q, n, rx_us);
     case GS_MSG_TELEMETRY:

@@ -10,6 +10,7 @@
 #include "gs_frame.h"
 #include "gs_hal.h"
 #include "gs_windows.h"
+#include "gs_spots.h"
 
 #define GS_FW_MAJOR 1u
 #define GS_FW_MINOR 0u
@@ -56,6 +57,8 @@ typedef struct {
     uint32_t frame_no;              /* last stream frame number handed out (never reused) */
     uint32_t sums[GS_LIM_MAX_WINDOWS];
     uint16_t store[GS_LIM_PIXEL_BUDGET];
+    gs_spot_scratch spot_scratch;   /* FIND_SPOTS: row buffers, histograms, spans */
+    gs_spot_list spots;
     uint8_t raw[GS_FRAME_MAX_RAW];    /* decoded request */
     uint8_t tx_raw[GS_FRAME_MAX_RAW]; /* reply header + payload + CRC */
     uint8_t tx[GS_FRAME_MAX_ENCODED + 1u];

@@ -56,7 +56,7 @@ static gs_sensor_status read_px(void *ctx, uint8_t plane, uint32_t index, uint16
     if (f->io_fail || plane >= f->geom.planes || (uint64_t)index + count > (uint64_t)f->geom.width * f->geom.height)
         return GS_SENSOR_IO;
     for (uint16_t i = 0; i < count; i++)
-        out[i] = fake_pixel(f, plane, index + i);
+        out[i] = plane == 0 && f->image ? f->image[index + i] : fake_pixel(f, plane, index + i);
     return GS_SENSOR_OK;
 }
 

@@ -25,6 +25,7 @@ typedef struct {
     uint64_t expose_t_us;
     uint32_t expose_us;
     size_t tx_backlog;        /* what uart_tx_backlog reports */
+    const uint16_t *image;    /* when set: the light plane, row-major (else fake_pixel) */
     uint8_t out[FAKE_OUT_CAP];
     size_t out_len;
 } fake_hal;

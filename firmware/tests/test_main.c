@@ -82,6 +82,7 @@ int main(int argc, char **argv)
     const char *vectors = argc > 1 ? argv[1] : "../../proto/vectors.json";
     int failed = 0;
     failed += run_codec_tests();
+    failed += run_spots_tests();
     failed += run_stream_tests(); /* before head: its last test checks every error code was seen */
     failed += run_head_tests();
     failed += run_vector_tests(vectors);

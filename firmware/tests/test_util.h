@@ -41,5 +41,6 @@ int run_head_tests(void);
 int run_vector_tests(const char *path);
 int run_posix_tests(void);
 int run_stream_tests(void);
+int run_spots_tests(void);
 
 #endif
