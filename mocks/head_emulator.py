@@ -52,7 +52,14 @@ from gyrostar.protocol.defs import (
 )
 from gyrostar.protocol.errors import CrcError, FrameError, LengthMismatchError
 from gyrostar.protocol.framing import decode_frame, encode_frame
-from gyrostar.protocol.payloads import WindowPixels, encode_pixels, encode_reply, encode_windows_tail, pixel_bytes
+from gyrostar.protocol.payloads import (
+    WindowPixels,
+    encode_pixels,
+    encode_reply,
+    encode_spots,
+    encode_windows_tail,
+    pixel_bytes,
+)
 
 FW_VERSION = (0, 9, 0)
 PORT_ID_EMULATOR = 2
@@ -246,6 +253,8 @@ class HeadEmulator:
             return self._window_data(q)
         if typ == MsgType.FULL_FRAME:
             return self._full_frame(q)
+        if typ == MsgType.FIND_SPOTS:
+            return self._find_spots(q)
         if typ == MsgType.TIME_SYNC:
             self._need(typ, n)
             host_us = self._fields(typ, q)["host_us"]
@@ -393,6 +402,50 @@ class HeadEmulator:
         px = self._full[1][off:off + count]
         return encode_reply(MsgType.FULL_FRAME, sensor_frame=self.sensor_frame, offset=off, count=count,
                             pixel_format=fmt, plane=plane) + encode_pixels(px, fmt)
+
+    def _find_spots(self, q: bytes) -> bytes:
+        """FIND_SPOTS: expose and render the whole frame, find its spots as the firmware does
+        (:mod:`gyrostar.mocks.spot_finder`), make their windows the set and read them."""
+        from .spot_finder import check_settings, find_spots
+
+        self._need(MsgType.FIND_SPOTS, len(q))
+        self._not_streaming()
+        f = self._fields(MsgType.FIND_SPOTS, q)
+        if f["reserved"] or f["reserved2"]:
+            raise _Reject(ErrorCode.RESERVED_NONZERO, f["reserved"])
+        bad = check_settings(f["n_sigma_x16"], f["max_spots"], f["box"])
+        if bad:
+            raise _Reject(ErrorCode.SPOT_SETTINGS, bad)
+        if self.width > LIMITS["spot_width_max"]:
+            raise _Reject(ErrorCode.SENSOR_TOO_WIDE, self.width)
+        t0_host = self.clock.now()
+        t0 = self.mcu_us(t0_host)
+        q_start, omega = self.scene.at(t0_host)
+        self.sensor_frame += 1
+        img, _ = self._sky_for(self.exposure_us).render_frame(q_start, omega, frame=self.sensor_frame,
+                                                             noise=self.noise)
+        self.full_renders += 1
+        img = np.minimum(img, 0x3FF).astype(np.uint16).reshape(self.height, self.width)
+        self._full = (self.sensor_frame, img.ravel())
+        remaining = t0_host + self.exposure_us * 1e-6 - self.clock.now()
+        if remaining > 0:
+            self.clock.sleep(remaining)
+        t1_host = self.clock.now()
+        self.last_exposure_host = (t0_host, t1_host)
+        found = find_spots(img, f["n_sigma_x16"], f["max_spots"], f["box"])
+        spans = found["spans"]
+        self.spans, self.window_ids, self.window_slices = self._validate_spans(spans)[:3]
+        self.pixels = (np.concatenate([img[r, c0:c1] for _, r, c0, c1 in spans.tolist()]) if len(spans)
+                       else np.zeros(0, np.uint16))
+        self.sums = [int(self.pixels[s].sum()) for s in self.window_slices]
+        self.has_capture = True
+        self.capture_no += 1
+        return encode_reply(MsgType.FIND_SPOTS, encode_spots(found["spots"]), capture_no=self.capture_no,
+                            sensor_frame=self.sensor_frame, t_start_us=t0, t_end_us=self.mcu_us(t1_host),
+                            exposure_us=self.exposure_us, gain_x16=self.gain_x16,
+                            n_windows=len(self.window_ids), n_pixels=len(self.pixels),
+                            candidates=found["candidates"], background_x16=found["background_x16"],
+                            sigma_x16=found["sigma_x16"], threshold_x16=found["threshold_x16"])
 
     # --- streaming ------------------------------------------------------------------------------
     def _start_stream(self, q: bytes, seq: int, rx_us: int) -> bytes:

@@ -139,7 +139,7 @@ def _exchanges() -> list[dict]:
                                   (MsgType.FULL_FRAME, b"\x00" * 7), (MsgType.DARK, b"\x00"),
                                   (MsgType.TIME_SYNC, b"\x00" * 4), (MsgType.TELEMETRY, b"\x00"),
                                   (MsgType.RESET, b"\x00"), (MsgType.START_STREAM, b"\x00" * 11),
-                                  (MsgType.STOP_STREAM, b"\x00")]):
+                                  (MsgType.STOP_STREAM, b"\x00"), (MsgType.FIND_SPOTS, b"\x00" * 7)]):
         reject(f"payload_length_{mt.name.lower()}", encode_frame(mt, 30 + i, pl), 30 + i,
                ErrorCode.PAYLOAD_LENGTH, mt, len(pl))
     reject("exposure_low", encode_frame(MsgType.SET_EXPOSURE, 50, struct.pack("<I", L["exposure_min_us"] - 1)),
@@ -194,6 +194,15 @@ def _exchanges() -> list[dict]:
            ErrorCode.PIXEL_FORMAT, MsgType.FULL_FRAME, 7)
     reject("frame_plane", encode_frame(MsgType.FULL_FRAME, 75, ff.pack(0, 16, 0, 2)), 75,
            ErrorCode.BAD_PLANE, MsgType.FULL_FRAME, 2)
+    # FIND_SPOTS checks in order reserved, n_sigma, max_spots, box, spans, pixels (detail: which)
+    fs = struct.Struct("<HHBBH")
+    reject("spots_reserved", encode_frame(MsgType.FIND_SPOTS, 76, fs.pack(96, 8, 7, 1, 0)), 76,
+           ErrorCode.RESERVED_NONZERO, MsgType.FIND_SPOTS, 1)
+    for i, (settings, detail) in enumerate([((0, 8, 7), 1), ((96, 0, 7), 2), ((96, L["max_windows"] + 1, 7), 2),
+                                            ((96, 8, 6), 3), ((96, 8, 1), 3), ((96, 8, L["spot_box_max"] + 2), 3),
+                                            ((96, 64, 9), 4)]):
+        reject(f"spots_settings_{i}", encode_frame(MsgType.FIND_SPOTS, 90 + i, fs.pack(*settings, 0, 0)), 90 + i,
+               ErrorCode.SPOT_SETTINGS, MsgType.FIND_SPOTS, detail)
     # streaming: START_STREAM checks in order reserved, exposure, period, pixel format
     reject("stream_reserved", _stream_req(80, 10000, 10000, reserved=1), 80, ErrorCode.RESERVED_NONZERO,
            MsgType.START_STREAM, 1)
@@ -266,6 +275,16 @@ def build() -> dict:
                       "start": 0, "count": 2, "total": 2, "pixel_format": 1,
                       "windows": [{"window_id": 2, "sum": 1536, "pixels": [1023, 1, 512]},
                                   {"window_id": 9, "sum": 7, "pixels": [7]}]}),
+        _frame_entry("find_spots_req", MsgType.FIND_SPOTS, 13, payloads.encode_request(
+            MsgType.FIND_SPOTS, n_sigma_x16=96, max_spots=40, box=7), {"n_sigma_x16": 96, "max_spots": 40, "box": 7}),
+        _frame_entry("find_spots_rep", MsgType.FIND_SPOTS | defs.REPLY_FLAG, 13, payloads.encode_reply(
+            MsgType.FIND_SPOTS, payloads.encode_spots([[20, 20, 1023], [1, 1022, 650]]), capture_no=3,
+            sensor_frame=77, t_start_us=3_000_000, t_end_us=3_010_000, exposure_us=10000, gain_x16=16,
+            n_windows=2, n_pixels=84, candidates=5, background_x16=1600, sigma_x16=40, threshold_x16=1840),
+            {"capture_no": 3, "sensor_frame": 77, "t_start_us": 3_000_000, "t_end_us": 3_010_000,
+             "exposure_us": 10000, "gain_x16": 16, "n_windows": 2, "n_pixels": 84, "candidates": 5,
+             "background_x16": 1600, "sigma_x16": 40, "threshold_x16": 1840,
+             "spots": [[20, 20, 1023], [1, 1022, 650]]}),
         _frame_entry("error_rep", MsgType.ERROR, 10, payloads.encode_reply(
             MsgType.ERROR, code=ErrorCode.SPAN_OUTSIDE, request_type=MsgType.SET_WINDOWS, detail=4),
             {"code": 9, "request_type": 5, "detail": 4}),

@@ -1,7 +1,7 @@
 """Camera-head client: request/response with retries, streamed frames, MCU↔host time sync."""
 
-from .client import Capture, HeadClient, HeadTimeoutError
+from .client import Capture, HeadClient, HeadTimeoutError, SpotCapture
 from .stream import StreamFrame
 from .timesync import ClockSync
 
-__all__ = ["HeadClient", "HeadTimeoutError", "Capture", "ClockSync", "StreamFrame"]
+__all__ = ["HeadClient", "HeadTimeoutError", "Capture", "SpotCapture", "ClockSync", "StreamFrame"]

@@ -69,7 +69,23 @@ class Capture:
     windows: list | None = None  # list of protocol.payloads.WindowPixels when fetched
 
 
+@dataclasses.dataclass(frozen=True)
+class SpotCapture:
+    """A FIND_SPOTS exposure: the capture (its windows are the box around each spot, ids
+    1..n brightest first), the spots ((n, 3) int [row, col, peak] in px and DN) and the
+    head's background statistics (DN)."""
+
+    capture: Capture
+    spots: np.ndarray
+    box: int
+    background_dn: float
+    sigma_dn: float
+    threshold_dn: float
+    candidates: int
+
+
 class HeadClient:
+    spot_scan_s = 1.0        # allowance (s) for the head's FIND_SPOTS scan of a whole frame
     def __init__(self, link, timeout: float = 0.5, retries: int = 2, sync: ClockSync | None = None,
                  sync_every_s: float = 1.0, depth: int = 4, first_seq: int | None = None, clock=None):
         self.link = link
@@ -329,6 +345,21 @@ class HeadClient:
         if w["count"] < w["total"]:
             windows += self.window_data(pixel_format, c["capture_no"], start=w["count"])
         return self._capture_of(c, windows)
+
+    def find_spots(self, n_sigma: float = 6.0, max_spots: int = 40, box: int = 7,
+                   pixel_format: int = PixelFormat.PACKED10) -> SpotCapture:
+        """FIND_SPOTS, then the spots' windows (WINDOW_DATA pages): a lost-in-space image in
+        a few kB whatever the link. ``n_sigma`` sets the threshold above the background
+        (rounded to 1/16), ``box`` the window side (px, odd)."""
+        self.maybe_sync()
+        req = encode_request(MsgType.FIND_SPOTS, n_sigma_x16=int(round(n_sigma * 16)), max_spots=max_spots, box=box)
+        f, _, _ = self.request(MsgType.FIND_SPOTS, req, timeout=self.timeout + self._exposure_s + self.spot_scan_s)
+        f = dict(f, plane=Plane.LIGHT)
+        windows = self.window_data(pixel_format, f["capture_no"]) if f["n_windows"] else []
+        if [w.window_id for w in windows] != list(range(1, f["n_windows"] + 1)):
+            raise DeviceError(f"FIND_SPOTS: window ids {[w.window_id for w in windows][:6]} are not 1..{f['n_windows']}")
+        return SpotCapture(self._capture_of(f, windows), f["spots"], box, f["background_x16"] / 16.0,
+                           f["sigma_x16"] / 16.0, f["threshold_x16"] / 16.0, f["candidates"])
 
     def _capture_of(self, f: dict, windows) -> Capture:
         self._exposure_s = f["exposure_us"] * 1e-6

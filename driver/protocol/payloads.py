@@ -3,7 +3,8 @@
 Fixed parts follow ``defs.REQUEST_LAYOUT`` / ``defs.REPLY_LAYOUT`` (little-endian);
 variable tails: PING ``echo`` bytes, SET_WINDOWS ``spans`` (N×4 int array of
 ``[window_id, row, col_start, col_stop)``), WINDOW_DATA and FRAME ``windows`` (list of
-:class:`WindowPixels`), FULL_FRAME ``pixels`` (uint16 array).
+:class:`WindowPixels`), FULL_FRAME ``pixels`` (uint16 array), FIND_SPOTS ``spots`` (N×3
+int array of ``[row, col, peak]``).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from .framing import Frame
 
 _SPAN = struct.Struct("<HHHH")
 _WIN_HEADER = struct.Struct("<HHI")
+_SPOT = struct.Struct("<HHH")
 
 
 @dataclass(frozen=True)
@@ -152,7 +154,7 @@ def _decode_windows(fields: dict, tail: bytes) -> list[WindowPixels]:
 
 
 def decode_reply(frame: Frame, expect: int | None = None) -> dict:
-    """Fields of a reply frame as a dict (plus ``echo``/``windows``/``pixels`` tails).
+    """Fields of a reply frame as a dict (plus ``echo``/``windows``/``pixels``/``spots`` tails).
 
     An ERROR frame raises the matching :class:`~gyrostar.protocol.errors.FirmwareError`;
     a reply of another type than ``expect`` | REPLY_FLAG, or a malformed payload, raises
@@ -187,9 +189,27 @@ def decode_reply(frame: Frame, expect: int | None = None) -> dict:
         if len(tail) != pixel_bytes(n, fmt_px):
             raise PayloadError(f"FULL_FRAME: {n} pixels in {len(tail)} bytes")
         fields["pixels"] = decode_pixels(tail, n, fmt_px)
+    elif msg_type == MsgType.FIND_SPOTS:
+        fields["spots"] = decode_spots(fields, tail)
     elif tail:
         raise PayloadError(f"{msg_type.name} reply has {len(tail)} unexpected trailing bytes")
     return fields
+
+
+def decode_spots(fields: dict, tail: bytes) -> np.ndarray:
+    """FIND_SPOTS tail → (n, 3) int32 array of [row, col, peak] (window ids 1..n in order)."""
+    n = fields["n_windows"]
+    if len(tail) != _SPOT.size * n:
+        raise PayloadError(f"FIND_SPOTS: {n} spots in {len(tail)} bytes")
+    return np.frombuffer(tail, dtype="<u2").reshape(n, 3).astype(np.int32)
+
+
+def encode_spots(spots) -> bytes:
+    """FIND_SPOTS tail from rows of [row, col, peak] (for emulators and tests)."""
+    a = np.asarray(spots, dtype=np.int64).reshape(-1, 3)
+    if a.size and (a.min() < 0 or a.max() > 0xFFFF):
+        raise ProtocolUsageError("FIND_SPOTS spot fields must fit u16")
+    return a.astype("<u2").tobytes()
 
 
 def encode_reply(msg_type: int, tail: bytes = b"", **fields) -> bytes:

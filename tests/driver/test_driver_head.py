@@ -253,6 +253,32 @@ def test_full_frame_streamed(head, leg):
     assert np.array_equal(img, leg.image)
 
 
+def test_find_spots_lists_the_stars_and_reads_their_windows(head, leg, sky):
+    """FIND_SPOTS on both legs: the spot list is the firmware rule applied to the frame the
+    leg holds (the Python mirror of gs_spots.c), each spot lies on a true star, and the
+    windows hold that frame's pixels."""
+    from gyrostar.mocks.spot_finder import find_spots
+
+    got = head.find_spots(n_sigma=6.0, max_spots=40, box=7)
+    want = find_spots(leg.image, 96, 40, 7)
+    assert got.spots.tolist() == want["spots"].tolist() and len(got.spots) >= 10
+    assert (got.background_dn * 16, got.sigma_dn * 16, got.candidates) == (
+        want["background_x16"], want["sigma_x16"], want["candidates"])
+    pixels = np.concatenate([w.pixels for w in got.capture.windows])
+    truth = np.concatenate([leg.image[r, c0:c1] for _, r, c0, c1 in want["spans"]])
+    assert np.array_equal(pixels, truth)
+    # independent truth: the brightest spots sit within 1.5 px of a true star's centroid
+    _, st = sky.render_frame(Q0, np.zeros(3), noise=False)
+    uv = st.uv[st.in_field]
+    for row, col, _ in got.spots[:8]:
+        assert np.min(np.hypot(uv[:, 0] - col, uv[:, 1] - row)) < 1.5
+    # a rejected setting names the field, changes nothing
+    with pytest.raises(perr.FirmwareError) as info:
+        head.find_spots(n_sigma=6.0, max_spots=40, box=8)
+    assert info.value.detail == 3
+    assert head.window_data(PixelFormat.U16, got.capture.capture_no)[0].window_id == 1
+
+
 def test_time_sync_offset(head, leg):
     head.sync(32)
     est = head.sync_state.offset_at(time.monotonic())

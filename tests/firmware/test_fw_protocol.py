@@ -63,6 +63,8 @@ def test_frame_vectors(case):
             if key == "windows":
                 assert [(w.window_id, w.sum, w.pixels.tolist()) for w in got["windows"]] == [
                     (w["window_id"], w["sum"], w["pixels"]) for w in val]
+            elif key == "spots":
+                assert got["spots"].tolist() == val
             else:
                 assert got[key] == val, key
     else:
@@ -123,7 +125,7 @@ def test_every_error_code_has_a_class_and_vector():
         assert issubclass(cls, DeviceError) and cls.code == code
     # codes not reachable by one request on a fresh head are covered by the C tests
     stateful = {"SPAN_OUTSIDE", "NO_CAPTURE", "WINDOW_INDEX", "PIXEL_FORMAT", "DARK_UNAVAILABLE",
-                "SENSOR_IO", "SENSOR_BUSY", "STREAMING"}
+                "SENSOR_IO", "SENSOR_BUSY", "STREAMING", "SENSOR_TOO_WIDE"}
     assert {c.name for c in ErrorCode} - stateful <= names
 
 
