@@ -356,8 +356,9 @@ class HeadClient:
         f, _, _ = self.request(MsgType.FIND_SPOTS, req, timeout=self.timeout + self._exposure_s + self.spot_scan_s)
         f = dict(f, plane=Plane.LIGHT)
         windows = self.window_data(pixel_format, f["capture_no"]) if f["n_windows"] else []
-        if [w.window_id for w in windows] != list(range(1, f["n_windows"] + 1)):
-            raise DeviceError(f"FIND_SPOTS: window ids {[w.window_id for w in windows][:6]} are not 1..{f['n_windows']}")
+        ids = [w.window_id for w in windows]
+        if ids != list(range(1, f["n_windows"] + 1)):
+            raise DeviceError(f"FIND_SPOTS: window ids {ids[:6]} are not 1..{f['n_windows']}")
         return SpotCapture(self._capture_of(f, windows), f["spots"], box, f["background_x16"] / 16.0,
                            f["sigma_x16"] / 16.0, f["threshold_x16"] / 16.0, f["candidates"])
 

@@ -131,7 +131,7 @@ ERROR_TEXT = {
     ErrorCode.RESERVED_NONZERO: 'a reserved field is not zero',
     ErrorCode.STREAM_PERIOD: 'stream period outside the limits or shorter than the exposure',
     ErrorCode.STREAMING: 'not available while the head streams (STOP_STREAM first)',
-    ErrorCode.SPOT_SETTINGS: 'FIND_SPOTS settings outside the limits (detail: 1 n_sigma, 2 max_spots, 3 box, 4 spans, 5 pixels)',
+    ErrorCode.SPOT_SETTINGS: 'FIND_SPOTS setting outside the limits (detail: 1 n_sigma 2 max_spots 3 box 4 spans 5 px)',
     ErrorCode.SENSOR_TOO_WIDE: 'the sensor rows are wider than the FIND_SPOTS scan buffers (spot_width_max)',
 }
 
