@@ -43,6 +43,9 @@ class HeadConfig:
     link: Literal["uart-921k", "uart-3m", "usb-fs", "none"] = "usb-fs"
     mode: Literal["stream", "request"] = "stream"   # streaming head, or CAPTURE request by request
     pixel_format: Literal["packed10", "u16"] = "packed10"
+    # lost-in-space image: the spot windows the head finds itself (FIND_SPOTS: a few kB on any
+    # link) or the whole frame (1.3 MB: 1.5 s on usb-fs, 14 s on uart-921k; bring-up, old firmware)
+    acquire: Literal["spots", "full_frame"] = "spots"
 
     def validate(self):
         from ..transport.linkrate import PRESETS
@@ -51,6 +54,8 @@ class HeadConfig:
             raise ValueError("head.kind = 'serial' needs head.url (e.g. /dev/ttyACM0)")
         if self.link not in PRESETS and self.link != "none":
             raise ValueError(f"head.link {self.link!r} is not a link preset ({', '.join(PRESETS)}, or none)")
+        if self.acquire not in ("spots", "full_frame"):
+            raise ValueError(f"head.acquire {self.acquire!r} is not 'spots' or 'full_frame'")
         if not 0 < self.exposure_ms <= 100:
             raise ValueError(f"head.exposure_ms {self.exposure_ms} outside (0, 100]")
         if self.baudrate <= 0 or self.timeout_s <= 0 or self.retries < 0:

@@ -237,13 +237,13 @@ def make_head(cfg: hc.FlatsatConfig, link, clock, reconnect=None, head_clock=Non
                           timeout_s=cfg.head.timeout_s, retries=cfg.head.retries,
                           exposure_s=cfg.head.exposure_ms * 1e-3, gain=cfg.head.gain, reconnect=reconnect,
                           head_clock=head_clock, poll_log=poll_log, replay_polls=replay_polls,
-                          replay_reconnects=replay_reconnects)
+                          replay_reconnects=replay_reconnects, acquire=cfg.head.acquire)
     if lockstep is not None:
         lockstep.inline_jobs = True
     return HeadPort(link, clock, timeout_s=cfg.head.timeout_s, retries=cfg.head.retries,
                     exposure_s=cfg.head.exposure_ms * 1e-3, gain=cfg.head.gain, reconnect=reconnect,
                     head_clock=head_clock, poll_log=poll_log, replay_polls=replay_polls,
-                    replay_reconnects=replay_reconnects, inline=lockstep)
+                    replay_reconnects=replay_reconnects, inline=lockstep, acquire=cfg.head.acquire)
 
 
 def star_index(cfg: hc.FlatsatConfig, camera):

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import DeviceError, GyrostarError
+from ..loop.image import LIS_BOX, LIS_HEAD_SPOTS, LIS_SIGMA
 from ..recording import logfile as lf
 
 log = logging.getLogger(__name__)
@@ -41,9 +42,10 @@ class ImageResult:
     t_end: float              # exposure end, host s
     t_mid: float
     values: np.ndarray | None = None   # windows: pixels in span order
-    image: np.ndarray | None = None    # frame: (H, W)
+    image: np.ndarray | None = None    # frame: (H, W) (full-frame acquisition)
+    spots: object = None               # frame: the head's FIND_SPOTS result (gyrostar.head.SpotCapture)
     error: Exception | None = None
-    measured: object = None            # frame: what the job's ``post(image)`` returned
+    measured: object = None            # frame: what the job's ``post(image or spots)`` returned
 
 
 def _exposure_times(cap) -> tuple[float, float, float]:
@@ -81,7 +83,8 @@ class HeadPort:
     """Jobs for the head on a worker thread; ``poll()`` returns finished results."""
 
     def __init__(self, link, clock, timeout_s=0.05, retries=2, exposure_s=0.010, gain=1, reconnect=None,
-                 head_clock=None, poll_log=None, replay_polls=None, replay_reconnects=None, inline=None):
+                 head_clock=None, poll_log=None, replay_polls=None, replay_reconnects=None, inline=None,
+                 acquire: str = "spots"):
         self.link = link
         self.clock = clock
         self.head_clock = head_clock if head_clock is not None else clock
@@ -106,6 +109,8 @@ class HeadPort:
         # once, no worker thread, on the job's own simulated time line (``run_job(fn)`` →
         # finish time, ``now()``); its result is polled from that finish time on
         self.inline = inline
+        self.acquire = acquire                 # lost-in-space image: "spots" (FIND_SPOTS) | "full_frame"
+        self.spots_unsupported = False         # the firmware answered FIND_SPOTS with UNKNOWN_TYPE
         self._ready_at: float | None = None
 
     # ------------------------------------------------------------------ set-up
@@ -191,9 +196,11 @@ class HeadPort:
         self._submit("windows", spans)
 
     def submit_frame(self, post=None) -> None:
-        """Capture and read a full frame; ``post(image)`` (optional, e.g. spot detection and
-        lost-in-space identification) runs on the worker after the read, outside the step
-        gate, and its return value comes back as ``ImageResult.measured``."""
+        """A lost-in-space image: the spot windows the head finds itself (FIND_SPOTS, when
+        ``acquire == "spots"`` and the firmware has it) or a full frame; ``post(image or
+        spots)`` (optional, e.g. spot centroids and identification) runs on the worker after
+        the read, outside the step gate, and its return value comes back as
+        ``ImageResult.measured``."""
         self._submit("frame", post)
 
     def _submit(self, kind, spans) -> None:
@@ -240,9 +247,10 @@ class HeadPort:
             if gate is not None:
                 gate.worker_exit()
         res = self._result
-        if post is not None and res is not None and res.error is None and res.image is not None:
+        src = None if res is None else (res.image if res.image is not None else res.spots)
+        if post is not None and res is not None and res.error is None and src is not None:
             try:
-                res.measured = post(res.image)
+                res.measured = post(src)
             except Exception as exc:  # noqa: BLE001 - reported to the loop like a device failure
                 res.error = exc
         self._done.set()
@@ -272,6 +280,17 @@ class HeadPort:
                 raise DeviceError(f"window data has {len(values)} pixels, the spans {n}")
             t0, t1, tm = _exposure_times(cap)
             return ImageResult("windows", t0, t1, tm, values=values)
+        if self.acquire == "spots" and not self.spots_unsupported:
+            from ..protocol.errors import UnknownTypeError
+
+            try:
+                sc = c.find_spots(LIS_SIGMA, LIS_HEAD_SPOTS, LIS_BOX)
+            except UnknownTypeError:
+                self.spots_unsupported = True
+                log.warning("the head's firmware has no FIND_SPOTS: acquiring from full frames")
+            else:
+                t0, t1, tm = _exposure_times(sc.capture)
+                return ImageResult("frame", t0, t1, tm, spots=sc)
         # full frame: one small window keeps CAPTURE legal; the frame is read in chunks
         w, h = int(self.info["width"]), int(self.info["height"])
         c.set_windows(np.array([[0, h // 2, w // 2, w // 2 + 1]], np.int32))

@@ -279,9 +279,10 @@ class StreamPort(HeadPort):
         except Exception as exc:  # noqa: BLE001 - back to the loop as a result
             self._result = ImageResult(kind, np.nan, np.nan, np.nan, error=exc)
         res = self._result
-        if post is not None and res is not None and res.error is None and res.image is not None:
+        src = None if res is None else (res.image if res.image is not None else res.spots)
+        if post is not None and res is not None and res.error is None and src is not None:
             try:
-                res.measured = post(res.image)
+                res.measured = post(src)
             except Exception as exc:  # noqa: BLE001
                 res.error = exc
         self._done.set()

@@ -5,12 +5,14 @@ firmware (host program) pixel for pixel. The rules are the FIND_SPOTS doc of
 ``firmware/proto/protocol.toml``: background and noise from a 10-bit histogram of every
 ``spot_grid``-th pixel of every ``spot_grid``-th row (median; σ = max(1.4826·MAD, 0.5) DN, in
 1/16 DN with the firmware's integer rounding), 3×3 local maxima above the threshold taken in
-row-major order into a bounded brightest-first list with non-maximum suppression.
+row-major order, scored by their 3×3 excess above background + 2σ, into a bounded
+best-first list with non-maximum suppression.
 """
 
 from __future__ import annotations
 
 import numpy as np
+from gyrostar.head.client import spot_spans
 from gyrostar.protocol.defs import LIMITS
 from numba import njit
 
@@ -60,8 +62,8 @@ def _background(img, grid):
 
 
 @njit(cache=True)
-def _scan(img, thr_x16, max_spots, box, spots):
-    """Local maxima into spots[:, (row, col, peak)]; returns (n kept, candidates)."""
+def _scan(img, bg_x16, sig_x16, thr_x16, max_spots, box, spots):
+    """Local maxima into spots[:, (row, col, score x16)]; returns (n kept, candidates)."""
     h, w = img.shape
     n = 0
     cand = 0
@@ -75,6 +77,13 @@ def _scan(img, thr_x16, max_spots, box, spots):
             if img[r, c + 1] > v or img[r + 1, c - 1] > v or img[r + 1, c] > v or img[r + 1, c + 1] > v:
                 continue
             cand += 1
+            low = bg_x16 + 2 * sig_x16
+            v = 0
+            for dr in range(-1, 2):
+                for dc in range(-1, 2):
+                    a = 16 * img[r + dr, c + dc]
+                    if a > low:
+                        v += a - bg_x16
             covered = False
             for i in range(n):
                 if spots[i, 2] >= v and abs(spots[i, 0] - r) < box and abs(spots[i, 1] - c) < box:
@@ -107,19 +116,16 @@ def _scan(img, thr_x16, max_spots, box, spots):
 def find_spots(img: np.ndarray, n_sigma_x16: int, max_spots: int, box: int) -> dict:
     """FIND_SPOTS over a 10-bit frame ``img`` (rows × cols; values above 1023 clip).
     Returns background_x16, sigma_x16, threshold_x16, candidates, spots ((n, 3) int32
-    [row, col, peak], brightest first) and spans ((m, 4) int32 window set, ids 1..n)."""
+    [row, col, flux DN], best score first) and spans ((m, 4) int32 window set, ids 1..n)."""
     img = np.minimum(np.asarray(img), 0x3FF).astype(np.int64)
     h, w = img.shape
     bg, sig = _background(img, GRID)
     thr = bg + (n_sigma_x16 * sig + 8) // 16
     spots = np.zeros((max(max_spots, 1) + 1, 3), np.int64)
-    n, cand = (0, 0) if h < 3 or w < 3 else _scan(img, thr, max_spots, box, spots)
-    spots = spots[:n].astype(np.int32)
-    half = box // 2
-    rows = []
-    for i, (r, c, _) in enumerate(spots.tolist()):
-        c0, c1 = max(c - half, 0), min(c + half + 1, w)
-        rows += [(i + 1, rr, c0, c1) for rr in range(max(r - half, 0), min(r + half + 1, h))]
-    spans = np.array(rows, np.int32).reshape(-1, 4)
+    n, cand = (0, 0) if h < 3 or w < 3 else _scan(img, bg, sig, thr, max_spots, box, spots)
+    spots = spots[:n].copy()
+    spots[:, 2] = np.minimum(spots[:, 2] // 16, 0xFFFF)      # the tail's flux, DN
+    spots = spots.astype(np.int32)
+    spans = spot_spans(spots, box, w, h)
     return {"background_x16": int(bg), "sigma_x16": int(sig), "threshold_x16": int(thr), "candidates": int(cand),
             "spots": spots, "spans": spans}

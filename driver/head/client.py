@@ -72,16 +72,28 @@ class Capture:
 @dataclasses.dataclass(frozen=True)
 class SpotCapture:
     """A FIND_SPOTS exposure: the capture (its windows are the box around each spot, ids
-    1..n brightest first), the spots ((n, 3) int [row, col, peak] in px and DN) and the
+    1..n best first), the spots ((n, 3) int [row, col, flux] in px and DN) and the
     head's background statistics (DN)."""
 
     capture: Capture
     spots: np.ndarray
     box: int
+    spans: np.ndarray        # (m, 4) int [window id, row, col_start, col_stop) of the windows
     background_dn: float
     sigma_dn: float
     threshold_dn: float
     candidates: int
+
+
+def spot_spans(spots: np.ndarray, box: int, width: int, height: int) -> np.ndarray:
+    """The FIND_SPOTS window set: a ``box`` × ``box`` square (clipped to the sensor) around
+    each spot [row, col, flux], window ids 1.. in list order, as (m, 4) [id, row, c0, c1)."""
+    half = box // 2
+    rows = []
+    for i, (r, c, _) in enumerate(np.asarray(spots).tolist()):
+        c0, c1 = max(c - half, 0), min(c + half + 1, width)
+        rows += [(i + 1, rr, c0, c1) for rr in range(max(r - half, 0), min(r + half + 1, height))]
+    return np.array(rows, np.int32).reshape(-1, 4)
 
 
 class HeadClient:
@@ -359,7 +371,14 @@ class HeadClient:
         ids = [w.window_id for w in windows]
         if ids != list(range(1, f["n_windows"] + 1)):
             raise DeviceError(f"FIND_SPOTS: window ids {ids[:6]} are not 1..{f['n_windows']}")
-        return SpotCapture(self._capture_of(f, windows), f["spots"], box, f["background_x16"] / 16.0,
+        info = self.info or self.get_info()
+        spans = spot_spans(f["spots"], box, info["width"], info["height"])
+        for w in windows:
+            rows = spans[spans[:, 0] == w.window_id]
+            if int(np.sum(rows[:, 3] - rows[:, 2])) != len(w.pixels):
+                raise DeviceError(f"FIND_SPOTS: window {w.window_id} has {len(w.pixels)} pixels, its box "
+                                  f"{int(np.sum(rows[:, 3] - rows[:, 2]))}")
+        return SpotCapture(self._capture_of(f, windows), f["spots"], box, spans, f["background_x16"] / 16.0,
                            f["sigma_x16"] / 16.0, f["threshold_x16"] / 16.0, f["candidates"])
 
     def _capture_of(self, f: dict, windows) -> Capture:

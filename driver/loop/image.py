@@ -3,8 +3,8 @@
 The pixels are centroided on a measuring thread (:func:`gyrostar.loop.image_kernels.
 measure_windows` is nogil: background, CoG, smeared-PSF fit along the predicted
 trajectory, unit direction with its σ) while the loop keeps stepping; :meth:`result`
-returns them at the next step. Also lost-in-space on a full frame (spot detection +
-the identifier), run on the head port's worker after the frame is read.
+returns them at the next step. Also lost-in-space on a full frame or on the spot windows
+a head found itself (FIND_SPOTS), then the identifier, run on the head port's worker.
 """
 
 from __future__ import annotations
@@ -12,6 +12,12 @@ from __future__ import annotations
 import numpy as np
 
 from .image_kernels import measure_windows
+
+LIS_SIGMA = 6.0        # lost-in-space spot threshold: background + 6σ (full frame or the head's FIND_SPOTS)
+LIS_MAX_SPOTS = 40     # spots handed to the identifier, brightest first
+LIS_HEAD_SPOTS = 64    # spot windows a head's FIND_SPOTS sends (its 3x3 score ranks a little
+                       # differently from the full box flux: the host re-ranks and keeps 40)
+LIS_BOX = 7            # px: centroid box and suppression distance
 
 
 class ImagePipeline:
@@ -67,12 +73,19 @@ class ImagePipeline:
             self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="loop-measure", initializer=join_realtime)
         return self._pool
 
-    def lost_in_space(self, image: np.ndarray):
-        """Spots of a full frame and their identification: ``(spots, ident or None)``.
-        Runs on the head port's worker, off the loop's steps; reads no loop state."""
-        from .acquire import detect_spots
+    def lost_in_space(self, image):
+        """Spots of a lost-in-space image and their identification: ``(spots, ident or None)``.
+        ``image``: a full frame ((H, W) array), or a head's FIND_SPOTS result
+        (:class:`gyrostar.head.SpotCapture`: its windows are centroided here). Runs on the head
+        port's worker, off the loop's steps; reads no loop state."""
+        from .acquire import detect_spots, spots_from_windows
 
-        spots = detect_spots(image.astype(np.float64), 6.0, 40, 7)
+        if isinstance(image, np.ndarray):
+            spots = detect_spots(image.astype(np.float64), LIS_SIGMA, LIS_MAX_SPOTS, LIS_BOX)
+        else:
+            values = np.concatenate([w.pixels for w in image.capture.windows]) if image.capture.windows \
+                else np.zeros(0)
+            spots = spots_from_windows(image.spans, values, image.background_dn, image.sigma_dn, LIS_MAX_SPOTS)
         if len(spots) < 3:
             return spots, None
         return spots, self.identifier.identify(np.ascontiguousarray(spots[:, :2]))

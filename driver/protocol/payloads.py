@@ -4,7 +4,7 @@ Fixed parts follow ``defs.REQUEST_LAYOUT`` / ``defs.REPLY_LAYOUT`` (little-endia
 variable tails: PING ``echo`` bytes, SET_WINDOWS ``spans`` (N×4 int array of
 ``[window_id, row, col_start, col_stop)``), WINDOW_DATA and FRAME ``windows`` (list of
 :class:`WindowPixels`), FULL_FRAME ``pixels`` (uint16 array), FIND_SPOTS ``spots`` (N×3
-int array of ``[row, col, peak]``).
+int array of ``[row, col, flux]``).
 """
 
 from __future__ import annotations
@@ -197,7 +197,7 @@ def decode_reply(frame: Frame, expect: int | None = None) -> dict:
 
 
 def decode_spots(fields: dict, tail: bytes) -> np.ndarray:
-    """FIND_SPOTS tail → (n, 3) int32 array of [row, col, peak] (window ids 1..n in order)."""
+    """FIND_SPOTS tail → (n, 3) int32 array of [row, col, flux] (window ids 1..n in order)."""
     n = fields["n_windows"]
     if len(tail) != _SPOT.size * n:
         raise PayloadError(f"FIND_SPOTS: {n} spots in {len(tail)} bytes")
@@ -205,7 +205,7 @@ def decode_spots(fields: dict, tail: bytes) -> np.ndarray:
 
 
 def encode_spots(spots) -> bytes:
-    """FIND_SPOTS tail from rows of [row, col, peak] (for emulators and tests)."""
+    """FIND_SPOTS tail from rows of [row, col, flux] (for emulators and tests)."""
     a = np.asarray(spots, dtype=np.int64).reshape(-1, 3)
     if a.size and (a.min() < 0 or a.max() > 0xFFFF):
         raise ProtocolUsageError("FIND_SPOTS spot fields must fit u16")

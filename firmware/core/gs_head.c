@@ -417,7 +417,8 @@ static int32_t cmd_find_spots(gs_head *h, gs_fail *f, const uint8_t *q, size_t n
     for (uint16_t i = 0; i < sl->n && len + 6u <= GS_PROTO_MAX_PAYLOAD; i++) {
         gs_put_u16(p + len, sl->spots[i].row);
         gs_put_u16(p + len + 2u, sl->spots[i].col);
-        gs_put_u16(p + len + 4u, sl->spots[i].peak);
+        uint32_t flux = sl->spots[i].score / 16u;
+        gs_put_u16(p + len + 4u, (uint16_t)(flux > 0xFFFFu ? 0xFFFFu : flux));
         len += 6u;
     }
     return OK(len);

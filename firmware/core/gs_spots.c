@@ -93,11 +93,11 @@ static int within(const gs_spot *a, uint16_t row, uint16_t col, uint8_t box)
     return dr < box && dc < box;
 }
 
-static void offer(gs_spot_list *out, uint16_t max_spots, uint8_t box, uint16_t row, uint16_t col, uint16_t peak)
+static void offer(gs_spot_list *out, uint16_t max_spots, uint8_t box, uint16_t row, uint16_t col, uint32_t score)
 {
     out->candidates++;
     for (uint16_t i = 0; i < out->n; i++)
-        if (out->spots[i].peak >= peak && within(&out->spots[i], row, col, box))
+        if (out->spots[i].score >= score && within(&out->spots[i], row, col, box))
             return; /* a brighter (or equal, earlier) spot covers it */
     uint16_t m = 0; /* drop the fainter spots it covers */
     for (uint16_t i = 0; i < out->n; i++)
@@ -105,7 +105,7 @@ static void offer(gs_spot_list *out, uint16_t max_spots, uint8_t box, uint16_t r
             out->spots[m++] = out->spots[i];
     out->n = m;
     uint16_t at = out->n; /* after every spot of equal or higher peak */
-    while (at > 0u && out->spots[at - 1u].peak < peak)
+    while (at > 0u && out->spots[at - 1u].score < score)
         at--;
     if (at >= max_spots)
         return; /* fainter than a full list */
@@ -114,7 +114,7 @@ static void offer(gs_spot_list *out, uint16_t max_spots, uint8_t box, uint16_t r
         out->spots[i] = out->spots[i - 1u];
     out->spots[at].row = row;
     out->spots[at].col = col;
-    out->spots[at].peak = peak;
+    out->spots[at].score = score;
     if (out->n < max_spots)
         out->n++;
 }
@@ -148,7 +148,14 @@ gs_sensor_status gs_spots_find(const gs_hal *hal, uint8_t plane, uint16_t width,
                 continue;
             if (cur[c + 1u] > v || next[c - 1u] > v || next[c] > v || next[c + 1u] > v)
                 continue;
-            offer(out, max_spots, box, r, c, v);
+            /* score: the excess over the background of the 3x3 pixels above background + 2 sigma */
+            uint32_t low = out->background_x16 + 2u * out->sigma_x16, score = 0;
+            for (int d = -1; d <= 1; d++) {
+                uint32_t a = 16u * prev[c + d], b = 16u * cur[c + d], e = 16u * next[c + d];
+                score += (a > low ? a - out->background_x16 : 0u) + (b > low ? b - out->background_x16 : 0u) +
+                         (e > low ? e - out->background_x16 : 0u);
+            }
+            offer(out, max_spots, box, r, c, score);
         }
         uint16_t *t = prev;
         prev = cur;

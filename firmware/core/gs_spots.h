@@ -2,8 +2,8 @@
  *
  * One pass over a sensor frame, three rows at a time: background and noise from a sparse
  * grid (a 10-bit histogram: median and MAD, no sort), 3x3 local maxima above
- * background + n_sigma * sigma, and a bounded list of the brightest ones with non-maximum
- * suppression. The exact rules are the FIND_SPOTS doc of firmware/proto/protocol.toml; the
+ * background + n_sigma * sigma scored by their 3x3 excess (a smeared star outscores a hot
+ * pixel of the same peak), and a bounded list of the best ones with non-maximum suppression. The exact rules are the FIND_SPOTS doc of firmware/proto/protocol.toml; the
  * Python head emulator follows them to the pixel. No malloc: every buffer is in the
  * caller's gs_spot_scratch.
  */
@@ -18,14 +18,15 @@
 #define GS_SPOT_LEVELS 1024u /* 10-bit values */
 
 typedef struct {
-    uint16_t row, col, peak;
+    uint16_t row, col;
+    uint32_t score; /* DN x 16: excess of the 3x3 pixels above background + 2 sigma */
 } gs_spot;
 
 typedef struct {
     uint32_t background_x16, sigma_x16, threshold_x16; /* DN x 16 */
     uint32_t candidates;                               /* local maxima above the threshold */
     uint16_t n;
-    gs_spot spots[GS_LIM_MAX_WINDOWS]; /* brightest first */
+    gs_spot spots[GS_LIM_MAX_WINDOWS]; /* highest score first */
 } gs_spot_list;
 
 typedef struct {

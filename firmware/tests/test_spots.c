@@ -1,5 +1,5 @@
 /* test_spots.c - FIND_SPOTS on a hand-built image: background statistics, local maxima,
- * tie rules, suppression, the bounded list, clipped windows, rejections. Every expected
+ * tie rules, 3x3 scores, suppression, the bounded list, clipped windows, rejections. Every expected
  * value below is worked out by hand from the image. */
 #include <string.h>
 
@@ -73,8 +73,10 @@ static void spot_list_brightest_first_with_suppression(void **state)
     assert_int_equal(gs_get_u32(p + GS_FIND_SPOTS_REP_CANDIDATES), 7);
     uint16_t n = gs_get_u16(p + GS_FIND_SPOTS_REP_N_WINDOWS);
     assert_int_equal(n, 6);
-    static const uint16_t want[6][3] = {{20, 20, 1023}, {10, 10, 900}, {40, 5, 700},
-                                        {1, 60, 650},   {30, 40, 600}, {25, 30, 400}};
+    /* score = excess of the 3x3 pixels above 101 DN (bg + 2 sigma): blob = (peak - 100) + 8 x 200;
+     * the hot pixel only its own 923; the equal pair 2 x 300 */
+    static const uint16_t want[6][3] = {{10, 10, 2400}, {40, 5, 2200}, {1, 60, 2150},
+                                        {30, 40, 2100}, {20, 20, 923},  {25, 30, 600}};
     assert_int_equal(f->payload_len, GS_FIND_SPOTS_REP_SIZE + 6u * n);
     for (uint16_t i = 0; i < n; i++) {
         const uint8_t *s = p + GS_FIND_SPOTS_REP_SIZE + 6u * i;
@@ -85,13 +87,12 @@ static void spot_list_brightest_first_with_suppression(void **state)
     /* windows: 7x7 except the edge one (rows 0..4, cols 57..63 -> 5 x 7 = 35 px) */
     assert_int_equal(gs_get_u32(p + GS_FIND_SPOTS_REP_N_PIXELS), 5u * 49u + 35u);
     assert_int_equal(r->f.exposes, 1);
-    /* the pixels come back through WINDOW_DATA; window 2 is the 900 blob, centre at (3,3) */
+    /* the pixels come back through WINDOW_DATA; window 1 is the 900 blob, centre at (3,3) */
     uint8_t wd[4] = {0, 0, GS_PIXFMT_U16, 0};
     f = rig_call(r, GS_MSG_WINDOW_DATA, 10, wd, 4);
     const uint8_t *t = f->payload + GS_WINDOW_DATA_REP_SIZE;
     assert_int_equal(gs_get_u16(f->payload + GS_WINDOW_DATA_REP_TOTAL), 6);
-    t += 8u + 2u * 49u; /* past window 1 */
-    assert_int_equal(gs_get_u16(t), 2);
+    assert_int_equal(gs_get_u16(t), 1);
     assert_int_equal(gs_get_u16(t + 2), 49);
     assert_int_equal(gs_get_u16(t + 8 + 2 * (3 * 7 + 3)), 900);
     assert_int_equal(gs_get_u16(t + 8 + 2 * (2 * 7 + 2)), 300);
@@ -106,9 +107,9 @@ static void bounded_list_keeps_the_brightest(void **state)
     assert_int_equal(gs_get_u32(p + GS_FIND_SPOTS_REP_CANDIDATES), 7);
     assert_int_equal(gs_get_u16(p + GS_FIND_SPOTS_REP_N_WINDOWS), 3);
     const uint8_t *s = p + GS_FIND_SPOTS_REP_SIZE;
-    assert_int_equal(gs_get_u16(s + 4), 1023);
-    assert_int_equal(gs_get_u16(s + 6 + 4), 900);
-    assert_int_equal(gs_get_u16(s + 12 + 4), 700);
+    assert_int_equal(gs_get_u16(s + 4), 2400);
+    assert_int_equal(gs_get_u16(s + 6 + 4), 2200);
+    assert_int_equal(gs_get_u16(s + 12 + 4), 2150);
     /* a higher threshold (600 DN: 100 + n_sigma * 0.5) leaves 1023, 900, 700, 650 */
     f = rig_call(r, GS_MSG_FIND_SPOTS, 12, q, req(1000 * 16, 8, 3));
     p = f->payload;

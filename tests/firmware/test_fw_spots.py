@@ -30,10 +30,11 @@ def test_hand_worked_image():
     img[20, 20], img[25, 30], img[25, 31] = 2000, 400, 400
     d = find_spots(img, 96, 8, 7)
     assert (d["background_x16"], d["sigma_x16"], d["threshold_x16"], d["candidates"]) == (1600, 8, 1648, 7)
-    assert d["spots"].tolist() == [[20, 20, 1023], [10, 10, 900], [40, 5, 700], [1, 60, 650], [30, 40, 600],
-                                   [25, 30, 400]]
+    # score: excess of the 3x3 pixels above bg + 2σ = 101 DN (blob: peak - 100 + 8 × 200)
+    assert d["spots"].tolist() == [[10, 10, 2400], [40, 5, 2200], [1, 60, 2150], [30, 40, 2100], [20, 20, 923],
+                                   [25, 30, 600]]
     assert int(np.sum(d["spans"][:, 3] - d["spans"][:, 2])) == 5 * 49 + 35
-    assert find_spots(img, 96, 3, 7)["spots"][:, 2].tolist() == [1023, 900, 700]
+    assert find_spots(img, 96, 3, 7)["spots"][:, 2].tolist() == [2400, 2200, 2150]
     assert [check_settings(*s) for s in [(0, 8, 7), (96, 0, 7), (96, 8, 6), (96, 64, 9), (96, 8, 7)]] == [1, 2, 3, 4, 0]
 
 
