@@ -27,7 +27,7 @@ LIMITS = {
     'stream_period_max_us': 1000000,
     'stream_pending_sets': 2,
     'stream_tx_backlog_max': 256,
-    'spot_width_max': 2048,
+    'spot_width_max': 1024,
     'spot_box_max': 15,
     'spot_grid': 7,
 }

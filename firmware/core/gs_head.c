@@ -12,6 +12,9 @@
 #define PAYLOAD(h) ((h)->tx_raw + GS_PROTO_HEADER_SIZE)
 #define WIN_HEADER_SIZE 8u
 
+_Static_assert(sizeof(uint16_t) * GS_LIM_FRAME_CHUNK_MAX >= 8u * GS_LIM_MAX_SPANS,
+               "FIND_SPOTS builds its span table in the line buffer");
+
 static void reset_state(gs_head *h)
 {
     h->exposure_us = GS_LIM_EXPOSURE_DEFAULT_US;
@@ -343,9 +346,12 @@ static gs_sensor_status locked_spots(gs_head *h, uint16_t n_sigma_x16, uint16_t 
         st = gs_spots_find(hal, GS_PLANE_LIGHT, h->geom.width, h->geom.height, n_sigma_x16, max_spots, box,
                            &h->spot_scratch, &h->spots);
         if (st == GS_SENSOR_OK) {
-            uint16_t n = gs_spots_spans(&h->spots, box, h->geom.width, h->geom.height, &h->spot_scratch);
+            /* the spans are built in the line buffer (free here: 512 spans x 8 bytes fit it) */
+            uint8_t *wire = (uint8_t *)h->line;
+            uint16_t n = gs_spots_spans(&h->spots, box, h->geom.width, h->geom.height, wire,
+                                        sizeof(uint16_t) * GS_LIM_FRAME_CHUNK_MAX);
             uint32_t detail = 0;
-            *code = gs_windows_set(&h->ws, h->spot_scratch.spans, n, h->geom.width, h->geom.height, &detail);
+            *code = gs_windows_set(&h->ws, wire, n, h->geom.width, h->geom.height, &detail);
             if (*code)
                 return GS_SENSOR_IO; /* cannot happen: the settings check bounds the set */
             st = gs_windows_read(&h->ws, hal, GS_PLANE_LIGHT, h->geom.width, h->store, h->sums);

@@ -71,12 +71,15 @@ static gs_sensor_status background(const gs_hal *hal, uint8_t plane, uint16_t wi
         }
     }
     uint16_t med = hist_rank(s->hist, k / 2u);
-    /* histogram of |v - med| from the value histogram */
-    uint32_t *dev = s->dev;
-    memset(dev, 0, sizeof s->dev);
-    for (uint16_t v = 0; v < GS_SPOT_LEVELS; v++)
-        dev[v >= med ? v - med : med - v] += s->hist[v];
-    uint32_t mad = hist_rank(dev, k / 2u);
+    /* MAD: the rank k/2 of |v - med|, counted outwards from the median (no second histogram) */
+    uint32_t mad = GS_SPOT_LEVELS - 1u, cum = 0;
+    for (uint32_t d = 0; d < GS_SPOT_LEVELS; d++) {
+        cum += (med + d < GS_SPOT_LEVELS ? s->hist[med + d] : 0u) + (d && d <= med ? s->hist[med - d] : 0u);
+        if (cum > k / 2u) {
+            mad = d;
+            break;
+        }
+    }
     /* sigma = max(1.4826 MAD, 0.5) in 1/16 DN: 1.4826 * 16 = 23.7216 */
     uint32_t sig = (mad * 237216u + 5000u) / 10000u;
     if (sig < 8u)
@@ -165,8 +168,8 @@ gs_sensor_status gs_spots_find(const gs_hal *hal, uint8_t plane, uint16_t width,
     return GS_SENSOR_OK;
 }
 
-uint16_t gs_spots_spans(const gs_spot_list *list, uint8_t box, uint16_t width, uint16_t height,
-                        gs_spot_scratch *s)
+uint16_t gs_spots_spans(const gs_spot_list *list, uint8_t box, uint16_t width, uint16_t height, uint8_t *out,
+                        size_t cap)
 {
     uint16_t n = 0, half = (uint16_t)(box / 2u);
     for (uint16_t i = 0; i < list->n; i++) {
@@ -175,8 +178,8 @@ uint16_t gs_spots_spans(const gs_spot_list *list, uint8_t box, uint16_t width, u
         uint16_t r1 = (uint32_t)sp->row + half + 1u < height ? (uint16_t)(sp->row + half + 1u) : height;
         uint16_t c0 = sp->col > half ? (uint16_t)(sp->col - half) : 0u;
         uint16_t c1 = (uint32_t)sp->col + half + 1u < width ? (uint16_t)(sp->col + half + 1u) : width;
-        for (uint16_t r = r0; r < r1 && n < GS_LIM_MAX_SPANS; r++) {
-            uint8_t *p = s->spans + 8u * n++;
+        for (uint16_t r = r0; r < r1 && 8u * ((size_t)n + 1u) <= cap; r++) {
+            uint8_t *p = out + 8u * n++;
             gs_put_u16(p, (uint16_t)(i + 1u));
             gs_put_u16(p + 2, r);
             gs_put_u16(p + 4, c0);

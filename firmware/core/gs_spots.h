@@ -10,6 +10,7 @@
 #ifndef GS_SPOTS_H
 #define GS_SPOTS_H
 
+#include <stddef.h>
 #include <stdint.h>
 
 #include "gs_hal.h"
@@ -32,8 +33,6 @@ typedef struct {
 typedef struct {
     uint16_t rows[3][GS_LIM_SPOT_WIDTH_MAX];
     uint32_t hist[GS_SPOT_LEVELS]; /* grid values */
-    uint32_t dev[GS_SPOT_LEVELS];  /* their |value - median| */
-    uint8_t spans[8u * GS_LIM_MAX_SPANS]; /* the window set, as SET_WINDOWS wire bytes */
 } gs_spot_scratch;
 
 /* Settings check: 0 if usable, else the SPOT_SETTINGS detail (1 n_sigma .. 5 pixels). */
@@ -47,8 +46,8 @@ gs_sensor_status gs_spots_find(const gs_hal *hal, uint8_t plane, uint16_t width,
                                gs_spot_list *out);
 
 /* The box x box windows (clipped to the sensor) around the spots as SET_WINDOWS wire
- * bytes in s->spans; returns the number of spans. */
-uint16_t gs_spots_spans(const gs_spot_list *list, uint8_t box, uint16_t width, uint16_t height,
-                        gs_spot_scratch *s);
+ * bytes (8 per span) in out (cap bytes); returns the number of spans written. */
+uint16_t gs_spots_spans(const gs_spot_list *list, uint8_t box, uint16_t width, uint16_t height, uint8_t *out,
+                        size_t cap);
 
 #endif

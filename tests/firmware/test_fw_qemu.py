@@ -115,3 +115,32 @@ def test_arm_image_streams_200_frames_on_its_timer(tmp_path):
     assert all(f.t_end_us - f.t_start_us == 10_000 for f in frames)
     for f in frames[::50]:
         assert len(f.windows) == 1 and np.array_equal(f.windows[0].pixels, want)
+
+
+def test_arm_image_finds_spots_as_the_mirror_does(tmp_path):
+    """FIND_SPOTS on the Cortex-M3 image (64 KiB RAM: three 1024-px rows and a histogram)
+    gives the spot list and window pixels of the Python mirror of gs_spots.c."""
+    from gyrostar.mocks.spot_finder import find_spots
+
+    W, H = 1024, 1024
+    rng = np.random.default_rng(11)
+    img = rng.normal(60.0, 3.0, (H, W))
+    for _ in range(80):
+        r, c, a = rng.uniform(2, H - 2), rng.uniform(2, W - 2), rng.uniform(40, 4000)
+        r0, c0 = int(r) - 6, int(c) - 6
+        yy, xx = np.mgrid[max(r0, 0):min(r0 + 13, H), max(c0, 0):min(c0 + 13, W)]
+        img[yy, xx] += a / (2 * np.pi) * np.exp(-((yy - r) ** 2 + (xx - c) ** 2) / 2)
+    light = np.clip(np.round(img), 0, 1100).astype(np.uint16)
+    pixels = PixelFile(tmp_path / "sensor.gspx", W, H, planes=1)
+    pixels.write_frame(light)
+    with qemu.QemuHead(pixels.path) as q:
+        link = q.link(timeout=10.0)
+        try:
+            got = HeadClient(link, timeout=30.0).find_spots(6.0, 64, 7)
+        finally:
+            link.close()
+    want = find_spots(light, 96, 64, 7)
+    assert got.spots.tolist() == want["spots"].tolist() and len(got.spots) >= 40
+    pix = np.concatenate([w.pixels for w in got.capture.windows])
+    assert np.array_equal(pix, np.concatenate([np.minimum(light, 1023)[r, c0:c1] for _, r, c0, c1 in want["spans"]]))
+    pixels.close()
