@@ -510,8 +510,8 @@ class HeadEmulator:
         while s.t_start + (s.exposure_us + s.period_us) * 1e-6 <= now:
             s.dropped += 1        # more than a period overdue (the emulator was held up): never read
             s.next_frame(self)
-        if now >= s.t_start:
-            self._prepare(s)
+        # the next frame is rendered at the next call (``next_due`` is now): this frame's bytes
+        # go out first, as the head's UART DMA starts at the readout, not after more work
         return out
 
     @property
