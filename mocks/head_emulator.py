@@ -295,7 +295,10 @@ class HeadEmulator:
         wset = self._validate_spans(spans)
         applies = 0
         if self.stream is not None:
-            applies = self.stream.queue(wset, named)
+            st = self.stream
+            applies = st.queue(wset, named)
+            if st.prepared is not None and st.due()[1][1] is not st.prepared[0][1]:
+                self._prepare(st)      # the frame integrating now changed sets: render it now, not at readout
         else:
             self.spans, self.window_ids, self.window_slices = wset[:3]
             self.has_capture = False
@@ -535,26 +538,18 @@ class HeadEmulator:
         return np.minimum(pixels, 0x3FF).astype(np.uint16)
 
     def _prepare(self, s) -> None:
-        """Render frame ``s.frame`` with the window set due for it as known now."""
-        active = s.due_set()
-        s.prepared = (active, self._render(s, active))
+        """Render frame ``s.frame`` with the window set due for it as known now, and encode its
+        FRAME messages with the counters as they stand (the MCU's DMA buffer, ready at readout)."""
+        set_frame, active = s.due()
+        pixels = self._render(s, active)
+        s.prepared = (active, pixels, self._encode_stream_frame(s, active, set_frame, pixels),
+                      (set_frame, s.late_sets, s.dropped, s.backpressure))
 
-    def _read_stream_frame(self, s, t_end: float) -> list[bytes]:
-        s.install_due()
-        prepared, s.prepared = s.prepared, None
-        if self.tx_backlog() > LIMITS["stream_tx_backlog_max"]:
-            s.dropped += 1
-            s.backpressure += 1
-            return []
-        spans, ids, slices = s.active[:3]
-        self.has_capture = False
-        if prepared is not None and prepared[0][1] is ids:
-            pixels = prepared[1]          # rendered during the exposure with this very set
-        else:
-            pixels = self._render(s, s.active)
-        self.last_exposure_host = (s.t_start, t_end)
+    def _encode_stream_frame(self, s, active, set_frame: int, pixels: np.ndarray) -> list[bytes]:
+        """The FRAME messages (one or more parts) of frame ``s.frame`` read with ``active``."""
+        _, ids, slices = active[:3]
         wins = [WindowPixels(wid, int(pixels[sl].sum()), pixels[sl]) for wid, sl in zip(ids, slices)]
-        t0_us, t1_us = self.mcu_us(s.t_start), self.mcu_us(t_end)
+        t0_us, t1_us = self.mcu_us(s.t_start), self.mcu_us(s.t_start + s.exposure_us * 1e-6)
         out, start = [], 0
         fixed = struct.calcsize("<" + REPLY_LAYOUT[MsgType.FRAME][0])
         while True:
@@ -565,14 +560,30 @@ class HeadEmulator:
                     break
                 part.append(w)
                 size += need
-            head = encode_reply(MsgType.FRAME, frame=s.frame, set_frame=s.set_frame, t_start_us=t0_us,
+            head = encode_reply(MsgType.FRAME, frame=s.frame, set_frame=set_frame, t_start_us=t0_us,
                                 t_end_us=t1_us, exposure_us=s.exposure_us, late_sets=s.late_sets, dropped=s.dropped,
                                 backpressure=s.backpressure, n_pixels=len(pixels), start=start, count=len(part),
                                 total=len(wins), pixel_format=s.fmt)
             out.append(encode_frame(MsgType.FRAME | REPLY_FLAG, s.seq, head + encode_windows_tail(part, s.fmt)))
             start += len(part)
             if start >= len(wins):
-                break
+                return out
+
+    def _read_stream_frame(self, s, t_end: float) -> list[bytes]:
+        s.install_due()
+        prepared, s.prepared = s.prepared, None
+        if self.tx_backlog() > LIMITS["stream_tx_backlog_max"]:
+            s.dropped += 1
+            s.backpressure += 1
+            return []
+        self.has_capture = False
+        self.last_exposure_host = (s.t_start, t_end)
+        if prepared is not None and prepared[0][1] is s.active[1]:
+            # rendered during the exposure with this very set; encoded then unless a counter moved
+            same = prepared[3] == (s.set_frame, s.late_sets, s.dropped, s.backpressure)
+            out = prepared[2] if same else self._encode_stream_frame(s, s.active, s.set_frame, prepared[1])
+        else:
+            out = self._encode_stream_frame(s, s.active, s.set_frame, self._render(s, s.active))
         s.frames += 1
         s.last_frame = s.frame
         return out
@@ -691,7 +702,7 @@ class _Stream:
         self.frame, self.t_start = frame, t_start
         self.active = active            # (spans, ids, slices) in use
         self.set_frame = 0
-        self.prepared = None            # (set, pixels) of the frame integrating now, rendered ahead
+        self.prepared = None            # (set, pixels, FRAME messages, counters) of the frame integrating now
         self.pending: list = []         # [first frame, named frame, (spans, ids, slices, total)]
         self.frames = self.late_sets = self.dropped = self.backpressure = self.last_frame = 0
 
@@ -706,10 +717,10 @@ class _Stream:
             self.late_sets += 1
         return first
 
-    def due_set(self) -> tuple:
-        """The set frame ``self.frame`` would be read with if no other set came."""
+    def due(self) -> tuple:
+        """(named frame, set) frame ``self.frame`` would be read with if no other set came."""
         due = [p for p in self.pending if p[0] <= self.frame]
-        return due[-1][2][:3] if due else self.active
+        return (due[-1][1], due[-1][2][:3]) if due else (self.set_frame, self.active)
 
     def install_due(self) -> None:
         while self.pending and self.pending[0][0] <= self.frame:
