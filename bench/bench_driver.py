@@ -301,10 +301,48 @@ def _measured_rate(preset_name: str, spans, seconds: float) -> dict:
     return {"frames_per_s": n / seconds, "head_dropped": stop["dropped"], "head_backpressure": stop["backpressure"]}
 
 
+def _lost_in_space_bytes(n_spots: int = 64, box: int = 7, width: int = 1024, height: int = 1024) -> dict:
+    """Head → host bytes of one lost-in-space image, built with the protocol's own encoders:
+    FIND_SPOTS (reply + WINDOW_DATA pages of ``n_spots`` box×box PACKED10 windows) against
+    a full frame (FULL_FRAME chunks of frame_chunk_max px, PACKED10)."""
+    from gyrostar.protocol import MsgType, PixelFormat
+    from gyrostar.protocol.defs import LIMITS, MAX_PAYLOAD, REPLY_FLAG
+    from gyrostar.protocol.framing import encode_frame
+    from gyrostar.protocol.payloads import WindowPixels, encode_reply, encode_spots, encode_windows_tail, pixel_bytes
+
+    fmt = PixelFormat.PACKED10
+    spots = encode_reply(MsgType.FIND_SPOTS, encode_spots([[100 + i, 200, 1000] for i in range(n_spots)]),
+                         capture_no=1, sensor_frame=1, t_start_us=0, t_end_us=10_000, exposure_us=10_000, gain_x16=16,
+                         n_windows=n_spots, n_pixels=n_spots * box * box, candidates=n_spots, background_x16=0,
+                         sigma_x16=8, threshold_x16=0)
+    down = len(encode_frame(MsgType.FIND_SPOTS | REPLY_FLAG, 1, spots))
+    wins = [WindowPixels(i + 1, 0, np.full(box * box, 512, np.uint16)) for i in range(n_spots)]
+    fixed = len(encode_reply(MsgType.WINDOW_DATA, capture_no=0, start=0, count=0, total=0, pixel_format=0))
+    start = 0
+    while start < n_spots:                       # WINDOW_DATA pages, as many whole windows as fit
+        size, k = fixed, start
+        while k < n_spots and size + 8 + pixel_bytes(box * box, fmt) <= MAX_PAYLOAD:
+            size += 8 + pixel_bytes(box * box, fmt)
+            k += 1
+        page = encode_reply(MsgType.WINDOW_DATA, encode_windows_tail(wins[start:k], fmt), capture_no=1, start=start,
+                            count=k - start, total=n_spots, pixel_format=fmt)
+        down += len(encode_frame(MsgType.WINDOW_DATA | REPLY_FLAG, 2, page))
+        start = k
+    chunk = LIMITS["frame_chunk_max"]
+    full = 0
+    for off in range(0, width * height, chunk):
+        n = min(chunk, width * height - off)
+        rep = encode_reply(MsgType.FULL_FRAME, np.zeros(pixel_bytes(n, fmt), np.uint8).tobytes(), sensor_frame=1,
+                           offset=off, count=n, pixel_format=fmt, plane=0)
+        full += len(encode_frame(MsgType.FULL_FRAME | REPLY_FLAG, 3, rep))
+    return {"spots": down, "full_frame": full}
+
+
 def bench_link(quick: bool) -> dict:
     """Per link preset: bytes per frame at rest and at 5 °/s with 10 stars (paper 000's 6×6
     trajectory windows, PACKED10), link utilisation at 100 Hz, the highest frame rate the
-    link carries within the loop's 0.8 budget, and the rate a paced stream really sustains."""
+    link carries within the loop's 0.8 budget, the rate a paced stream really sustains, and
+    the wire time of a lost-in-space image (the head's FIND_SPOTS windows vs a full frame)."""
     from gyrostar.fwtools.wirecount import star_trajectory_windows
     from gyrostar.loop.linkbudget import frame_bytes, windows_bytes
     from gyrostar.transport.linkrate import PRESETS
@@ -313,6 +351,7 @@ def bench_link(quick: bool) -> dict:
     sets = {"rest": star_trajectory_windows(10, rate_dps=0.0, seed=2)[0],
             "5dps": star_trajectory_windows(10, rate_dps=5.0, seed=2)[0]}
     sizes = {k: _stream_bytes(v) for k, v in sets.items()}
+    lis = _lost_in_space_bytes()
     for k, sp in sets.items():   # the loop's budget model must not under-count the real bytes
         n_px = int((sp[:, 3] - sp[:, 2]).sum())
         assert frame_bytes(n_px, len(np.unique(sp[:, 0]))) >= sizes[k][0] - 2
@@ -323,14 +362,18 @@ def bench_link(quick: bool) -> dict:
                "bytes_per_frame_5dps": {"down": sizes["5dps"][0], "up": sizes["5dps"][1]},
                "utilisation_100hz_rest": p.utilisation(max(sizes["rest"]), 100.0),
                "utilisation_100hz_5dps": p.utilisation(per, 100.0),
-               "max_frame_hz_5dps_budget_0.8": p.max_frame_hz(per, 0.8)}
+               "max_frame_hz_5dps_budget_0.8": p.max_frame_hz(per, 0.8),
+               "lost_in_space_bytes": lis,
+               "lost_in_space_wire_s": {k: p.wire_time(v) for k, v in lis.items()}}
         if not quick:
             fig["measured_5dps_at_100hz"] = _measured_rate(name, sets["5dps"], 2.0)
         m = fig.get("measured_5dps_at_100hz", {})
         fig["note"] = (f"{name}: {sizes['rest'][0]}/{sizes['5dps'][0]} B down at rest/5°/s, "
                        f"util@100Hz {fig['utilisation_100hz_5dps']:.2f}, "
                        f"max {fig['max_frame_hz_5dps_budget_0.8']:.0f} Hz"
-                       + (f", paced stream {m['frames_per_s']:.0f} fps" if "frames_per_s" in m else ""))
+                       + (f", paced stream {m['frames_per_s']:.0f} fps" if "frames_per_s" in m else "")
+                       + f"; lost-in-space {lis['spots']} B in {1e3 * p.wire_time(lis['spots']):.0f} ms (head's spots)"
+                       f" vs {lis['full_frame'] / 1e6:.2f} MB in {p.wire_time(lis['full_frame']):.1f} s (full frame)")
         out[f"link_{name}"] = fig
     return out
 
