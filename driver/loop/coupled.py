@@ -507,7 +507,7 @@ class CoupledLoop:
         cov = fix_covariance(body, 2.0 * self.p.pyramid_sigma_px / self.f_px)
         self.filter.set_attitude(ident.q, res.t_mid, now, cov)
         self.tracks.clear()
-        self.tracks.fill_from_catalog(self.filter.q)
+        self.tracks.fill_from_catalog(self.filter.q, now)
         log.info("acquired: %d stars identified (p_false %.2g)", ident.n_identified, ident.p_false)
         # the mode turns to TRACK at the first image whose stars pass the filter's gate
         self._set_state(modes.on_acquired(self.state), now)
@@ -520,7 +520,7 @@ class CoupledLoop:
         command-to-exposure jitter to cover)."""
         f = self.filter
         if f.valid:
-            self.tracks.fill_from_catalog(f.q)
+            self.tracks.fill_from_catalog(f.q, now)
         sig = math.sqrt(max(f.P[0, 0], f.P[1, 1]))
         if self.streaming:
             lag, jitter = max(t_exp - now, 0.0), 0.0
@@ -601,7 +601,7 @@ class CoupledLoop:
             wrong = tr.score(slots, good)
             if updated >= self.p.min_stars:
                 for s in wrong:
-                    tr.drop(s)
+                    tr.drop_wrong(s, now)
                     self.c.wrong_ids_dropped += 1
         self.id_verified = updated >= 3 and updated == len(slots)
         self._after_image(now, int(updated))

@@ -4,7 +4,10 @@
 miss and reject counts, latest predicted centroid px). Stars enter from the catalog
 around the current attitude (the gyro-extended field: the attitude is propagated by the
 gyro between images), leave when they reach the sensor edge, miss too many images, or fail
-the filter's gate ``wrong_id_rejects`` times in a row. :meth:`plan` builds the windows of
+the filter's gate ``wrong_id_rejects`` times in a row. A star dropped that way is kept out
+for a while that doubles with each such drop (:meth:`drop_wrong`: 1, 2, 4 … 32 s): a star
+whose image a hot pixel or an unresolved neighbour pulls off its catalog place would
+otherwise come back at once and fail again, frame after frame. :meth:`plan` builds the windows of
 the next exposure for every tracked star (trajectory over the exposure and the command
 lag from the current rate, :func:`gyrostar.loop.image_kernels.plan_windows`).
 """
@@ -20,6 +23,8 @@ from .image_kernels import plan_windows
 from .kernels import project_refs
 
 MODEL = 1                # core.motion.MODEL_PINHOLE
+BAN_FIRST_S = 1.0        # a star dropped as a wrong identification stays out this long (s),
+BAN_MAX_S = 32.0         # twice as long after each further such drop, at most this long
 
 
 class StarTracks:
@@ -38,6 +43,8 @@ class StarTracks:
         self.rejects = np.zeros(S, np.int64)
         self.uv = np.zeros((S, 2))             # predicted centroid (col, row) px at the last output
         self.version = 0                       # changes whenever the set of tracked stars changes
+        self.strikes: dict[int, int] = {}      # navigation index → wrong-identification drops
+        self.banned_until: dict[int, float] = {}   # navigation index → time (s) it may come back
 
     # -- slots ---------------------------------------------------------------------------
     def clear(self) -> None:
@@ -52,15 +59,25 @@ class StarTracks:
         self.ids[s] = -1
         self.version += 1
 
+    def drop_wrong(self, s: int, now: float) -> None:
+        """Drop slot ``s`` as a wrong or unusable identification and keep its star out for
+        ``BAN_FIRST_S`` × 2^(drops before) s (at most ``BAN_MAX_S``)."""
+        nav = int(self.nav[s])
+        k = self.strikes.get(nav, 0)
+        self.strikes[nav] = k + 1
+        self.banned_until[nav] = now + min(BAN_FIRST_S * 2.0 ** k, BAN_MAX_S)
+        self.drop(s)
+
     def tracked(self) -> np.ndarray:
         return np.flatnonzero(self.active)
 
     def mags(self, slots) -> np.ndarray:
         return self.index.vmag[self.nav[slots]] if len(slots) else np.zeros(0)
 
-    def fill_from_catalog(self, q) -> None:
+    def fill_from_catalog(self, q, now: float = -math.inf) -> None:
         """Fill free slots with catalog stars attitude ``q`` puts on the sensor, brightest
-        first, skipping one closer than ``neighbour_sep_px`` to a tracked star."""
+        first, skipping one closer than ``neighbour_sep_px`` to a tracked star and one kept
+        out until after ``now`` (s) by :meth:`drop_wrong`."""
         from ..attitude import quat_to_dcm
 
         free = [s for s in range(self.p.max_stars) if not self.active[s]]
@@ -84,7 +101,7 @@ class StarTracks:
             if fi >= len(free):
                 break
             nav = int(cand[j])
-            if nav in tracked:
+            if nav in tracked or self.banned_until.get(nav, -math.inf) > now:
                 continue
             act = self.active
             if np.any(act & (np.abs(uv[j, 0] - self.uv[:, 0]) < sep) & (np.abs(uv[j, 1] - self.uv[:, 1]) < sep)):
