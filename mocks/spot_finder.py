@@ -5,8 +5,8 @@ firmware (host program) pixel for pixel. The rules are the FIND_SPOTS doc of
 ``firmware/proto/protocol.toml``: background and noise from a 10-bit histogram of every
 ``spot_grid``-th pixel of every ``spot_grid``-th row (median; σ = max(1.4826·MAD, 0.5) DN, in
 1/16 DN with the firmware's integer rounding), 3×3 local maxima above the threshold taken in
-row-major order, scored by their 3×3 excess above background + 2σ, into a bounded
-best-first list with non-maximum suppression.
+row-major order, scored by their 8 neighbours' excess over the background (a hot pixel
+ranks last), into a bounded best-first list with non-maximum suppression.
 """
 
 from __future__ import annotations
@@ -62,7 +62,7 @@ def _background(img, grid):
 
 
 @njit(cache=True)
-def _scan(img, bg_x16, sig_x16, thr_x16, max_spots, box, spots):
+def _scan(img, bg_x16, thr_x16, max_spots, box, spots):
     """Local maxima into spots[:, (row, col, score x16)]; returns (n kept, candidates)."""
     h, w = img.shape
     n = 0
@@ -77,13 +77,12 @@ def _scan(img, bg_x16, sig_x16, thr_x16, max_spots, box, spots):
             if img[r, c + 1] > v or img[r + 1, c - 1] > v or img[r + 1, c] > v or img[r + 1, c + 1] > v:
                 continue
             cand += 1
-            low = bg_x16 + 2 * sig_x16
             v = 0
             for dr in range(-1, 2):
                 for dc in range(-1, 2):
-                    a = 16 * img[r + dr, c + dc]
-                    if a > low:
-                        v += a - bg_x16
+                    if dr != 0 or dc != 0:
+                        v += 16 * img[r + dr, c + dc] - bg_x16
+            v = max(v, 0)
             covered = False
             for i in range(n):
                 if spots[i, 2] >= v and abs(spots[i, 0] - r) < box and abs(spots[i, 1] - c) < box:
@@ -122,7 +121,7 @@ def find_spots(img: np.ndarray, n_sigma_x16: int, max_spots: int, box: int) -> d
     bg, sig = _background(img, GRID)
     thr = bg + (n_sigma_x16 * sig + 8) // 16
     spots = np.zeros((max(max_spots, 1) + 1, 3), np.int64)
-    n, cand = (0, 0) if h < 3 or w < 3 else _scan(img, bg, sig, thr, max_spots, box, spots)
+    n, cand = (0, 0) if h < 3 or w < 3 else _scan(img, bg, thr, max_spots, box, spots)
     spots = spots[:n].copy()
     spots[:, 2] = np.minimum(spots[:, 2] // 16, 0xFFFF)      # the tail's flux, DN
     spots = spots.astype(np.int32)

@@ -15,7 +15,7 @@ from .image_kernels import measure_windows
 
 LIS_SIGMA = 6.0        # lost-in-space spot threshold: background + 6σ (full frame or the head's FIND_SPOTS)
 LIS_MAX_SPOTS = 40     # spots handed to the identifier, brightest first
-LIS_HEAD_SPOTS = 64    # spot windows a head's FIND_SPOTS sends (its 3x3 score ranks a little
+LIS_HEAD_SPOTS = 64    # spot windows a head's FIND_SPOTS sends (its neighbour score ranks a little
                        # differently from the full box flux: the host re-ranks and keeps 40)
 LIS_BOX = 7            # px: centroid box and suppression distance
 

@@ -151,13 +151,15 @@ gs_sensor_status gs_spots_find(const gs_hal *hal, uint8_t plane, uint16_t width,
                 continue;
             if (cur[c + 1u] > v || next[c - 1u] > v || next[c] > v || next[c + 1u] > v)
                 continue;
-            /* score: the excess over the background of the 3x3 pixels above background + 2 sigma */
-            uint32_t low = out->background_x16 + 2u * out->sigma_x16, score = 0;
+            /* score: the 8 neighbours' excess over the background (a star's PSF spreads
+             * there, a hot pixel or a cosmic-ray hit on one pixel does not) */
+            int32_t ring = 0;
             for (int d = -1; d <= 1; d++) {
-                uint32_t a = 16u * prev[c + d], b = 16u * cur[c + d], e = 16u * next[c + d];
-                score += (a > low ? a - out->background_x16 : 0u) + (b > low ? b - out->background_x16 : 0u) +
-                         (e > low ? e - out->background_x16 : 0u);
+                ring += (int32_t)(16u * prev[c + d]) + (int32_t)(16u * next[c + d]) - 2 * (int32_t)out->background_x16;
+                if (d)
+                    ring += (int32_t)(16u * cur[c + d]) - (int32_t)out->background_x16;
             }
+            uint32_t score = ring > 0 ? (uint32_t)ring : 0u;
             offer(out, max_spots, box, r, c, score);
         }
         uint16_t *t = prev;

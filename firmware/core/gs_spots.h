@@ -2,8 +2,9 @@
  *
  * One pass over a sensor frame, three rows at a time: background and noise from a sparse
  * grid (a 10-bit histogram: median and MAD, no sort), 3x3 local maxima above
- * background + n_sigma * sigma scored by their 3x3 excess (a smeared star outscores a hot
- * pixel of the same peak), and a bounded list of the best ones with non-maximum suppression. The exact rules are the FIND_SPOTS doc of firmware/proto/protocol.toml; the
+ * background + n_sigma * sigma scored by their 8 neighbours' excess (a star's PSF spreads
+ * there; a hot pixel or a cosmic-ray hit does not), and a bounded list of the best ones with
+ * non-maximum suppression. The exact rules are the FIND_SPOTS doc of firmware/proto/protocol.toml; the
  * Python head emulator follows them to the pixel. No malloc: every buffer is in the
  * caller's gs_spot_scratch.
  */
@@ -20,7 +21,7 @@
 
 typedef struct {
     uint16_t row, col;
-    uint32_t score; /* DN x 16: excess of the 3x3 pixels above background + 2 sigma */
+    uint32_t score; /* DN x 16: excess over the background of the 8 neighbours (>= 0) */
 } gs_spot;
 
 typedef struct {

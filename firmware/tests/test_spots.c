@@ -1,5 +1,5 @@
 /* test_spots.c - FIND_SPOTS on a hand-built image: background statistics, local maxima,
- * tie rules, 3x3 scores, suppression, the bounded list, clipped windows, rejections. Every expected
+ * tie rules, neighbour scores, suppression, the bounded list, clipped windows, rejections. Every expected
  * value below is worked out by hand from the image. */
 #include <string.h>
 
@@ -17,11 +17,11 @@ static uint8_t q[16];
  * even (r,c), 101 where both are odd). */
 static void put(uint16_t row, uint16_t col, uint16_t v) { img[row * W + col] = v; }
 
-static void blob(uint16_t row, uint16_t col, uint16_t peak)
+static void blob(uint16_t row, uint16_t col, uint16_t peak, uint16_t ring)
 {
     for (int dr = -1; dr <= 1; dr++)
         for (int dc = -1; dc <= 1; dc++)
-            put((uint16_t)(row + dr), (uint16_t)(col + dc), (uint16_t)(dr || dc ? 300 : peak));
+            put((uint16_t)(row + dr), (uint16_t)(col + dc), (uint16_t)(dr || dc ? ring : peak));
 }
 
 static void scene(void)
@@ -29,11 +29,11 @@ static void scene(void)
     for (uint16_t r = 0; r < H; r++)
         for (uint16_t c = 0; c < W; c++)
             img[r * W + c] = (uint16_t)((r & 1u) && (c & 1u) ? 101 : 100);
-    blob(10, 10, 900);   /* brightest */
-    blob(12, 14, 500);   /* 2 rows, 4 cols from it: inside box 7 -> suppressed */
-    blob(30, 40, 600);
-    blob(40, 5, 700);
-    blob(1, 60, 650);    /* next to the top edge: its window is clipped to rows 0..4 */
+    blob(10, 10, 900, 300); /* best */
+    blob(12, 14, 500, 250); /* 2 rows, 4 cols from it: inside box 7 -> suppressed */
+    blob(30, 40, 600, 200);
+    blob(40, 5, 700, 280);
+    blob(1, 60, 650, 260);  /* next to the top edge: its window is clipped to rows 0..4 */
     put(20, 20, 2000);   /* above 10 bits: saturates to 1023, a single hot pixel */
     put(25, 30, 400);    /* two equal pixels side by side: the earlier one is the maximum */
     put(25, 31, 400);
@@ -73,10 +73,10 @@ static void spot_list_brightest_first_with_suppression(void **state)
     assert_int_equal(gs_get_u32(p + GS_FIND_SPOTS_REP_CANDIDATES), 7);
     uint16_t n = gs_get_u16(p + GS_FIND_SPOTS_REP_N_WINDOWS);
     assert_int_equal(n, 6);
-    /* score = excess of the 3x3 pixels above 101 DN (bg + 2 sigma): blob = (peak - 100) + 8 x 200;
-     * the hot pixel only its own 923; the equal pair 2 x 300 */
-    static const uint16_t want[6][3] = {{10, 10, 2400}, {40, 5, 2200}, {1, 60, 2150},
-                                        {30, 40, 2100}, {20, 20, 923},  {25, 30, 600}};
+    /* score = the 8 neighbours' excess over 100 DN: blob 8 x (ring - 100); the hot pixel only
+     * its four 101 neighbours (4); of the equal pair, the other one (300) and one 101 */
+    static const uint16_t want[6][3] = {{10, 10, 1600}, {40, 5, 1440}, {1, 60, 1280},
+                                        {30, 40, 800},  {25, 30, 301}, {20, 20, 4}};
     assert_int_equal(f->payload_len, GS_FIND_SPOTS_REP_SIZE + 6u * n);
     for (uint16_t i = 0; i < n; i++) {
         const uint8_t *s = p + GS_FIND_SPOTS_REP_SIZE + 6u * i;
@@ -107,9 +107,9 @@ static void bounded_list_keeps_the_brightest(void **state)
     assert_int_equal(gs_get_u32(p + GS_FIND_SPOTS_REP_CANDIDATES), 7);
     assert_int_equal(gs_get_u16(p + GS_FIND_SPOTS_REP_N_WINDOWS), 3);
     const uint8_t *s = p + GS_FIND_SPOTS_REP_SIZE;
-    assert_int_equal(gs_get_u16(s + 4), 2400);
-    assert_int_equal(gs_get_u16(s + 6 + 4), 2200);
-    assert_int_equal(gs_get_u16(s + 12 + 4), 2150);
+    assert_int_equal(gs_get_u16(s + 4), 1600);
+    assert_int_equal(gs_get_u16(s + 6 + 4), 1440);
+    assert_int_equal(gs_get_u16(s + 12 + 4), 1280);
     /* a higher threshold (600 DN: 100 + n_sigma * 0.5) leaves 1023, 900, 700, 650 */
     f = rig_call(r, GS_MSG_FIND_SPOTS, 12, q, req(1000 * 16, 8, 3));
     p = f->payload;

@@ -24,17 +24,19 @@ def test_hand_worked_image():
     h, w = 48, 64
     img = np.full((h, w), 100, np.uint16)
     img[1::2, 1::2] = 101
-    for r, c, p in [(10, 10, 900), (12, 14, 500), (30, 40, 600), (40, 5, 700), (1, 60, 650)]:
-        img[r - 1:r + 2, c - 1:c + 2] = 300
+    for r, c, p, ring in [(10, 10, 900, 300), (12, 14, 500, 250), (30, 40, 600, 200), (40, 5, 700, 280),
+                          (1, 60, 650, 260)]:
+        img[r - 1:r + 2, c - 1:c + 2] = ring
         img[r, c] = p
     img[20, 20], img[25, 30], img[25, 31] = 2000, 400, 400
     d = find_spots(img, 96, 8, 7)
     assert (d["background_x16"], d["sigma_x16"], d["threshold_x16"], d["candidates"]) == (1600, 8, 1648, 7)
-    # score: excess of the 3x3 pixels above bg + 2σ = 101 DN (blob: peak - 100 + 8 × 200)
-    assert d["spots"].tolist() == [[10, 10, 2400], [40, 5, 2200], [1, 60, 2150], [30, 40, 2100], [20, 20, 923],
-                                   [25, 30, 600]]
+    # score: the 8 neighbours' excess over 100 DN (blob: 8 × (ring − 100); the hot pixel 4 × 1; the
+    # earlier of the equal pair: its twin's 300 and one 101)
+    assert d["spots"].tolist() == [[10, 10, 1600], [40, 5, 1440], [1, 60, 1280], [30, 40, 800], [25, 30, 301],
+                                   [20, 20, 4]]
     assert int(np.sum(d["spans"][:, 3] - d["spans"][:, 2])) == 5 * 49 + 35
-    assert find_spots(img, 96, 3, 7)["spots"][:, 2].tolist() == [2400, 2200, 2150]
+    assert find_spots(img, 96, 3, 7)["spots"][:, 2].tolist() == [1600, 1440, 1280]
     assert [check_settings(*s) for s in [(0, 8, 7), (96, 0, 7), (96, 8, 6), (96, 64, 9), (96, 8, 7)]] == [1, 2, 3, 4, 0]
 
 
