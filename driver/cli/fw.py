@@ -7,6 +7,7 @@ TARGETS = {
     "host": "gyrostar.fwtools.cli_host",
     "arm": "gyrostar.fwtools.cli_arm",
     "ping": "gyrostar.fwtools.cli_ping",
+    "spots": "gyrostar.fwtools.cli_spots",
 }
 
 

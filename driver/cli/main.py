@@ -7,7 +7,7 @@ Sub-commands (each has ``--help``):
     bench      speed benchmarks, each a ratio against a baseline measured in the same run
     calibrate  field calibration (gyro-static, gyro-scale, dark, camera, alignment)
     replay     feed a recorded log back through the driver; export it
-    fw         camera-head firmware tools (build, host program, ARM image, ping)
+    fw         camera-head firmware tools (build, host program, ARM image, ping, spots)
     sim        the physical simulator (frame rendering)
 
 Exit codes: see :data:`gyrostar.errors.EXIT_CODES` (also printed by ``gyrostar --help``).
@@ -36,7 +36,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "bench": ("speed benchmarks with same-run baselines (ratios)", "gyrostar.cli.bench"),
     "calibrate": ("field calibration: gyro, dark frames, camera, alignment", "gyrostar.cli.calibrate"),
     "replay": ("replay a recorded log through the driver; export CSV/HDF5", "gyrostar.cli.replay"),
-    "fw": ("camera-head firmware: build, host program, ARM image, ping", "gyrostar.cli.fw"),
+    "fw": ("camera-head firmware: build, host program, ARM image, ping, spots", "gyrostar.cli.fw"),
     "sim": ("physical simulator: render frames", "gyrostar.cli.sim"),
 }
 

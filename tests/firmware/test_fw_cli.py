@@ -121,3 +121,25 @@ def test_fw_arm_run_stops_qemu_on_sigterm(tmp_path):
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+def test_fw_spots_lists_the_heads_spots():
+    """`gyrostar fw spots` against the host program holding a frame with three stars."""
+    import numpy as np
+
+    build.build("host")
+    img = np.full((64, 96), 50, np.uint16)
+    for r, c, peak in [(10, 20, 900), (40, 70, 600), (30, 40, 300)]:
+        img[r - 1:r + 2, c - 1:c + 2] = peak // 3
+        img[r, c] = peak
+    with FirmwareHost(96, 64, planes=1) as host:
+        host.pixels.write_frame(img)
+        proc = _gyrostar("fw", "spots", host.path, "--max-spots", "8", "--json")
+        bad = _gyrostar("fw", "spots", host.path, "--box", "8")
+    assert proc.returncode == 0, proc.stderr
+    res = json.loads(proc.stdout)
+    assert [s[:2] for s in res["spots"]] == [[10, 20], [40, 70], [30, 40]]
+    assert res["background_dn"] == 50.0 and res["candidates"] == 3
+    for (r, c, _), (u, v, _) in zip(res["spots"], res["centroids_uv_flux"]):
+        assert abs(u - c) < 0.01 and abs(v - r) < 0.01           # symmetric blobs: centroid on the peak
+    assert bad.returncode == 2 and "--box 8" in bad.stderr and "Traceback" not in bad.stderr
