@@ -331,6 +331,12 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
         res_top["head_mode"] = "stream"
     else:
         res_top["head_mode"] = "request"
+    port = loop.head
+    if hasattr(port, "acquire"):
+        # the lost-in-space image the port used: the head's spot list, or full frames (by
+        # configuration, or because the firmware answered FIND_SPOTS with UNKNOWN_TYPE)
+        res_top["acquisition_image"] = "full_frame" if port.acquire != "spots" or port.spots_unsupported \
+            else "spots"
     res_top["calibration"] = {"path": calib.path, "sha256": calib.sha256} if calib.cal is not None else None
     from .health import health
 

@@ -30,6 +30,7 @@ def test_spot_list_acquires_over_a_slow_uart(tmp_path):
     # exposure + the head's scan + ~5 kB at 92 kB/s, then the confirming image
     assert _first_track_s(res) < 0.5, res["health"]["mode_timeline"]
     assert res["counters"]["acquisitions"] == 1 and res["counters"]["acquisition_failures"] == 0
+    assert res["acquisition_image"] == "spots"
     assert res["attitude_error_arcsec_1sigma"] < 3 * res["floor_arcsec"]
     assert res["samples_lost"] == 0
 
@@ -40,7 +41,7 @@ def test_full_frame_acquisition_takes_the_wire_time(tmp_path):
     assert res["mode_seconds"]["TRACK"] == 0.0 and res["counters"]["acquisitions"] == 0
 
 
-def test_firmware_without_find_spots_falls_back_to_full_frames(tmp_path, monkeypatch, caplog):
+def test_firmware_without_find_spots_falls_back_to_full_frames(tmp_path, monkeypatch):
     from gyrostar.mocks import head_emulator as he
     from gyrostar.protocol.defs import ErrorCode
 
@@ -51,7 +52,7 @@ def test_firmware_without_find_spots_falls_back_to_full_frames(tmp_path, monkeyp
     res, _ = _run(tmp_path, "usb-fs", "spots", 4.0)
     # full frames over usb-fs: ~1.5 s each, then TRACK
     assert 1.0 < _first_track_s(res) < 3.5, res["health"]["mode_timeline"]
-    assert any("no FIND_SPOTS" in r.getMessage() for r in caplog.records)
+    assert res["acquisition_image"] == "full_frame"
     assert res["counters"]["acquisition_failures"] == 0
 
 
