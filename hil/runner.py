@@ -510,6 +510,15 @@ def human_summary(r: dict) -> str:
         f"  numba start-up {r['numba_startup']['seconds']:.2f} s ({r['numba_startup']['cache_hits']} cached, "
         f"{r['numba_startup']['compiled']} compiled)",
     ]
+    if r.get("head_mode") == "stream" and r.get("frame_rate_hz") is not None:
+        lb = r.get("link_budget") or {}
+        lines.append(f"  head stream: {r['frame_rate_hz']:.1f} frames/s, link {lb.get('preset', '?')} "
+                     f"{100 * (r.get('link_utilisation') or 0):.0f} % used, exposure → output p50 "
+                     f"{f(r.get('exposure_to_output_ms_p50'), '.1f')} ms; stars cut for the link in "
+                     f"{lb.get('frames_stars_cut', 0)} frames, rate changes {len(lb.get('rate_changes', []))}")
+    if r.get("acquisition_image"):
+        spots = r["acquisition_image"] == "spots"
+        lines.append("  lost-in-space image: " + ("the head's spot list (FIND_SPOTS)" if spots else "full frames"))
     if r.get("bias_error_dps_final") is not None:
         lines.append("  final bias error (°/s): " + " ".join(f"{v:+.4f}" for v in r["bias_error_dps_final"]))
     if r.get("centroid_error_px_rms") is not None:

@@ -41,3 +41,18 @@ def test_every_eval_starid_option_has_help_and_default():
             continue
         assert action.help, f"--{action.dest} has no help text"
         assert "default" in action.help, f"--{action.dest} does not say its default: {action.help!r}"
+
+
+def test_run_summary_says_what_the_head_stream_and_acquisition_did():
+    r = {"scenario": "demo", "flatsat": "sim", "duration_s": 3.0, "wall_s": 3.1, "realtime": False,
+         "attitude_error_arcsec_1sigma": 3.9, "floor_arcsec": 4.1, "mode_seconds": {"TRACK": 3.0},
+         "frames": 300, "gyro_samples": 1200, "samples_lost": 0, "latency_p99_ms": 0.1, "latency_clock": "host",
+         "cpu_percent": 15.0, "overruns": 0, "numba_startup": {"seconds": 0.5, "cache_hits": 14, "compiled": 0},
+         "run_folder": "runs/x", "head_mode": "stream", "frame_rate_hz": 97.0, "link_utilisation": 0.697,
+         "exposure_to_output_ms_p50": 16.2, "acquisition_image": "spots",
+         "link_budget": {"preset": "uart-921k", "frames_stars_cut": 2492, "rate_changes": []}}
+    text = human_summary(r)
+    assert "97.0 frames/s, link uart-921k 70 % used, exposure → output p50 16.2 ms" in text
+    assert "stars cut for the link in 2492 frames" in text and "the head's spot list (FIND_SPOTS)" in text
+    r["acquisition_image"] = "full_frame"
+    assert "lost-in-space image: full frames" in human_summary(r)
