@@ -244,13 +244,16 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
         fs.start_faults(t_start_of(fs))
         period = 1.0 / loop.gyro.odr_hz
         try:
-            if fs.lockstep is not None:
-                loop.image.threaded = False      # centroid in the step: same result, no hand-over per frame
-                cpu_loop = _run_lockstep(fs, loop, duration, period, step_wall, line if status else None)
-            else:
-                sched = PeriodicScheduler(period)
-                cpu_loop = _run_realtime(fs, loop, gate, sched, duration, step_wall, line if status else None,
-                                         probe)
+            # a Ctrl-C lands between steps: the log never holds a step's inputs without its outputs
+            with interrupt.StepBoundary() as boundary:
+                if fs.lockstep is not None:
+                    loop.image.threaded = False      # centroid in the step: same result, no hand-over per frame
+                    cpu_loop = _run_lockstep(fs, loop, duration, period, step_wall, line if status else None,
+                                             boundary)
+                else:
+                    sched = PeriodicScheduler(period)
+                    cpu_loop = _run_realtime(fs, loop, gate, sched, duration, step_wall,
+                                             line if status else None, probe, boundary)
         except KeyboardInterrupt:       # Ctrl-C: stop here, keep and report the part that ran
             interrupted = True
             cpu_loop = None
@@ -390,7 +393,7 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
     return res_top
 
 
-def _run_realtime(fs, loop, gate, sched, duration: float, step_wall: list, line, probe) -> float:
+def _run_realtime(fs, loop, gate, sched, duration: float, step_wall: list, line, probe, boundary) -> float:
     """Real time: one loop step every gyro period on the monotonic clock. Returns the loop's
     CPU seconds."""
     cpu = 0.0
@@ -410,18 +413,20 @@ def _run_realtime(fs, loop, gate, sched, duration: float, step_wall: list, line,
         c0 = time.thread_time()
         w0 = time.perf_counter()
         gate.loop_enter()
+        boundary.inside = True
         loop.step()
         step_wall.append(time.perf_counter() - w0)
         cpu += time.thread_time() - c0
         sched.done()
         gate.loop_exit(sched.deadline)
+        boundary.step_done()
         if line is not None and loop.last_output is not None:
             line.update(loop.last_output, fs.truth_at(loop.last_output["t"]), step_wall[-1] * 1e6,
                         sched.overruns, duration, t0=t_start)
     return cpu
 
 
-def _run_lockstep(fs, loop, duration: float, period: float, step_wall: list, line) -> float:
+def _run_lockstep(fs, loop, duration: float, period: float, step_wall: list, line, boundary) -> float:
     """Fast mode: step the loop every gyro period of simulated time. A request-mode head
     port's jobs run at once on their own time line (:meth:`Lockstep.run_job`); a worker
     thread (other head ports) runs between steps at the simulated times its replies (or
@@ -457,8 +462,10 @@ def _run_lockstep(fs, loop, duration: float, period: float, step_wall: list, lin
         if fs.loop_stalled(t):        # injected "loop does not read the FIFO" fault
             continue
         w0 = time.perf_counter()
+        boundary.inside = True
         loop.step()
         step_wall.append(time.perf_counter() - w0)
+        boundary.step_done()
         if not inline:
             lk.settle(head)
         if line is not None and loop.last_output is not None and w0 - shown > 0.2:

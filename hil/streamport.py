@@ -107,7 +107,10 @@ class StreamPort(HeadPort):
         self.stream_starts = 0
         self.wire_bytes = 0                        # FRAME bytes received (head → host)
         self.sent_bytes = 0                        # SET_WINDOWS bytes sent while streaming (host → head)
-        self._t_rx = [float("nan"), float("nan")]  # first and last frame arrival (host s)
+        # first and last frame's mid-exposure (host s, from the head's clock: host scheduling
+        # cannot bunch it) and the first frame's bytes (they arrived before the span began)
+        self._t_mid = [float("nan"), float("nan")]
+        self._first_bytes = 0
         self._arrival = np.zeros(1 << 14)          # mid-exposure → frame received (s), ring
         self._n_arrival = 0
         self._start_key = 0
@@ -223,10 +226,12 @@ class StreamPort(HeadPort):
         n = min(self._n_arrival, len(self._arrival))
         if n:
             out["arrival_ms_p50"] = float(np.median(self._arrival[:n])) * 1e3   # mid-exposure → received
-        t0, t1 = self._t_rx
+        t0, t1 = self._t_mid
         if self.frames_received > 1 and t1 > t0:
+            # the frames after the first, over the head time they span: a rate the host's
+            # reading schedule (frames read in a burst on a loaded host) cannot inflate
             span = t1 - t0
-            down, up = self.wire_bytes / span, self.sent_bytes / span
+            down, up = (self.wire_bytes - self._first_bytes) / span, self.sent_bytes / span
             out["down_bytes_per_s"], out["up_bytes_per_s"] = down, up
             out["down_bytes_per_frame"] = self.wire_bytes / self.frames_received
             if self.link_preset is not None:
@@ -353,9 +358,11 @@ class StreamPort(HeadPort):
             got = self._sets.get(key)
         self.frames_received += 1
         self.wire_bytes += fr.wire_bytes
-        if self._t_rx[0] != self._t_rx[0]:
-            self._t_rx[0] = fr.t_rx
-        self._t_rx[1] = fr.t_rx
+        t_mid = fr.t_mid_host if fr.t_mid_host == fr.t_mid_host else fr.t_rx     # nan before time sync
+        if self._t_mid[0] != self._t_mid[0]:
+            self._t_mid[0] = t_mid
+            self._first_bytes = fr.wire_bytes
+        self._t_mid[1] = t_mid
         self._arrival[self._n_arrival % len(self._arrival)] = fr.t_rx - fr.t_mid_host
         self._n_arrival += 1
         self.head_counters = {"dropped": fr.dropped, "late_sets": fr.late_sets, "backpressure": fr.backpressure}

@@ -69,3 +69,60 @@ def ignore_in_child() -> None:
     """In a forked child: ignore SIGINT (the parent stops us), then unblock it."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
+class StepBoundary:
+    """Ctrl-C and SIGTERM take effect between loop steps, never inside one.
+
+    A step reads the gyro FIFO (logged as it is read) and then emits that batch's outputs
+    (logged as they are emitted); a signal that raised between the two would leave a log whose
+    last inputs have no outputs, and its replay would show one step more than the run did.
+    Inside the block, a signal that arrives while :attr:`inside` is True is held and delivered
+    (to the handler that was installed before: :func:`watch`'s or Python's default) by
+    :meth:`step_done`; between steps it is delivered at once. Main thread only; elsewhere, or
+    for a signal whose previous action is not a Python handler, nothing changes.
+    """
+
+    _SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self):
+        self.inside = False
+        self._pending: tuple | None = None
+        self._old: dict = {}
+
+    def __enter__(self) -> StepBoundary:
+        if threading.current_thread() is threading.main_thread():
+            for sig in self._SIGNALS:
+                old = signal.getsignal(sig)
+                if callable(old):
+                    self._old[sig] = old
+                    signal.signal(sig, self._on_signal)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for sig, old in self._old.items():
+            signal.signal(sig, old)
+        self._old.clear()
+        self.inside = False
+        self._deliver()
+
+    def _on_signal(self, signum, frame) -> None:
+        if self.inside:
+            self._pending = (signum, frame)
+            return
+        self._old[signum](signum, frame)
+
+    def step_done(self) -> None:
+        """The step ended: deliver a signal held during it."""
+        self.inside = False
+        self._deliver()
+
+    def _deliver(self) -> None:
+        if self._pending is not None:
+            signum, frame = self._pending
+            self._pending = None
+            handler = self._old.get(signum) or signal.getsignal(signum)
+            if callable(handler):
+                handler(signum, frame)
+            else:
+                raise KeyboardInterrupt

@@ -1,0 +1,41 @@
+"""A Ctrl-C or SIGTERM during a loop step takes effect when the step ends (the log never holds a
+step's inputs without its outputs); between steps it takes effect at once."""
+
+import os
+import signal
+
+import pytest
+
+from gyrostar.cli import interrupt
+
+
+def test_signal_inside_a_step_is_held_until_it_ends():
+    done = []
+    with pytest.raises(KeyboardInterrupt):
+        with interrupt.StepBoundary() as b:
+            b.inside = True
+            os.kill(os.getpid(), signal.SIGINT)
+            done.append("rest of the step")          # the step runs to its end
+            b.step_done()
+            done.append("next step")                 # never reached
+    assert done == ["rest of the step"]
+
+
+def test_signal_between_steps_acts_at_once_and_handlers_come_back():
+    before = signal.getsignal(signal.SIGINT)
+    with pytest.raises(KeyboardInterrupt):
+        with interrupt.StepBoundary():
+            os.kill(os.getpid(), signal.SIGINT)
+            raise AssertionError("not interrupted")
+    assert signal.getsignal(signal.SIGINT) is before
+
+
+def test_sigterm_under_watch_is_held_and_reported_as_terminated():
+    with interrupt.watch():
+        with pytest.raises(KeyboardInterrupt):
+            with interrupt.StepBoundary() as b:
+                b.inside = True
+                os.kill(os.getpid(), signal.SIGTERM)
+                assert not interrupt.seen()          # held: watch's handler has not run yet
+                b.step_done()
+        assert interrupt.seen() and interrupt.reason() == "terminated (SIGTERM)"
