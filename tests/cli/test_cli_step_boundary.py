@@ -5,7 +5,6 @@ import os
 import signal
 
 import pytest
-
 from gyrostar.cli import interrupt
 
 
