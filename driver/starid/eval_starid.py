@@ -49,6 +49,7 @@ METHODS = ("pyramid", "grid", "extended-grid", "extended-triangle")
 SWEEPS = ("fig10", "fig11", "fig12", "fig13", "fig14", "fig15", "fig16")
 DPH = math.pi / 180.0 / 3600.0
 FAST_PER_FIELD = 10  # navigation stars per field of Pyramid's first (thinned) tier
+MAG_SIGMA_FLOOR = 0.2    # mag: the narrowest photometric window Pyramid is given (the paper-001 camera)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -200,7 +201,10 @@ def setup(cfg: TrialConfig) -> dict:
         index = load_index(cfg.catalog, cfg.mag_limit, sep, per_field)
         # thinned first tier (the brightest stars per field) unless the index is thinned already
         fast = load_index(cfg.catalog, cfg.mag_limit, sep, FAST_PER_FIELD) if per_field == 0 else None
-        out["ident"] = Pyramid(index, cam, sigma_px=sigma, fast_index=fast)
+        # measured magnitudes in the search and the bound, never trusted beyond the paper-001
+        # camera's 0.2 mag (a field generated with exact magnitudes still gets a 0.2 mag window)
+        out["ident"] = Pyramid(index, cam, sigma_px=sigma, fast_index=fast,
+                               sigma_mag=max(cfg.total_mag_noise, MAG_SIGMA_FLOOR))
         if cfg.peer:
             from .peers import load_peer
 

@@ -332,7 +332,7 @@ def extended_identify(b, q_pred, cam, vec, vmag, vstart, vstars, vvec, vh, vg, m
     q, match, nok, _ = verify_matches(b, vec, raw, tol)
     if nok <= 3:
         # a weak solution: its attitude must label other centroids (unambiguous both ways)
-        label_rest(b, q, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, tol, match)
+        label_rest(b, q, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, tol, match, np.empty(0), 0.0)
         q, match, nok, _ = verify_matches(b, vec, match, tol)
     while 4 <= nok <= LOO_MAX and loo_reject(b, vec, match, LOO_TOL * tol):
         q, match, nok, _ = verify_matches(b, vec, match, tol)

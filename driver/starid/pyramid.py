@@ -106,8 +106,30 @@ def _triad(b1, b2, r1, r2):
 
 
 @njit(cache=True)
-def _confirm(b, nb, i, j, k, x, y, z, vec, is_nav, vstart, vstars, vvec, vh, vg, eps, max_sep):
-    """First observed star r < ``nb``, r ∉ {i,j,k}, with a unique catalog star w fitting all three angles.
+def _mag_ok(smag, vmag, mwin, s, w):
+    """Spot ``s`` may be catalog star ``w``: no magnitudes given (``smag`` empty, or NaN for
+    ``s``), or |V_w − m_s| ≤ ``mwin``."""
+    if smag.shape[0] == 0:
+        return True
+    m = smag[s]
+    return not (abs(vmag[w] - m) > mwin)     # NaN: no gate
+
+
+@njit(cache=True)
+def _mag_fraction(sorted_v, m, mwin):
+    """Share of the stars (magnitudes ``sorted_v``, ascending) within ``mwin`` of ``m``: the
+    chance that a random one passes :func:`_mag_ok` (1 for NaN; at least one star's share)."""
+    if not (m == m):
+        return 1.0
+    lo = np.searchsorted(sorted_v, m - mwin, side="left")
+    hi = np.searchsorted(sorted_v, m + mwin, side="right")
+    return max(hi - lo, 1) / sorted_v.shape[0]
+
+
+@njit(cache=True)
+def _confirm(b, nb, i, j, k, x, y, z, vec, is_nav, vstart, vstars, vvec, vh, vg, eps, max_sep, smag, vmag, mwin):
+    """First observed star r < ``nb``, r ∉ {i,j,k}, with a unique catalog star w fitting all three angles
+    (and r's measured magnitude: :func:`_mag_ok`).
 
     The candidate attitude (triad on the triangle's longest side) predicts r's ICRS direction;
     ``w`` is searched in a cone around it (voxel grid) wide enough for the triad's error, and
@@ -163,7 +185,7 @@ def _confirm(b, nb, i, j, k, x, y, z, vec, is_nav, vstart, vstars, vvec, vh, vg,
                     if vw[0] * p[0] + vw[1] * p[1] + vw[2] * p[2] < cosr:
                         continue
                     w = vstars[t]
-                    if w == x or w == y or w == z or not is_nav[w]:
+                    if w == x or w == y or w == z or not is_nav[w] or not _mag_ok(smag, vmag, mwin, r, w):
                         continue
                     d = vw[0] * vx[0] + vw[1] * vx[1] + vw[2] * vx[2]
                     if d < ci_lo or d > ci_hi:
@@ -183,9 +205,9 @@ def _confirm(b, nb, i, j, k, x, y, z, vec, is_nav, vstart, vstars, vvec, vh, vg,
 
 
 @njit(cache=True)
-def _triangle_candidates(b, i, j, k, vec, pt, pa, pb, kv, km, kq, eps, mark, nxt, oth, cand):
-    """Catalog triangles (x, y, z) matching observed (i, j, k): all three sides within ε and
-    the same handedness. Writes up to ``_MAX_CAND`` rows of ``cand``; returns their count
+def _triangle_candidates(b, i, j, k, vec, pt, pa, pb, kv, km, kq, eps, mark, nxt, oth, cand, smag, vmag, mwin):
+    """Catalog triangles (x, y, z) matching observed (i, j, k): all three sides within ε,
+    the same handedness and each star's magnitude (:func:`_mag_ok`). Writes up to ``_MAX_CAND`` rows of ``cand``; returns their count
     (more than ``_MAX_CAND``: too many to be useful) and the work arrays ``nxt``/``oth``
     (grown when needed). ``mark`` int32 (N,) zeros, left zeroed.
 
@@ -228,6 +250,8 @@ def _triangle_candidates(b, i, j, k, vec, pt, pa, pb, kv, km, kq, eps, mark, nxt
         for o in range(2):
             x = pa[p] if o == 0 else pb[p]
             y = pb[p] if o == 0 else pa[p]
+            if not (_mag_ok(smag, vmag, mwin, i, x) and _mag_ok(smag, vmag, mwin, j, y)):
+                continue
             h = x if from_x else y
             u = y if from_x else x   # the vertex whose side to z is tested by angle
             t = mark[h] - 1
@@ -243,7 +267,7 @@ def _triangle_candidates(b, i, j, k, vec, pt, pa, pb, kv, km, kq, eps, mark, nxt
                 d = vu[0] * vzz[0] + vu[1] * vzz[1] + vu[2] * vzz[2]
                 if d < c_lo or d > c_hi:
                     continue
-                if np.sign(_triple(vec[x], vec[y], vzz)) != hand:
+                if np.sign(_triple(vec[x], vec[y], vzz)) != hand or not _mag_ok(smag, vmag, mwin, k, z):
                     continue
                 if nc < _MAX_CAND:
                     cand[nc, 0] = x
@@ -259,11 +283,14 @@ def _triangle_candidates(b, i, j, k, vec, pt, pa, pb, kv, km, kq, eps, mark, nxt
 @njit(cache=True)
 def _search(b, vec, vmag, is_nav, pt, pa, pb, kv, km, kq, vstart, vstars, vvec, vh, vg, eps, label_tol, max_sep,
             fov_radius, p_false_max, max_triangles, mark, nnav, nloc, nmin, lab_nloc, max_spots, budgets, tried,
-            status):
+            status, smag, mwin, fn, flab):
     """Pyramid search over one navigation-star tier (pair table ``pt/pa/pb`` with its k-vector,
     ``is_nav``/``nnav`` its stars, ``nloc`` their local density as an all-sky count and ``nmin``
     its 5th percentile (early rejection only); only the brightest ``max_spots`` spots form pyramids);
-    ``tried``/``status`` carry over from earlier tiers.
+    ``tried``/``status`` carry over from earlier tiers. Measured magnitudes ``smag`` (empty: none)
+    gate every candidate star within ``mwin``; ``fn``/``flab`` (n,): the share of this tier's
+    navigation stars / of all indexed stars a spot's magnitude admits (1 without magnitudes),
+    each star's factor in the false-match count.
     Returns ``(match (n,), q (4,), p_false, status, triangles_tried)``."""
     n = b.shape[0]
     nstar = vec.shape[0]
@@ -273,6 +300,9 @@ def _search(b, vec, vmag, is_nav, pt, pa, pb, kv, km, kq, vstart, vstars, vvec, 
     last_q = np.zeros(4)
     same_q = np.cos(5.0 * label_tol)  # two attitudes within 10 label tolerances: the same solution
     lab_min = nstar * label_tol * label_tol / 4.0 * nmin / nnav  # least chance of a random label
+    flab_min = 1.0
+    for s in range(n):
+        flab_min = min(flab_min, flab[s])
     nxt = np.empty(256, dtype=np.int32)
     oth = np.empty(256, dtype=np.int32)
     prev = 0
@@ -280,6 +310,9 @@ def _search(b, vec, vmag, is_nav, pt, pa, pb, kv, km, kq, vstart, vstars, vvec, 
         nb = min(n, max_spots) if lev == budgets.shape[0] else min(n, budgets[lev], max_spots)
         if nb <= prev:
             continue
+        fmin = 1.0       # the most selective magnitude among the spots that may confirm
+        for s in range(nb):
+            fmin = min(fmin, fn[s])
         for dj in range(1, nb - 1):
             for dk in range(1, nb - dj):
                 for i in range(0, nb - dj - dk):
@@ -297,19 +330,20 @@ def _search(b, vec, vmag, is_nav, pt, pa, pb, kv, km, kq, vstart, vstars, vvec, 
                         continue
                     sin_k = max(_sin_vertex(b[k], b[i], b[j]), 0.05)
                     # E₃ with the local density ρ (an all-sky count) for the stars around x
-                    g3 = nnav * eps ** 3 * np.sin(tij) / (np.pi * sin_k)
+                    g3 = nnav * eps ** 3 * np.sin(tij) / (np.pi * sin_k) * fn[i] * fn[j] * fn[k]
                     # early rejection: even in a sparse sky (5th percentile), with the best-placed confirming star
                     # and every other spot labelled, this triangle's pyramid could not pass the bound
                     if n == 3:
                         best = g3 * nmin * nmin * (tried + 1)
                     else:
-                        best = (g3 * nmin ** 3 * eps * eps / np.pi * (nb - 3) * (lab_min ** (n - 4) if lab_min < 1.0
-                                                                                   else 1.0) * (tried + 1))
+                        lm = lab_min * flab_min
+                        best = (g3 * nmin ** 3 * eps * eps / np.pi * fmin * (nb - 3) * (lm ** (n - 4) if lm < 1.0
+                                                                                          else 1.0) * (tried + 1))
                     if best > p_false_max:
                         continue
                     tried += 1
                     nc, nxt, oth = _triangle_candidates(b, i, j, k, vec, pt, pa, pb, kv, km, kq, eps, mark, nxt,
-                                                        oth, cand)
+                                                        oth, cand, smag, vmag, mwin)
                     if nc == 0 or nc > _MAX_CAND:
                         continue
                     if n == 3:
@@ -332,7 +366,7 @@ def _search(b, vec, vmag, is_nav, pt, pa, pb, kv, km, kq, vstart, vstars, vvec, 
                     bw = -1
                     for c in range(nc):
                         r, w = _confirm(b, nb, i, j, k, cand[c, 0], cand[c, 1], cand[c, 2], vec, is_nav, vstart,
-                                        vstars, vvec, vh, vg, eps, max_sep)
+                                        vstars, vvec, vh, vg, eps, max_sep, smag, vmag, mwin)
                         if r >= 0:
                             nconf += 1
                             best = c
@@ -346,7 +380,7 @@ def _search(b, vec, vmag, is_nav, pt, pa, pb, kv, km, kq, vstart, vstars, vvec, 
                     z = cand[best, 2]
                     rho = max(nloc[x], nloc[y], nloc[z], nloc[bw])
                     # any of the nb − 3 other spots could have confirmed a false candidate
-                    pf = g3 * rho ** 3 * eps * eps / (np.pi * sin_r) * (nb - 3) * tried
+                    pf = g3 * rho ** 3 * eps * eps / (np.pi * sin_r) * fn[br] * (nb - 3) * tried
                     lab = lab_nloc[x] * label_tol * label_tol / 4.0  # chance of a random label near x
                     # attitude from the pyramid, then label every spot
                     bb = np.empty((4, 3))
@@ -365,13 +399,16 @@ def _search(b, vec, vmag, is_nav, pt, pa, pb, kv, km, kq, vstart, vstars, vvec, 
                     match[j] = y
                     match[k] = z
                     match[br] = bw
-                    label_rest(b, q4, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, label_tol, match)
+                    label_rest(b, q4, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, label_tol, match, smag, mwin)
                     q, out, nok, _ = verify_matches(b, vec, match, label_tol)
                     if out[i] != x or out[j] != y or out[k] != z or out[br] != bw:
                         status = ST_REJECTED
                         match[:] = -1
                         continue
-                    pf *= lab ** (nok - 4)
+                    # every further label: a random spot near a star of the right magnitude
+                    for s in range(n):
+                        if out[s] >= 0 and s != i and s != j and s != k and s != br:
+                            pf *= lab * flab[s]
                     if pf > p_false_max:
                         status = ST_REJECTED
                         match[:] = -1
@@ -390,7 +427,7 @@ def _search(b, vec, vmag, is_nav, pt, pa, pb, kv, km, kq, vstart, vstars, vvec, 
 
 @njit(cache=True)
 def pyramid_core(b, vec, vmag, tiers, lab_nloc, vstart, vstars, vvec, vh, vg, eps, label_tol, max_sep, fov_radius,
-                 p_false_max, max_triangles, mark, budgets):
+                 p_false_max, max_triangles, mark, budgets, smag, mwin, lab_sorted_v):
     """Numba core. ``b`` (n,3) body unit vectors, brightest first; ``mark`` int32 (N,) zeros (work, left zeroed).
 
     ``tiers``: tuple of navigation-star tiers, searched in order, each
@@ -408,6 +445,10 @@ def pyramid_core(b, vec, vmag, tiers, lab_nloc, vstart, vstars, vvec, vh, vg, ep
     bounds the triangles tried over all tiers. The accepted ``p_false`` is the pyramid's
     expected false-match count times the number of triangles tried so far (a union bound
     over the search), and must be ≤ ``p_false_max``.
+    Magnitudes: ``smag`` (n,) measured V (NaN unknown) or empty (positions only); a catalog
+    star may stand for a spot only within ``mwin`` (mag) of its measured V, and each star's
+    term of the false-match count is multiplied by the share of stars that window admits
+    (``tier[7]``: the tier's navigation magnitudes sorted; ``lab_sorted_v``: every indexed star's).
     Returns ``(match (n,), q (4,), p_false, status, triangles_tried)``.
     """
     n = b.shape[0]
@@ -415,23 +456,35 @@ def pyramid_core(b, vec, vmag, tiers, lab_nloc, vstart, vstars, vvec, vh, vg, ep
         return -np.ones(n, dtype=np.int64), np.array([0.0, 0.0, 0.0, 1.0]), np.inf, ST_TOO_FEW, 0
     tried = 0
     status = ST_NO_MATCH
+    use_mag = smag.shape[0] == n
+    gate = smag[:n] if use_mag else smag[:0]       # the magnitudes the search gates on (empty: none)
+    flab = np.ones(n)
+    fn = np.ones(n)
+    if use_mag:
+        for s in range(n):
+            flab[s] = _mag_fraction(lab_sorted_v, smag[s], mwin)
     for tier in tiers:
-        is_nav, pt, pa, pb, kv, nloc, kmq = tier
+        is_nav, pt, pa, pb, kv, nloc, kmq, nav_sorted_v = tier
+        if use_mag:
+            for s in range(n):
+                fn[s] = _mag_fraction(nav_sorted_v, smag[s], mwin)
         match, q, pf, status, tried = _search(b, vec, vmag, is_nav, pt, pa, pb, kv, kmq[0], kmq[1], vstart, vstars,
                                               vvec, vh, vg, eps, label_tol, max_sep, fov_radius, p_false_max,
                                               max_triangles, mark, kmq[2], nloc, kmq[4], lab_nloc, int(kmq[3]),
-                                              budgets, tried, status)
+                                              budgets, tried, status, gate, mwin, fn, flab)
         if status == ST_OK or status == ST_SPARSE or tried >= max_triangles:
             return match, q, pf, status, tried
     return match, q, np.inf, status, tried
 
 
 @njit(cache=True)
-def label_rest(b, q, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, tol, match):
+def label_rest(b, q, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, tol, match, smag, mwin):
     """Label unmatched observed stars with catalog stars predicted within ``tol`` (in place).
 
     A label is given only when it is unambiguous both ways: exactly one catalog star within
-    ``tol`` of the observed star, and no other observed star within ``tol`` of that one.
+    ``tol`` of the observed star, and no other observed star within ``tol`` of that one; with
+    measured magnitudes ``smag`` (empty: none) that star must also be within ``mwin`` of the
+    spot's V (:func:`_mag_ok`).
     Then every label, the caller's included, is dropped when two observed stars lie within
     ``tol`` of its catalog star, and moves to the observed star nearest its catalog star
     (or is dropped when that one is named already).
@@ -467,7 +520,7 @@ def label_rest(b, q, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, tol, m
             if v[0] * vec[s, 0] + v[1] * vec[s, 1] + v[2] * vec[s, 2] >= cos_tol:
                 hits += 1
                 bt = t
-        if hits == 1 and count_obs[bt] == 1 and not used[bt]:
+        if hits == 1 and count_obs[bt] == 1 and not used[bt] and _mag_ok(smag, vmag, mwin, i, near[bt]):
             match[i] = near[bt]
             used[bt] = True
     # every label (the caller's too) belongs to the spot nearest its star: a spurious spot
@@ -496,10 +549,11 @@ def label_rest(b, q, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, tol, m
 
 @njit(cache=True)
 def pyramid_identify_uv(uv, cam, tiers, lab_nloc, vec, vmag, ids, vstart, vstars, vvec, vh, vg, eps, label_tol, max_sep,
-                        fov_radius, p_false_max, max_triangles, mark, budgets, mag, check):
+                        fov_radius, p_false_max, max_triangles, mark, budgets, mag, check, mwin, lab_sorted_v):
     """One compiled call: centroids ``uv`` (n, 2) px → body vectors → :func:`pyramid_core` →
     the per-star check :func:`gyrostar.starid.star_check.check_stars` (scalars ``check`` from
-    ``StarCheck.settings()``; empty: no check here). ``mag`` (n,) measured V or empty.
+    ``StarCheck.settings()``; empty: no check here). ``mag`` (n,) measured V or empty; the search
+    uses it when ``mwin`` > 0 (:func:`pyramid_core`).
     Returns ``(match, catalog ids, q, status, p_false, n_ok)``; status ``ST_BAD`` for a
     non-finite centroid."""
     n = uv.shape[0]
@@ -508,8 +562,10 @@ def pyramid_identify_uv(uv, cam, tiers, lab_nloc, vec, vmag, ids, vstart, vstars
             none = -np.ones(n, dtype=np.int64)
             return none, none.copy(), np.array([0.0, 0.0, 0.0, 1.0]), ST_BAD, np.inf, 0
     b = unproject_many(cam, uv)
+    smag = mag[:n] if (mwin > 0.0 and mag.shape[0] == n) else mag[:0]
     match, q, pf, st, _ = pyramid_core(b, vec, vmag, tiers, lab_nloc, vstart, vstars, vvec, vh, vg, eps, label_tol,
-                                       max_sep, fov_radius, p_false_max, max_triangles, mark, budgets)
+                                       max_sep, fov_radius, p_false_max, max_triangles, mark, budgets, smag, mwin,
+                                       lab_sorted_v)
     n_ok = 0
     for i in range(n):
         if match[i] >= 0:
@@ -555,6 +611,11 @@ class Pyramid:
     ``check``: the per-star verification stage (any object with ``apply(b, mag, ref, vmag,
     match) -> (q, match, n_ok)``); default a :class:`StarCheck` at ``sigma_px`` and the
     index's limiting magnitude, three stars minimum.
+    ``sigma_mag``: 1σ of measured minus catalog V (mag, sensor and catalog together); when > 0
+    and the caller gives magnitudes, a catalog star stands for a spot only within
+    ``n_sigma·sigma_mag`` of its measured V, in the search, the confirming star and the labels,
+    and every star's term of the false-match count is multiplied by the share of stars that
+    window admits. 0: positions only (magnitudes then reach the per-star check alone).
     """
 
     index: StarIndex
@@ -567,10 +628,12 @@ class Pyramid:
     fast_spots: int = 10
     max_triangles: int = 400
     check: object = None
+    sigma_mag: float = 0.0
 
     def __post_init__(self) -> None:
-        if not (self.sigma_px > 0 and self.n_sigma > 0 and self.max_triangles >= 1):
-            raise ConfigError("pyramid needs sigma_px > 0, n_sigma > 0 and max_triangles ≥ 1")
+        if not (self.sigma_px > 0 and self.n_sigma > 0 and self.max_triangles >= 1 and self.sigma_mag >= 0):
+            raise ConfigError("pyramid needs sigma_px > 0, n_sigma > 0, max_triangles ≥ 1 and sigma_mag ≥ 0")
+        self.mwin = self.n_sigma * self.sigma_mag
         if not (len(self.budgets) >= 1 and all(int(k) >= 3 for k in self.budgets)
                 and list(self.budgets) == sorted(self.budgets)):
             raise ConfigError(f"pyramid spot budgets must be ascending and ≥ 3, got {self.budgets!r}")
@@ -593,8 +656,9 @@ class Pyramid:
         dens = [local_density(t) for t in tiers]
         self._tiers = tuple((t.is_nav, t.pair_theta, t.pair_a, t.pair_b, t.kv, d,
                              (float(t.kv_m), float(t.kv_q), float(np.count_nonzero(t.is_nav)), cap,
-                              float(np.percentile(d[t.is_nav], 5))))
+                              float(np.percentile(d[t.is_nav], 5))), np.sort(t.vmag[t.is_nav]))
                             for t, cap, d in zip(tiers, caps, dens))
+        self._lab_sorted_v = np.sort(self.index.vmag)
         # every indexed star (labels): the full tier's navigation density scaled to all stars
         self._lab_nloc = dens[-1] * (len(self.index) / np.count_nonzero(self.index.is_nav))
         if self.check is None:
@@ -608,10 +672,11 @@ class Pyramid:
         """Identify body unit vectors (n, 3), brightest first; ``mag`` (n,) measured V or None."""
         ix = self.index
         b = np.ascontiguousarray(b, dtype=np.float64)
+        smag = self._magnitudes(mag, b.shape[0])
         full, q, pf, st, tried = pyramid_core(
             b, ix.vectors, ix.vmag, self._tiers, self._lab_nloc, ix.vox_start, ix.vox_stars, ix.vox_vec, ix.vox_h,
             ix.vox_g, self.eps, self.label_tol, ix.max_sep, self.fov_radius, self.p_false_max, self.max_triangles,
-            self._mark, self._budgets)
+            self._mark, self._budgets, smag if self.mwin > 0 else self._no_mag, self.mwin, self._lab_sorted_v)
         n_ok = 0
         if st == ST_OK:
             q, full, n_ok = self.check.apply(b, mag, ix.vectors, ix.vmag, full)
@@ -630,19 +695,24 @@ class Pyramid:
                 and pts.flags.c_contiguous):
             pts = np.asarray(uv, dtype=np.float64)
             pts = np.ascontiguousarray(pts.reshape(-1, 2) if pts.size else np.empty((0, 2)))
-        m = self._no_mag
-        if mag is not None:
-            m = np.ascontiguousarray(mag, dtype=np.float64).reshape(-1)
-            if m.shape[0] != pts.shape[0]:
-                raise ConfigError(f"{m.shape[0]} magnitudes for {pts.shape[0]} centroids")
+        m = self._magnitudes(mag, pts.shape[0])
         ix = self.index
         match, ids, q, st, pf, n_ok = pyramid_identify_uv(
             pts, self._params, self._tiers, self._lab_nloc, ix.vectors, ix.vmag, ix.ids, ix.vox_start, ix.vox_stars,
             ix.vox_vec, ix.vox_h, ix.vox_g, self.eps, self.label_tol, ix.max_sep, self.fov_radius, self.p_false_max,
-            self.max_triangles, self._mark, self._budgets, m, self._fused)
+            self.max_triangles, self._mark, self._budgets, m, self._fused, self.mwin, self._lab_sorted_v)
         if st == ST_BAD:
             raise ConfigError(STATUS_TEXT[ST_BAD])
         return StarIdResult(match, ids, q, st == ST_OK, self._status(st, n_ok, pf), float(pf), "pyramid")
+
+    def _magnitudes(self, mag, n: int) -> np.ndarray:
+        """``mag`` as a float64 (n,) array (empty for None)."""
+        if mag is None:
+            return self._no_mag
+        m = np.ascontiguousarray(mag, dtype=np.float64).reshape(-1)
+        if m.shape[0] != n:
+            raise ConfigError(f"{m.shape[0]} magnitudes for {n} centroids")
+        return m
 
     @staticmethod
     def _status(st, n_ok, pf) -> str:

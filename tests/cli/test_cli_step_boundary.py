@@ -8,6 +8,15 @@ import pytest
 from gyrostar.cli import interrupt
 
 
+@pytest.fixture(autouse=True)
+def python_sigint():
+    """Python's own Ctrl-C handler for the test (a shell that starts a background job hands
+    it SIGINT ignored), restored after."""
+    old = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, old)
+
+
 def test_signal_inside_a_step_is_held_until_it_ends():
     done = []
     with pytest.raises(KeyboardInterrupt):

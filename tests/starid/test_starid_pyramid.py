@@ -171,3 +171,47 @@ def test_swapped_check_stage_runs_after_the_compiled_search(setup10):
         assert a.ok == b.ok and np.array_equal(a.ids, b.ids) and np.allclose(a.q, b.q)
         assert a.status == b.status
     assert wrapped.calls >= 9
+
+
+@pytest.fixture(scope="module")
+def setup4_coarse():
+    """The paper-001 geometry: 4° over 512 px (28″/px), stars to V 7.5."""
+    cam = camera_for_fov(4.0, 512)
+    ix = load_index("hip2", 7.5, 5.67, 0)
+    return cam, ix, Sky(load_catalog("hip2", 8.5))
+
+
+def test_measured_magnitudes_solve_sparser_fields_never_wrongly(setup4_coarse):
+    """1 px centroids and 0.2 mag photometry: with the magnitudes in the search and the bound,
+    fields of 5–7 stars the geometry alone cannot vouch for are solved; no wrong label either way."""
+    cam, ix, sky = setup4_coarse
+    pos_only = Pyramid(ix, cam, sigma_px=1.0)
+    with_mag = Pyramid(ix, cam, sigma_px=1.0, sigma_mag=0.2)
+    rng = np.random.default_rng(17)
+    n_pos = n_mag = 0
+    for q in random_attitudes(300, rng):
+        f = sky.observe(cam, q, 7.5, 1.0, 0.2, 0, rng)
+        a, b = pos_only.identify(f.uv, mag=f.mag), with_mag.identify(f.uv, mag=f.mag)
+        for r in (a, b):
+            c, w = score(r.ids, f.truth, f.alt)
+            assert w == 0, "a wrong identification was output"
+        n_pos += a.ok
+        n_mag += b.ok
+        if b.ok:
+            assert b.p_false <= with_mag.p_false_max and _attitude_right(b, q, cam, px=4.0)
+    assert n_mag >= n_pos + 6, (n_pos, n_mag)
+
+
+def test_magnitudes_far_from_every_star_identify_nothing(setup4_coarse):
+    """Photometry 3 mag off (every spot fainter than any indexed star by more than the
+    window): no catalog star may stand for any spot, so nothing is identified."""
+    cam, ix, sky = setup4_coarse
+    pyr = Pyramid(ix, cam, sigma_px=1.0, sigma_mag=0.2)
+    rng = np.random.default_rng(2)
+    for q in random_attitudes(10, rng):
+        f = sky.observe(cam, q, 7.5, 1.0, 0.0, 0, rng)
+        assert pyr.identify(f.uv).ok or len(f.uv) < 7      # positions only: a rich field is solved
+        r = pyr.identify(f.uv, mag=f.mag + 3.0)
+        assert not r.ok and np.all(r.ids == -1)
+    with pytest.raises(ConfigError):
+        Pyramid(ix, cam, sigma_mag=-0.1)
