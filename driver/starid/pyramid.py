@@ -207,8 +207,8 @@ def _confirm(b, nb, i, j, k, x, y, z, vec, is_nav, vstart, vstars, vvec, vh, vg,
 @njit(cache=True)
 def _triangle_candidates(b, i, j, k, vec, pt, pa, pb, kv, km, kq, eps, mark, nxt, oth, cand, smag, vmag, mwin):
     """Catalog triangles (x, y, z) matching observed (i, j, k): all three sides within ε,
-    the same handedness and each star's magnitude (:func:`_mag_ok`). Writes up to ``_MAX_CAND`` rows of ``cand``; returns their count
-    (more than ``_MAX_CAND``: too many to be useful) and the work arrays ``nxt``/``oth``
+    the same handedness and each star's magnitude (:func:`_mag_ok`). Writes up to
+    ``_MAX_CAND`` rows of ``cand``; returns their count (more than ``_MAX_CAND``: too many to be useful) and the work arrays ``nxt``/``oth``
     (grown when needed). ``mark`` int32 (N,) zeros, left zeroed.
 
     The shorter of the ik/jk pair ranges (k-vector) is threaded into per-star linked lists
