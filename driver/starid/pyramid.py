@@ -208,8 +208,8 @@ def _confirm(b, nb, i, j, k, x, y, z, vec, is_nav, vstart, vstars, vvec, vh, vg,
 def _triangle_candidates(b, i, j, k, vec, pt, pa, pb, kv, km, kq, eps, mark, nxt, oth, cand, smag, vmag, mwin):
     """Catalog triangles (x, y, z) matching observed (i, j, k): all three sides within ε,
     the same handedness and each star's magnitude (:func:`_mag_ok`). Writes up to
-    ``_MAX_CAND`` rows of ``cand``; returns their count (more than ``_MAX_CAND``: too many to be useful) and the work arrays ``nxt``/``oth``
-    (grown when needed). ``mark`` int32 (N,) zeros, left zeroed.
+    ``_MAX_CAND`` rows of ``cand``; returns their count (more than ``_MAX_CAND``: too many to
+    be useful) and the work arrays ``nxt``/``oth`` (grown when needed). ``mark`` int32 (N,) zeros, left zeroed.
 
     The shorter of the ik/jk pair ranges (k-vector) is threaded into per-star linked lists
     (heads in ``mark``, 1-based); each ij pair (x, y) in both orders walks the list of x (or
