@@ -237,6 +237,7 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
     if hasattr(loop.head, "step_gate") and not (fs.lockstep is not None and fs.lockstep.inline_jobs):
         loop.head.step_gate = gate
     try:
+        interrupt.raise_if_seen()      # a Ctrl-C during start-up whose exception an import swallowed
         fs.start_scenario(fs.clock_now())
         if writer:
             writer.event({"scenario_t0": fs.truth.t_origin if fs.truth is not None else fs.clock_now()})

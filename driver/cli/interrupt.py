@@ -14,6 +14,7 @@ whole process group, never leaves a traceback from a child.
 from __future__ import annotations
 
 import signal
+import sys
 import threading
 from contextlib import contextmanager
 
@@ -25,6 +26,26 @@ def _handler(signum, frame):
     _signal_name[0] = signal.Signals(signum).name
     _seen.set()
     raise KeyboardInterrupt
+
+
+def raise_if_seen() -> None:
+    """Raise :class:`KeyboardInterrupt` when a signal arrived under :func:`watch` whose
+    exception was swallowed (Python drops an exception raised in a weakref or ``__del__``
+    callback, e.g. an import lock's, and only prints it): call where a run may stop cleanly."""
+    if _seen.is_set():
+        raise KeyboardInterrupt
+
+
+def _quiet_unraisable(hook):
+    """``sys.unraisablehook`` that drops the KeyboardInterrupt of a signal seen under
+    :func:`watch` (it ends the run at the next :func:`raise_if_seen`) and passes the rest on."""
+
+    def quiet(unraisable):
+        if _seen.is_set() and isinstance(unraisable.exc_value, KeyboardInterrupt):
+            return
+        hook(unraisable)
+
+    return quiet
 
 
 def seen() -> bool:
@@ -47,11 +68,14 @@ def watch():
     _signal_name[0] = "SIGINT"
     old_int = signal.signal(signal.SIGINT, _handler)
     old_term = signal.signal(signal.SIGTERM, _handler)
+    old_hook = sys.unraisablehook
+    sys.unraisablehook = _quiet_unraisable(old_hook)
     try:
         yield
     finally:
         signal.signal(signal.SIGINT, old_int)
         signal.signal(signal.SIGTERM, old_term)
+        sys.unraisablehook = old_hook
 
 
 @contextmanager
@@ -91,6 +115,7 @@ class StepBoundary:
         self._old: dict = {}
 
     def __enter__(self) -> StepBoundary:
+        raise_if_seen()
         if threading.current_thread() is threading.main_thread():
             for sig in self._SIGNALS:
                 old = signal.getsignal(sig)
@@ -113,9 +138,11 @@ class StepBoundary:
         self._old[signum](signum, frame)
 
     def step_done(self) -> None:
-        """The step ended: deliver a signal held during it."""
+        """The step ended: deliver a signal held during it (or one whose exception was
+        swallowed: :func:`raise_if_seen`)."""
         self.inside = False
         self._deliver()
+        raise_if_seen()
 
     def _deliver(self) -> None:
         if self._pending is not None:

@@ -20,7 +20,7 @@ def run(args) -> int:
     import subprocess
 
     from . import build
-    from .interrupt import sigterm_as_interrupt, stop_child
+    from .interrupt import release_held_signals, signals_held, sigterm_as_interrupt, stop_child
 
     build.build("host")
     cmd = [str(build.host_binary_path()), "--sensor", args.sensor, "--width", str(args.width),
@@ -28,8 +28,13 @@ def run(args) -> int:
     if args.link:
         cmd += ["--link", args.link]
     with sigterm_as_interrupt():
-        proc = subprocess.Popen(cmd)
+        proc = None
         try:
+            # a signal while Popen runs (the program may already be up) would leave no handle to
+            # stop it: held until ``proc`` exists, then delivered here, inside the try
+            with signals_held():
+                proc = subprocess.Popen(cmd, preexec_fn=release_held_signals)
             return proc.wait()
         finally:   # Ctrl-C or SIGTERM (KeyboardInterrupt): the CLI reports it, exit 130
-            stop_child(proc)
+            if proc is not None:
+                stop_child(proc)

@@ -37,6 +37,26 @@ def sigterm_as_interrupt():
         signal.signal(signal.SIGTERM, old)
 
 
+_HELD = {signal.SIGINT, signal.SIGTERM}
+
+
+@contextmanager
+def signals_held():
+    """Hold SIGINT and SIGTERM back while the block runs (delivered when it ends): wrap the
+    start of a child so that a signal cannot arrive before the handle to stop it exists. The
+    child inherits the mask: give it :func:`release_held_signals` as ``preexec_fn``."""
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, _HELD)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+def release_held_signals() -> None:
+    """In a forked child before exec: SIGINT and SIGTERM reach it again."""
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, _HELD)
+
+
 def stop_child(proc: subprocess.Popen, grace_s: float = 2.0) -> None:
     """SIGTERM the child, give it ``grace_s`` to clean up (unlink its pty link), then SIGKILL;
     always reaped."""

@@ -33,7 +33,13 @@ density around the candidate written as an all-sky count (N for an average sky; 
 galactic plane is up to 2–3 N, and a false match is most likely there); the confirming
 star multiplies by ρ ε²/(π sin φ_r) and by the n − 3 spots that could have confirmed;
 every further labelled star by ρ' δ²/4 (δ = label_tol, a random spot landing on a star;
-ρ' counts every indexed star, not only navigation stars). ``p_false`` reported is that
+ρ' counts every indexed star, not only navigation stars). With measured magnitudes
+(``sigma_mag`` > 0) a catalog star stands for a spot only within n_sigma·sigma_mag of its V,
+and each star's term is multiplied by the share f(m) of stars that window admits. Of the
+false matches inside these tolerances only those that fit as well as the one found count:
+the product t of the triangle sides' |Δθ|/ε and the labels' (r/δ)² (r measured from the
+pyramid's attitude; each uniform on (0, 1) for a false match) multiplies the count by
+t·Σ_{j<k}(−ln t)^j/j! (Fisher's combination of k uniforms). ``p_false`` reported is that
 product times the number of triangles tried (a union bound over the search); the search
 skips a triangle that could not pass even in a sparse sky (the 5th percentile of the star
 density) with every spot labelled: that costs success only, never safety.
@@ -124,6 +130,48 @@ def _mag_fraction(sorted_v, m, mwin):
     lo = np.searchsorted(sorted_v, m - mwin, side="left")
     hi = np.searchsorted(sorted_v, m + mwin, side="right")
     return max(hi - lo, 1) / sorted_v.shape[0]
+
+
+@njit(cache=True)
+def _fit_share(b, vec, i, j, k, x, y, z, br, q4, match, eps, label_tol, n_sigma):
+    """The share of false matches that fit at least as well as this one (Fisher's combination).
+
+    A false pyramid inside the tolerances has each triangle side's error |θ_obs − θ_cat|/ε
+    uniform on (0, 1) (catalog separations are locally uniform), and each further label's
+    (r/label_tol)², r its offset from the direction the pyramid's attitude ``q4`` predicts,
+    uniform on (0, 1) too (a random star in the tolerance disc). For k such independent
+    uniforms the chance that their product is at most the observed t is
+    t·Σ_{j<k} (−ln t)^j / j!. The confirming star is not credited (its share is taken as 1).
+    An error smaller than the noise says nothing more (a true match's is that small by chance,
+    and so is a structured near-match's, a mirror image's stars near its axis): each factor
+    is floored at its 1σ value, 1/n_sigma for a side (ε = n_sigma·σ_side) and
+    1/(1.25·n_sigma)² for a label (label_tol = 1.25·n_sigma·σ)."""
+    side_min = 1.0 / n_sigma
+    lab_min = 1.0 / (1.25 * n_sigma) ** 2
+    t = 1.0
+    kk = 0
+    for a, c, ca, cc in ((i, j, x, y), (i, k, x, z), (j, k, y, z)):
+        t *= min(1.0, max(abs(_angle(b[a], b[c]) - _angle(vec[ca], vec[cc])) / eps, side_min))
+        kk += 1
+    m = quat_to_dcm(q4)
+    for s in range(b.shape[0]):
+        w = match[s]
+        if w < 0 or s == i or s == j or s == k or s == br:
+            continue
+        v = vec[w]
+        p = np.empty(3)
+        for e in range(3):
+            p[e] = m[e, 0] * v[0] + m[e, 1] * v[1] + m[e, 2] * v[2]      # predicted body direction
+        r = _angle(b[s], p)
+        t *= min(1.0, max((r / label_tol) ** 2, lab_min))
+        kk += 1
+    lt = -math.log(t)
+    term = 1.0
+    total = 1.0
+    for jj in range(1, kk):
+        term *= lt / jj
+        total += term
+    return min(1.0, t * total)
 
 
 @njit(cache=True)
@@ -283,7 +331,7 @@ def _triangle_candidates(b, i, j, k, vec, pt, pa, pb, kv, km, kq, eps, mark, nxt
 @njit(cache=True)
 def _search(b, vec, vmag, is_nav, pt, pa, pb, kv, km, kq, vstart, vstars, vvec, vh, vg, eps, label_tol, max_sep,
             fov_radius, p_false_max, max_triangles, mark, nnav, nloc, nmin, lab_nloc, max_spots, budgets, tried,
-            status, smag, mwin, fn, flab):
+            status, smag, mwin, fn, flab, n_sigma):
     """Pyramid search over one navigation-star tier (pair table ``pt/pa/pb`` with its k-vector,
     ``is_nav``/``nnav`` its stars, ``nloc`` their local density as an all-sky count and ``nmin``
     its 5th percentile (early rejection only); only the brightest ``max_spots`` spots form pyramids);
@@ -409,6 +457,9 @@ def _search(b, vec, vmag, is_nav, pt, pa, pb, kv, km, kq, vstart, vstars, vvec, 
                     for s in range(n):
                         if out[s] >= 0 and s != i and s != j and s != k and s != br:
                             pf *= lab * flab[s]
+                    # of the false pyramids inside the tolerances, only those that fit as well
+                    # as this one count
+                    pf *= _fit_share(b, vec, i, j, k, x, y, z, br, q4, out, eps, label_tol, n_sigma)
                     if pf > p_false_max:
                         status = ST_REJECTED
                         match[:] = -1
@@ -427,7 +478,7 @@ def _search(b, vec, vmag, is_nav, pt, pa, pb, kv, km, kq, vstart, vstars, vvec, 
 
 @njit(cache=True)
 def pyramid_core(b, vec, vmag, tiers, lab_nloc, vstart, vstars, vvec, vh, vg, eps, label_tol, max_sep, fov_radius,
-                 p_false_max, max_triangles, mark, budgets, smag, mwin, lab_sorted_v):
+                 p_false_max, max_triangles, mark, budgets, smag, mwin, lab_sorted_v, n_sigma):
     """Numba core. ``b`` (n,3) body unit vectors, brightest first; ``mark`` int32 (N,) zeros (work, left zeroed).
 
     ``tiers``: tuple of navigation-star tiers, searched in order, each
@@ -471,7 +522,7 @@ def pyramid_core(b, vec, vmag, tiers, lab_nloc, vstart, vstars, vvec, vh, vg, ep
         match, q, pf, status, tried = _search(b, vec, vmag, is_nav, pt, pa, pb, kv, kmq[0], kmq[1], vstart, vstars,
                                               vvec, vh, vg, eps, label_tol, max_sep, fov_radius, p_false_max,
                                               max_triangles, mark, kmq[2], nloc, kmq[4], lab_nloc, int(kmq[3]),
-                                              budgets, tried, status, gate, mwin, fn, flab)
+                                              budgets, tried, status, gate, mwin, fn, flab, n_sigma)
         if status == ST_OK or status == ST_SPARSE or tried >= max_triangles:
             return match, q, pf, status, tried
     return match, q, np.inf, status, tried
@@ -549,7 +600,8 @@ def label_rest(b, q, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, tol, m
 
 @njit(cache=True)
 def pyramid_identify_uv(uv, cam, tiers, lab_nloc, vec, vmag, ids, vstart, vstars, vvec, vh, vg, eps, label_tol, max_sep,
-                        fov_radius, p_false_max, max_triangles, mark, budgets, mag, check, mwin, lab_sorted_v):
+                        fov_radius, p_false_max, max_triangles, mark, budgets, mag, check, mwin, lab_sorted_v,
+                        n_sigma):
     """One compiled call: centroids ``uv`` (n, 2) px → body vectors → :func:`pyramid_core` →
     the per-star check :func:`gyrostar.starid.star_check.check_stars` (scalars ``check`` from
     ``StarCheck.settings()``; empty: no check here). ``mag`` (n,) measured V or empty; the search
@@ -565,7 +617,7 @@ def pyramid_identify_uv(uv, cam, tiers, lab_nloc, vec, vmag, ids, vstart, vstars
     smag = mag[:n] if (mwin > 0.0 and mag.shape[0] == n) else mag[:0]
     match, q, pf, st, _ = pyramid_core(b, vec, vmag, tiers, lab_nloc, vstart, vstars, vvec, vh, vg, eps, label_tol,
                                        max_sep, fov_radius, p_false_max, max_triangles, mark, budgets, smag, mwin,
-                                       lab_sorted_v)
+                                       lab_sorted_v, n_sigma)
     n_ok = 0
     for i in range(n):
         if match[i] >= 0:
@@ -676,7 +728,8 @@ class Pyramid:
         full, q, pf, st, tried = pyramid_core(
             b, ix.vectors, ix.vmag, self._tiers, self._lab_nloc, ix.vox_start, ix.vox_stars, ix.vox_vec, ix.vox_h,
             ix.vox_g, self.eps, self.label_tol, ix.max_sep, self.fov_radius, self.p_false_max, self.max_triangles,
-            self._mark, self._budgets, smag if self.mwin > 0 else self._no_mag, self.mwin, self._lab_sorted_v)
+            self._mark, self._budgets, smag if self.mwin > 0 else self._no_mag, self.mwin, self._lab_sorted_v,
+            self.n_sigma)
         n_ok = 0
         if st == ST_OK:
             q, full, n_ok = self.check.apply(b, mag, ix.vectors, ix.vmag, full)
@@ -700,7 +753,8 @@ class Pyramid:
         match, ids, q, st, pf, n_ok = pyramid_identify_uv(
             pts, self._params, self._tiers, self._lab_nloc, ix.vectors, ix.vmag, ix.ids, ix.vox_start, ix.vox_stars,
             ix.vox_vec, ix.vox_h, ix.vox_g, self.eps, self.label_tol, ix.max_sep, self.fov_radius, self.p_false_max,
-            self.max_triangles, self._mark, self._budgets, m, self._fused, self.mwin, self._lab_sorted_v)
+            self.max_triangles, self._mark, self._budgets, m, self._fused, self.mwin, self._lab_sorted_v,
+            self.n_sigma)
         if st == ST_BAD:
             raise ConfigError(STATUS_TEXT[ST_BAD])
         return StarIdResult(match, ids, q, st == ST_OK, self._status(st, n_ok, pf), float(pf), "pyramid")

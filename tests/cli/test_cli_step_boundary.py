@@ -3,6 +3,7 @@ step's inputs without its outputs); between steps it takes effect at once."""
 
 import os
 import signal
+import time
 
 import pytest
 from gyrostar.cli import interrupt
@@ -47,3 +48,24 @@ def test_sigterm_under_watch_is_held_and_reported_as_terminated():
                 assert not interrupt.seen()          # held: watch's handler has not run yet
                 b.step_done()
         assert interrupt.seen() and interrupt.reason() == "terminated (SIGTERM)"
+
+
+def test_interrupt_swallowed_by_a_callback_still_ends_the_run(capsys):
+    """A Ctrl-C whose KeyboardInterrupt lands in a ``__del__`` (or an import lock's weakref
+    callback) is dropped by Python; the run still ends at the next step boundary, and no
+    "Exception ignored" traceback is printed."""
+
+    class Dropper:
+        def __del__(self):
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.05)              # the handler runs here and raises inside __del__
+
+    with interrupt.watch():
+        d = Dropper()
+        del d                             # the KeyboardInterrupt is swallowed
+        assert interrupt.seen()
+        with pytest.raises(KeyboardInterrupt):
+            with interrupt.StepBoundary():
+                raise AssertionError("a step ran after the interrupt")
+    err = capsys.readouterr().err
+    assert "KeyboardInterrupt" not in err and "Traceback" not in err
