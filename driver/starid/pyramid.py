@@ -121,15 +121,30 @@ def _mag_ok(smag, vmag, mwin, s, w):
     return not (abs(vmag[w] - m) > mwin)     # NaN: no gate
 
 
+_MTAB_LO, _MTAB_STEP, _MTAB_N = -3.0, 0.01, 2001     # magnitude grid of the share tables (V −3 … 17)
+
+
+def mag_share_table(v: np.ndarray, mwin: float) -> np.ndarray:
+    """Per cell [m, m + 0.01) of the magnitude grid: the share of the stars (magnitudes ``v``)
+    within ``mwin`` of some m in the cell (an upper bound of :func:`_mag_fraction`'s share,
+    at least one star's). Empty when ``mwin`` is 0 (magnitudes not used)."""
+    if mwin <= 0.0:
+        return np.ones(1)
+    sv = np.sort(np.asarray(v, dtype=np.float64))
+    edge = _MTAB_LO + _MTAB_STEP * np.arange(_MTAB_N)
+    lo = np.searchsorted(sv, edge - mwin, side="left")
+    hi = np.searchsorted(sv, edge + _MTAB_STEP + mwin, side="right")
+    return np.maximum(hi - lo, 1) / max(len(sv), 1)
+
+
 @njit(cache=True)
-def _mag_fraction(sorted_v, m, mwin):
-    """Share of the stars (magnitudes ``sorted_v``, ascending) within ``mwin`` of ``m``: the
-    chance that a random one passes :func:`_mag_ok` (1 for NaN; at least one star's share)."""
-    if not (m == m):
+def _mag_fraction(table, m):
+    """The chance that a random star passes :func:`_mag_ok` for a spot of measured V ``m``
+    (``table`` from :func:`mag_share_table`; 1 for NaN)."""
+    if not (m == m) or table.shape[0] < _MTAB_N:
         return 1.0
-    lo = np.searchsorted(sorted_v, m - mwin, side="left")
-    hi = np.searchsorted(sorted_v, m + mwin, side="right")
-    return max(hi - lo, 1) / sorted_v.shape[0]
+    k = int(np.floor((m - _MTAB_LO) / _MTAB_STEP))
+    return table[min(max(k, 0), _MTAB_N - 1)]
 
 
 @njit(cache=True)
@@ -298,12 +313,10 @@ def _triangle_candidates(b, i, j, k, vec, pt, pa, pb, kv, km, kq, eps, mark, nxt
         for o in range(2):
             x = pa[p] if o == 0 else pb[p]
             y = pb[p] if o == 0 else pa[p]
-            if not (_mag_ok(smag, vmag, mwin, i, x) and _mag_ok(smag, vmag, mwin, j, y)):
-                continue
             h = x if from_x else y
             u = y if from_x else x   # the vertex whose side to z is tested by angle
             t = mark[h] - 1
-            if t < 0:
+            if t < 0 or not (_mag_ok(smag, vmag, mwin, i, x) and _mag_ok(smag, vmag, mwin, j, y)):
                 continue
             vu = vec[u]
             while t >= 0:
@@ -499,7 +512,8 @@ def pyramid_core(b, vec, vmag, tiers, lab_nloc, vstart, vstars, vvec, vh, vg, ep
     Magnitudes: ``smag`` (n,) measured V (NaN unknown) or empty (positions only); a catalog
     star may stand for a spot only within ``mwin`` (mag) of its measured V, and each star's
     term of the false-match count is multiplied by the share of stars that window admits
-    (``tier[7]``: the tier's navigation magnitudes sorted; ``lab_sorted_v``: every indexed star's).
+    (``tier[7]``: :func:`mag_share_table` of the tier's navigation stars; ``lab_sorted_v``: of
+    every indexed star).
     Returns ``(match (n,), q (4,), p_false, status, triangles_tried)``.
     """
     n = b.shape[0]
@@ -513,12 +527,12 @@ def pyramid_core(b, vec, vmag, tiers, lab_nloc, vstart, vstars, vvec, vh, vg, ep
     fn = np.ones(n)
     if use_mag:
         for s in range(n):
-            flab[s] = _mag_fraction(lab_sorted_v, smag[s], mwin)
+            flab[s] = _mag_fraction(lab_sorted_v, smag[s])
     for tier in tiers:
         is_nav, pt, pa, pb, kv, nloc, kmq, nav_sorted_v = tier
         if use_mag:
             for s in range(n):
-                fn[s] = _mag_fraction(nav_sorted_v, smag[s], mwin)
+                fn[s] = _mag_fraction(nav_sorted_v, smag[s])
         match, q, pf, status, tried = _search(b, vec, vmag, is_nav, pt, pa, pb, kv, kmq[0], kmq[1], vstart, vstars,
                                               vvec, vh, vg, eps, label_tol, max_sep, fov_radius, p_false_max,
                                               max_triangles, mark, kmq[2], nloc, kmq[4], lab_nloc, int(kmq[3]),
@@ -708,9 +722,9 @@ class Pyramid:
         dens = [local_density(t) for t in tiers]
         self._tiers = tuple((t.is_nav, t.pair_theta, t.pair_a, t.pair_b, t.kv, d,
                              (float(t.kv_m), float(t.kv_q), float(np.count_nonzero(t.is_nav)), cap,
-                              float(np.percentile(d[t.is_nav], 5))), np.sort(t.vmag[t.is_nav]))
+                              float(np.percentile(d[t.is_nav], 5))), mag_share_table(t.vmag[t.is_nav], self.mwin))
                             for t, cap, d in zip(tiers, caps, dens))
-        self._lab_sorted_v = np.sort(self.index.vmag)
+        self._lab_sorted_v = mag_share_table(self.index.vmag, self.mwin)
         # every indexed star (labels): the full tier's navigation density scaled to all stars
         self._lab_nloc = dens[-1] * (len(self.index) / np.count_nonzero(self.index.is_nav))
         if self.check is None:
