@@ -91,8 +91,10 @@ class StreamRates:
     """Measured rates from a :class:`~gyrostar.mocks.gyro_truth.GyroStream` at model (host) time.
 
     ``origin()`` is the host time (s) of the stream's time 0 (the scenario start; it may move
-    when the run restarts). Model time ``t`` maps to output sample ``round((t − origin)·odr) − 1``
-    (clamped at 0): fresh samples for as long as the run lasts.
+    when the run restarts). A sample the model takes at time ``t`` reports the stream's output
+    at exactly ``t − origin`` (:meth:`GyroStream.meas_at`, fractional index
+    ``(t − origin)·odr − 1``, clamped at 0), whatever the phase of the model's sample clock
+    against the stream's grid: fresh samples for as long as the run lasts.
     """
 
     def __init__(self, stream, origin):
@@ -101,5 +103,4 @@ class StreamRates:
 
     def __call__(self, k: np.ndarray, t: np.ndarray) -> np.ndarray:
         ts = np.maximum(np.asarray(t, float) - self.origin(), 0.0)
-        i = np.maximum(np.round(ts * self.stream.odr_hz).astype(np.int64) - 1, 0)
-        return self.stream.meas(i)
+        return self.stream.meas_at(ts * self.stream.odr_hz - 1.0)

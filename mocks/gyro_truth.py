@@ -161,19 +161,26 @@ def butterworth2(fc: float, fs: float) -> tuple[np.ndarray, np.ndarray]:
 @njit(cache=True, nogil=True)
 def _sensor_chain(omega_in, b0, gm_sigma, gm_phi, rrw_step, white_int, white_out, filt_b, filt_a, use_filter,
                   decim, seed, state):
-    """Internal-rate chain: add biases and noise, filter, decimate. Returns (meas, bias) at ODR.
+    """Internal-rate chain: add biases and noise, filter, decimate. Returns (meas, bias, signal)
+    at ODR; ``signal`` is the filtered body rate alone (the chain without biases and noise: it is
+    linear, so ``meas − signal`` is the filtered error), for content between output samples.
 
-    ``state`` (7, 3) carries the chain from one call to the next and is updated in place:
+    ``state`` (11, 3) carries the chain from one call to the next and is updated in place:
     rows 0–1 the Gauss–Markov and random-walk biases, rows 2–5 the filter's x[n−1], x[n−2],
-    y[n−1], y[n−2], row 6 column 0 nonzero once started. All zeros is a fresh start (the
-    Gauss–Markov bias is drawn from its stationary distribution, the filter starts in steady
-    state at the first value). The noise comes from ``seed``.
+    y[n−1], y[n−2], row 6 column 0 nonzero once started, rows 7–10 the signal filter's. All
+    zeros is a fresh start (the Gauss–Markov bias is drawn from its stationary distribution,
+    the filter starts in steady state at the first value). The noise comes from ``seed``.
     """
     np.random.seed(seed)
     n_int = omega_in.shape[0]
     n_out = n_int // decim
     meas = np.empty((n_out, 3))
     bias = np.empty((n_out, 3))
+    sig = np.empty((n_out, 3))
+    sx1 = state[7]
+    sx2 = state[8]
+    sy1 = state[9]
+    sy2 = state[10]
     gm = state[0]
     rw = state[1]
     x1 = state[2]
@@ -190,22 +197,30 @@ def _sensor_chain(omega_in, b0, gm_sigma, gm_phi, rrw_step, white_int, white_out
             gm[j] = gm_phi * gm[j] + drive * np.random.standard_normal()
             rw[j] += rrw_step * np.random.standard_normal()
             x = omega_in[i, j] + b0[j] + gm[j] + rw[j] + white_int * np.random.standard_normal()
+            xs = omega_in[i, j]
             if use_filter:
                 if not primed:  # start the filter in steady state at the first value
                     x1[j], x2[j], y1[j], y2[j] = x, x, x, x
+                    sx1[j], sx2[j], sy1[j], sy2[j] = xs, xs, xs, xs
                 y = filt_b[0] * x + filt_b[1] * x1[j] + filt_b[2] * x2[j] - filt_a[1] * y1[j] - filt_a[2] * y2[j]
                 x2[j], x1[j] = x1[j], x
                 y2[j], y1[j] = y1[j], y
+                ys = (filt_b[0] * xs + filt_b[1] * sx1[j] + filt_b[2] * sx2[j] - filt_a[1] * sy1[j]
+                      - filt_a[2] * sy2[j])
+                sx2[j], sx1[j] = sx1[j], xs
+                sy2[j], sy1[j] = sy1[j], ys
             else:
                 y = x
+                ys = xs
             if (i + 1) % decim == 0:
                 k = (i + 1) // decim - 1
                 meas[k, j] = y + white_out * np.random.standard_normal()
                 bias[k, j] = b0[j] + gm[j] + rw[j]
+                sig[k, j] = ys
         primed = True
     if primed:
         state[6, 0] = 1.0
-    return meas, bias
+    return meas, bias, sig
 
 
 class _Chain:
@@ -261,7 +276,7 @@ def simulate_gyro(profile: RateProfile, duration_s: float, params: GyroErrorPara
     if n_out < 1:
         raise ConfigError("gyro duration shorter than one output sample")
     chain = _Chain(p, seed)
-    meas, bias = chain.run(profile, 0, n_out, chain.seed, np.zeros((7, 3)))
+    meas, bias, _ = chain.run(profile, 0, n_out, chain.seed, np.zeros((11, 3)))
     t = np.arange(1, n_out + 1) / p.odr_hz
     raw = None
     sensed = meas
@@ -297,8 +312,8 @@ class GyroStream:
         self.cache_chunks = int(cache_chunks)
         self._chain = _Chain(p, seed)
         self.scale, self.misalignment = self._chain.scale, self._chain.mis
-        self._starts = [np.zeros((7, 3))]   # chain state before chunk c
-        self._cache: OrderedDict = OrderedDict()   # c -> (meas, bias)
+        self._starts = [np.zeros((11, 3))]   # chain state before chunk c
+        self._cache: OrderedDict = OrderedDict()   # c -> (meas, bias, signal)
         self.generated = 0                  # chunks generated (regenerations included)
         self._ahead = None                  # (chunk, future, its state) being generated ahead
         self._worker = None
@@ -380,6 +395,23 @@ class GyroStream:
         """What the gyro reports (rad/s, body axes, filtered; quantised at ``params.range_dps``
         unless 0) at output sample index/indices ``i``."""
         out = self._rows(0, i)
+        p = self.params
+        if p.range_dps > 0:
+            out = quantise(out, p.range_dps).astype(np.float64) * p.lsb_dps * DEG
+        return out
+
+    def meas_at(self, x) -> np.ndarray:
+        """What the gyro reports for a sample taken between output samples: ``x`` the fractional
+        output index (sample i at ``(i + 1)/odr_hz``, so time ``t`` is ``x = t·odr_hz − 1``). The
+        filtered body rate is interpolated to ``x`` (the filter leaves it smooth: at the scenarios'
+        rate ramps the error is below 1e-3 °/s), the filtered errors are the nearest sample's (their
+        statistics untouched), then quantised as :meth:`meas`. At integer ``x`` it is :meth:`meas`."""
+        x = np.maximum(np.atleast_1d(np.asarray(x, np.float64)), 0.0)
+        i0 = np.floor(x).astype(np.int64)
+        f = (x - i0)[:, None]
+        near = np.where(f[:, 0] >= 0.5, i0 + 1, i0)
+        s0, s1 = self._rows(2, i0), self._rows(2, i0 + 1)
+        out = self._rows(0, near) - self._rows(2, near) + s0 + f * (s1 - s0)
         p = self.params
         if p.range_dps > 0:
             out = quantise(out, p.range_dps).astype(np.float64) * p.lsb_dps * DEG

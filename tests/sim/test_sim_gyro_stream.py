@@ -92,3 +92,27 @@ def test_stream_is_a_pure_function_of_the_seed_and_matches_simulate_gyro():
     boundary = np.arange(999, 24000, 1000)
     assert step[boundary].max() < 5 * np.percentile(step, 99.9)
     assert n == 2000
+
+
+def test_sample_content_is_the_rate_at_its_own_instant_whatever_the_clock_phase():
+    """On a rate ramp a 2nd-order low-pass reports a·(t − τ), τ its DC group delay (datasheet
+    47 Hz at 1600 Hz internal: √2/(2π·47) ≈ 4.8 ms). A sample the register model takes at time
+    t, between two of the stream's 2.5 ms output instants, must report that value at t itself:
+    nearest-sample content would be up to 1.25 ms (a·1.25 ms) off, a timing error no real part has."""
+    p = gt.gyro_params("bmi088", bias_sigma_dps=0.0, bias_instability_dph=0.0, rrw_dps_per_rts=0.0,
+                       noise_density_dps_rthz=0.0, scale_factor_sigma_ppm=0.0, misalignment_sigma_mrad=0.0,
+                       range_dps=0.0)
+    slope = 10.0 * DEG                                    # rad/s²
+    stream = gt.GyroStream(Ramp((0.0, 0.0, 0.0), (slope * 20.0, 0.0, 0.0), 0.0, 20.0), p, seed=1)
+    b, a = gt.butterworth2(p.filter_hz, p.internal_hz)
+    k = np.arange(3)
+    tau = ((k * b).sum() / b.sum() - (k * a).sum() / a.sum()) / p.internal_hz
+    assert abs(tau - math.sqrt(2) / (2 * math.pi * 47.0)) < 2e-4
+    for phase in (0.0, 0.2, 0.37, 0.5, 0.81):
+        t = 2.0 + (np.arange(400) + phase) / p.odr_hz       # model sample instants off the stream's grid
+        got = StreamRates(stream, lambda: 0.0)(np.arange(400), t)[:, 0]
+        err_dps = np.degrees(got - slope * (t - tau))
+        assert np.max(np.abs(err_dps)) < 1e-3, (phase, np.max(np.abs(err_dps)))
+    # on the grid: the same value as the stream's own sample
+    i = np.arange(800, 900)
+    assert np.allclose(stream.meas_at(i.astype(float)), stream.meas(i), atol=1e-12)
