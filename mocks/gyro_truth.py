@@ -410,8 +410,16 @@ class GyroStream:
         i0 = np.floor(x).astype(np.int64)
         f = (x - i0)[:, None]
         near = np.where(f[:, 0] >= 0.5, i0 + 1, i0)
-        s0, s1 = self._rows(2, i0), self._rows(2, i0 + 1)
-        out = self._rows(0, near) - self._rows(2, near) + s0 + f * (s1 - s0)
+        c0 = int(i0[0]) // self.chunk if len(i0) else 0
+        if len(i0) and c0 == int(i0.min()) // self.chunk == int(i0.max() + 1) // self.chunk:
+            with self._lock:                      # the usual request: one chunk, one look-up
+                meas, _, sig = self._chunk(c0)
+            j0, jn = i0 - c0 * self.chunk, near - c0 * self.chunk
+            s0, s1 = sig[j0], sig[j0 + 1]
+            out = meas[jn] - sig[jn] + s0 + f * (s1 - s0)
+        else:
+            s0, s1 = self._rows(2, i0), self._rows(2, i0 + 1)
+            out = self._rows(0, near) - self._rows(2, near) + s0 + f * (s1 - s0)
         p = self.params
         if p.range_dps > 0:
             out = quantise(out, p.range_dps).astype(np.float64) * p.lsb_dps * DEG
