@@ -17,7 +17,7 @@ from spacepackets.ccsds.spacepacket import PacketId, PacketType, parse_space_pac
 NS = {"x": "http://www.omg.org/spec/XTCE/20180204"}
 
 
-def test_tai_utc_leap_seconds_from_astropy():
+def test_tai_utc_leap_seconds_from_erfa():
     # POSIX seconds of two UTC instants either side of the 2016-12-31 leap second
     before = calendar.timegm((2016, 6, 1, 0, 0, 0))
     after = calendar.timegm((2017, 6, 1, 0, 0, 0))
@@ -30,6 +30,15 @@ def test_tai_utc_leap_seconds_from_astropy():
     assert tm.tai(100.0) == pytest.approx(days * 86400 + 37.0, abs=1e-6)
     assert tm.tai(101.5) - tm.tai(100.0) == pytest.approx(1.5)
     assert tm.utc_iso(102.25) == ["2017-06-01T00:00:02.250000"]
+    # against astropy.time (an independent route to the same table) at an arbitrary instant
+    from astropy.time import Time
+
+    u = 1795578551.554203
+    ref = Time(u, format="unix", scale="utc")
+    got = timescale.from_pair(5.0, u)
+    assert got.tai(5.0) == pytest.approx((ref.tai - Time("1958-01-01T00:00:00", scale="tai")).sec, abs=1e-6)
+    ref.precision = 6
+    assert got.utc_iso(5.0) == [ref.isot]
 
 
 def test_xtce_matches_the_packet_layout_and_every_parameter_has_a_unit(repo):
