@@ -221,12 +221,14 @@ def make_gyro(cfg: hc.FlatsatConfig, regs, clock):
 def make_head(cfg: hc.FlatsatConfig, link, clock, reconnect=None, head_clock=None, poll_log=None,
               replay_polls=None, replay_reconnects=None, fast: bool = False, replay_records=None, lockstep=None):
     """The head port the loop drives (see :mod:`gyrostar.hil.headport`), on a packet link:
-    a streaming port (:mod:`gyrostar.hil.streamport`) with ``head.mode = "stream"`` (fast
-    mode's lock-step head serves request/response only). ``lockstep``: fast mode's schedule,
-    which runs the port's jobs at once on their own simulated time (no worker thread)."""
+    a streaming port (:mod:`gyrostar.hil.streamport`) with ``head.mode = "stream"``.
+    ``lockstep``: fast mode's schedule, which runs the port's jobs (and stream turns) at once
+    on their own simulated time (no worker thread)."""
     from .headport import HeadPort
 
-    if cfg.head.mode == "stream" and not fast:
+    if lockstep is not None:
+        lockstep.inline_jobs = True
+    if cfg.head.mode == "stream":
         from ..protocol.defs import PixelFormat
         from ..transport.linkrate import PRESETS
         from .streamport import StreamPort, StreamReplay
@@ -237,9 +239,8 @@ def make_head(cfg: hc.FlatsatConfig, link, clock, reconnect=None, head_clock=Non
                           timeout_s=cfg.head.timeout_s, retries=cfg.head.retries,
                           exposure_s=cfg.head.exposure_ms * 1e-3, gain=cfg.head.gain, reconnect=reconnect,
                           head_clock=head_clock, poll_log=poll_log, replay_polls=replay_polls,
-                          replay_reconnects=replay_reconnects, acquire=cfg.head.acquire)
-    if lockstep is not None:
-        lockstep.inline_jobs = True
+                          replay_reconnects=replay_reconnects, acquire=cfg.head.acquire,
+                          stream_clock=lockstep, inline=lockstep)
     return HeadPort(link, clock, timeout_s=cfg.head.timeout_s, retries=cfg.head.retries,
                     exposure_s=cfg.head.exposure_ms * 1e-3, gain=cfg.head.gain, reconnect=reconnect,
                     head_clock=head_clock, poll_log=poll_log, replay_polls=replay_polls,

@@ -13,7 +13,10 @@ real-time run; only the devices and the clock differ:
   link modelled at its line rate (:mod:`gyrostar.transport.linkrate`): every frame takes
   the preset's latency plus its bytes at the sustained rate, one after the other in each
   direction; the head serves requests in order, an exposure takes its time on the device
-  clock. Faults (disconnect, reply corruption, eclipse) as on the emulator process.
+  clock, and a stream (START_STREAM) runs its exposure grid on that clock: :meth:`SimHead.pump`
+  puts each frame on the wire at its readout, whenever the host next reads the link or sends
+  to the head (before the head serves what it sent). Faults (disconnect, reply corruption,
+  eclipse) as on the emulator process.
 * :class:`SimLink` — the packet link to a :class:`SimHead` (the
   :class:`gyrostar.transport.SerialLink` interface: ``send``, ``recv``, ``drain``).
 
@@ -205,6 +208,7 @@ class SimHead:
         self.bytes_out = 0
         self.bytes_in = 0
         self.link = None
+        emulator.backlog_source = self.tx_backlog      # the stream's back-pressure sees this wire
 
     # -- faults / life cycle (the interface the fault plan drives) -------------------------
     def start(self) -> str:
@@ -237,19 +241,63 @@ class SimHead:
         return self.link
 
     # -- traffic -----------------------------------------------------------------------------
+    def _up(self, data: bytes, t: float, chunks: list) -> None:
+        """``data`` leaves the head at device time ``t`` (after what the wire already carries):
+        appended to ``chunks`` as (arrival at the host, bytes), through the byte faults."""
+        out = []
+        if self.faults is not None:
+            self.faults.write_through(out.append, data, sleep=self.dev.sleep)
+        else:
+            out.append(data)
+        p = self.preset
+        for b in out:
+            s = max(t, self._rx_free)
+            self._rx_free = s + len(b) / p.bytes_per_s
+            self.bytes_in += len(b)
+            chunks.append((self._rx_free + p.latency_s, b))
+
+    def tx_backlog(self) -> int:
+        """Bytes the head has handed to its link that are not yet on the wire at device time
+        (the emulator's stream drops a frame above ``stream_tx_backlog_max``, as on its pty)."""
+        return max(0, int((self._rx_free - self.dev.now()) * self.preset.bytes_per_s))
+
+    def next_event(self) -> float:
+        """Simulated time of the stream's next step (an exposure starts or is read out)."""
+        due = self.emu.next_due if self.emu.stream is not None else None
+        return float("inf") if due is None else due
+
+    def pump(self, t: float) -> list[tuple[float, bytes]]:
+        """Run the head's stream up to simulated time ``t``: every frame read out by then is
+        put on the wire at its readout (``(arrival, bytes)`` chunks, in order)."""
+        chunks: list = []
+        emu = self.emu
+        while emu.stream is not None:
+            due = emu.next_due
+            if due is None or due > t:
+                break
+            if due > self.dev.now():
+                self.dev.set(due)
+            msgs = emu.poll_stream(self.dev.now())
+            if self.connected:
+                for m in msgs:
+                    self._up(m, self.dev.now(), chunks)
+        return chunks
+
     def transact(self, data: bytes, t_send: float) -> list[tuple[float, bytes]]:
-        """Bytes sent at ``t_send``: their frames served in order; returns the reply chunks
-        as ``(arrival time at the host, bytes)``."""
+        """Bytes sent at ``t_send``: their frames served in order (the stream run up to each
+        one's arrival first); returns the head's output as ``(arrival time at the host,
+        bytes)`` chunks: stream frames and replies in the order they left."""
         p = self.preset
         start = max(t_send, self._tx_free)
         self._tx_free = start + len(data) / p.bytes_per_s
         t_arr = self._tx_free + p.latency_s
         self.bytes_out += len(data)
-        chunks = []
+        chunks: list = []
         for frame in bytes(data).split(b"\x00"):
             if not frame:
                 continue
             t_serve = max(t_arr, self._busy_until)
+            chunks += self.pump(t_serve)
             if t_serve > self.dev.now():
                 self.dev.set(t_serve)
             try:
@@ -258,18 +306,8 @@ class SimHead:
                 self.emu.cnt["framing_errors"] += 1
                 reply = None
             self._busy_until = self.dev.now()
-            if reply is None:
-                continue
-            out = []
-            if self.faults is not None:
-                self.faults.write_through(out.append, reply, sleep=self.dev.sleep)
-            else:
-                out.append(reply)
-            for b in out:
-                s = max(self.dev.now(), self._rx_free)
-                self._rx_free = s + len(b) / p.bytes_per_s
-                self.bytes_in += len(b)
-                chunks.append((self._rx_free + p.latency_s, b))
+            if reply is not None:
+                self._up(reply, self.dev.now(), chunks)
         return chunks
 
 
@@ -313,23 +351,31 @@ class SimLink:
                 self.overlong += 1
                 self._buf.clear()
 
+    def _pump(self, now: float) -> None:
+        for t_arr, chunk in self.head.pump(now):
+            heapq.heappush(self._arrivals, (t_arr, self._n, chunk))
+            self._n += 1
+
     def recv(self, timeout: float):
         now = self.clock.now()
         deadline = now + max(timeout, 0.0)
-        self._deliver(now)
-        if not self._ready:
+        while True:
+            self._pump(now)
+            self._deliver(now)
+            if self._ready:
+                return self._ready.pop(0)
             if self.lost is not None:
                 raise self.lost
+            if now >= deadline:
+                return None
+            # wake at the next arrival, the stream's next step (it may put a frame on the
+            # wire) or the deadline, whichever comes first
             nxt = self._arrivals[0][0] if self._arrivals else float("inf")
-            self.head.lockstep.wait_until(min(nxt, deadline))
-            self._deliver(self.clock.now())
-        if self._ready:
-            return self._ready.pop(0)
-        if self.lost is not None:
-            raise self.lost
-        return None
+            self.head.lockstep.wait_until(min(nxt, self.head.next_event(), deadline))
+            now = self.clock.now()
 
     def drain(self) -> int:
+        self._pump(self.clock.now())
         self._deliver(self.clock.now())
         n = len(self._ready)
         self._ready.clear()

@@ -428,8 +428,8 @@ def _run_realtime(fs, loop, gate, sched, duration: float, step_wall: list, line,
 
 
 def _run_lockstep(fs, loop, duration: float, period: float, step_wall: list, line, boundary) -> float:
-    """Fast mode: step the loop every gyro period of simulated time. A request-mode head
-    port's jobs run at once on their own time line (:meth:`Lockstep.run_job`); a worker
+    """Fast mode: step the loop every gyro period of simulated time. The head port's jobs (and
+    a streaming port's turns) run at once on their own time line (:meth:`Lockstep.run_job`); a worker
     thread (other head ports) runs between steps at the simulated times its replies (or
     timeouts) are due. Returns the loop's CPU seconds on this thread (its steps and the
     few µs of scheduling per step, not the head jobs')."""
@@ -438,7 +438,7 @@ def _run_lockstep(fs, loop, duration: float, period: float, step_wall: list, lin
     head = loop.head
     lk.begin()
     t_start = t_start_of(fs)
-    # a request-mode port runs each job at once on the job's own time (Lockstep.run_job): the
+    # the head port runs each job or stream turn at once on its own time (Lockstep.run_job): the
     # head's faults follow that time line; there is no worker to wake or settle
     inline = lk.inline_jobs
     lk.on_time = lambda t: fs.apply_head_faults(t - t_start)

@@ -10,6 +10,13 @@ its reply comes back among the frames). :meth:`next_target` says which frame the
 command next and when that exposure starts (host s): two frames after the newest one
 received, so while frame n+1 integrates the loop commands n+2 — two sets in flight.
 
+Fast mode (``inline``, the lock-step schedule of :mod:`gyrostar.hil.lockstep`) has no
+worker: each window set is sent at once, as part of the loop step that commands it, and
+the frames that have arrived by a step are taken in at that step's ``poll()`` — each turn
+on its own simulated time line (:meth:`Lockstep.run_job`), so a request inside it (start,
+time sync) never moves the loop's clock; a result is handed over only once the loop's
+time has reached its frame's arrival.
+
 Lost-in-space full frames stop the stream (full frames are request/response), as do
 reconnects; the next ``submit_windows`` starts it again with that set. ``set_period``
 changes the frame period (the stream restarts with it): the loop lowers the frame rate this
@@ -42,6 +49,7 @@ CH_STREAM_TARGET = 8
 CH_STREAM_INFO = 9
 CH_STREAM_SETS = 10
 _TARGET = struct.Struct("<Id")
+_READ_ARRIVED_S = 1e-6   # fast mode: a stream turn's read of what has arrived (its own time moves 1 µs)
 
 
 class StreamReplay:
@@ -84,9 +92,12 @@ class StreamPort(HeadPort):
     streaming = True
 
     def __init__(self, link, clock, pixel_format: int = 1, frame_hz: float = 100.0, link_preset=None,
-                 replay: StreamReplay | None = None, **kw):
+                 replay: StreamReplay | None = None, stream_clock=None, **kw):
         super().__init__(link, clock, **kw)
         self.replay = replay
+        # the stream's timing clock, kept off the recorded head clock: host monotonic, or in
+        # fast mode the lock-step schedule's simulated time
+        self.stream_clock = stream_clock
         self.link_preset = link_preset             # gyrostar.transport.linkrate.LinkPreset (utilisation)
         self.pixel_format = pixel_format
         self.period_us = int(round(1e6 / frame_hz))
@@ -128,7 +139,7 @@ class StreamPort(HeadPort):
         # port's answers, not the client's clock readings (1000 a second while streaming)
         from ..clock import MONOTONIC
 
-        self.client.clock = MONOTONIC
+        self.client.clock = self.stream_clock if self.stream_clock is not None else MONOTONIC
         self._log(CH_STREAM_INFO, json.dumps(self.info).encode())
 
     def _log(self, channel: int, payload: bytes) -> None:
@@ -178,6 +189,9 @@ class StreamPort(HeadPort):
         self._log(CH_STREAM_SETS, digest)
         self.sent_bytes += windows_bytes(len(spans))
         self._sends.put((spans, frame))
+        if self.inline is not None:
+            self._inline_turn()
+            return frame
         self._start_worker()
         self._jobs.put(("wake", None))
         return frame
@@ -185,7 +199,7 @@ class StreamPort(HeadPort):
     def set_period(self, period_s: float) -> None:
         """New frame period (s): the stream restarts with it at the next window set."""
         self._want_period = int(round(period_s * 1e6))
-        if self.replay is None:
+        if self.replay is None and self.inline is None:
             self._jobs.put(("wake", None))
 
     def _submit(self, kind, arg) -> None:
@@ -208,7 +222,16 @@ class StreamPort(HeadPort):
                     res.measured = got[1](res.values)       # the loop's measurement, recomputed
             return res
         res = None
-        if self._job is not None and self._done.is_set() and not self._results:
+        if self.inline is not None:
+            if self.on and self._job is None:
+                self._inline_turn()            # the frames that arrived by now
+            if self._job is not None and self.job_done and not self._results:
+                res = self._result
+                self._job = self._result = None
+                self._ready_at = None
+            elif self._results and getattr(self._results[0], "t_rx", -float("inf")) <= self.inline.now():
+                res = self._results.popleft()
+        elif self._job is not None and self._done.is_set() and not self._results:
             res = self._result
             self._job = self._result = None
         elif self._results:
@@ -271,6 +294,10 @@ class StreamPort(HeadPort):
                     self._holding = False
                     gate.worker_exit()
 
+    def _inline_turn(self) -> None:
+        """Fast mode: one stream turn at once, on its own simulated time line."""
+        self.inline.run_job(self._stream_turn)
+
     def _gate_held(self) -> bool:
         """The worker holds the step gate only inside a full-frame or reconnect job."""
         return self._holding and threading.current_thread() is self._thread
@@ -321,12 +348,15 @@ class StreamPort(HeadPort):
                     c.send_windows(spans, frame)
             if not self.on:
                 return
-            fr = c.next_frame(min(0.001, self.period_s))   # short: a window set waits at most 1 ms
+            # short: a window set waits at most 1 ms (fast mode: what has arrived by now — a
+            # wait of 1 µs of the turn's own time reads the link once)
+            more = _READ_ARRIVED_S if self.inline is not None else 0.0
+            fr = c.next_frame(more if self.inline is not None else min(0.001, self.period_s))
             while fr is not None:
                 self._take(fr)
                 if not self._sends.empty():
                     break
-                fr = c.next_frame(0.0)
+                fr = c.next_frame(more)
             c.maybe_sync(1)
         except Exception as exc:  # noqa: BLE001 - the link failed: the loop sees an error result
             with self._lock:

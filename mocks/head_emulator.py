@@ -116,6 +116,9 @@ class HeadEmulator:
         self.rendered_pixels = 0   # pixels rendered for window captures (only the windows)
         self.full_renders = 0
         self.frame_no = 0          # last stream frame number handed out (never reused)
+        # bytes handed to the link and not yet on the wire: the pty's queue by default; a
+        # link model in the same process (fast mode's gyrostar.hil.lockstep.SimHead) gives its own
+        self.backlog_source = None
         self._reset_state()
 
     # --- clocks -------------------------------------------------------------------------------
@@ -485,7 +488,10 @@ class HeadEmulator:
         return (mcu_us - self.mcu_offset_us) * 1e-6 / (1 + self.drift_ppm * 1e-6)
 
     def tx_backlog(self) -> int:
-        """Bytes written to the pty that the other end has not read yet."""
+        """Bytes written to the pty that the other end has not read yet (or what
+        ``backlog_source()`` says)."""
+        if self.backlog_source is not None:
+            return int(self.backlog_source())
         if self.slave is None:
             return 0
         buf = bytearray(4)

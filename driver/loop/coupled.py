@@ -318,7 +318,9 @@ class CoupledLoop:
         self.outputs.emit(out, t_read, float(smp.t[n - 1]))
         self.c.outputs += n
         if self._mids:                   # streamed frames whose update these outputs are the first to hold
-            t_out = self.lat_clock.now()
+            # on the loop's clock, the frames' own timeline (the latency clock is the same clock
+            # in real time; on a simulated clock it measures host compute, which takes no time there)
+            t_out = self.clock.now()
             for t_mid in self._mids:
                 self.e2o[self.n_e2o % len(self.e2o)] = t_out - t_mid
                 self.n_e2o += 1

@@ -68,11 +68,15 @@ def test_client_over_the_simulated_link_and_link_loss():
         client.ping(b"x")
 
 
-def _fast_run(tmp_path, name, seconds=3.0):
+def _fast_run(tmp_path, name, seconds=3.0, head_mode=None):
+    import dataclasses
+
     from gyrostar.hil import config as hc
     from gyrostar.hil.runner import run_flatsat
 
     cfg = hc.load_flatsat()
+    if head_mode is not None:
+        cfg = dataclasses.replace(cfg, head=dataclasses.replace(cfg.head, mode=head_mode))
     scen = hc.load_scenario("demo")
     folder = tmp_path / name
     folder.mkdir()
@@ -130,7 +134,8 @@ def test_fast_head_disconnect_coasts_and_reconnects(tmp_path):
 def test_inline_head_jobs_match_the_worker_thread_schedule(tmp_path, monkeypatch):
     """Lock-step runs the request-mode head's jobs at once on their own time line (no worker
     thread, no hand-overs): the loop sees every result at the same step as with the head
-    worker woken at each reply's time, so the outputs are the same bit for bit."""
+    worker woken at each reply's time, so the outputs are the same bit for bit (``head.mode
+    = "request"``; the streaming port has no worker-thread form in fast mode)."""
     import threading
 
     from gyrostar.hil import flatsat
@@ -143,13 +148,30 @@ def test_inline_head_jobs_match_the_worker_thread_schedule(tmp_path, monkeypatch
         return real_start(self)
 
     monkeypatch.setattr(threading.Thread, "start", spy)
-    r1, o1 = _fast_run(tmp_path, "inline", seconds=2.5)
+    r1, o1 = _fast_run(tmp_path, "inline", seconds=2.5, head_mode="request")
     assert "head-port" not in seen and r1["frames"] > 40
     monkeypatch.setattr(threading.Thread, "start", real_start)
 
     make_head = flatsat.make_head
     monkeypatch.setattr(flatsat, "make_head", lambda *a, **k: make_head(*a, **(k | {"lockstep": None})))
-    r2, o2 = _fast_run(tmp_path, "worker", seconds=2.5)
+    r2, o2 = _fast_run(tmp_path, "worker", seconds=2.5, head_mode="request")
     assert r2["frames"] == r1["frames"]
     for key in ("t", "q", "cov", "flags", "mode", "centroid_px", "t_mid", "q_mid"):
         np.testing.assert_array_equal(o1[key], o2[key])
+
+
+def test_fast_mode_streams_at_the_frame_rate_with_the_link_s_timing(tmp_path):
+    """The default flatsat streams in fast mode too (no worker thread): 100 frames/s of 10 ms
+    exposures, each frame arriving half an exposure after its mid-exposure plus its bytes at
+    the link's sustained rate plus the link latency (usb-fs: 0.9 MB/s, 1 ms), and its update
+    in the first output on the 400 Hz grid after that."""
+    from gyrostar.transport.linkrate import preset
+
+    res, out = _fast_run(tmp_path, "stream", seconds=3.0)
+    assert res["head_mode"] == "stream"
+    st = res["stream"]
+    assert res["frame_rate_hz"] > 99.0 and st["head_dropped"] == 0 and st["frames_unmatched"] <= 1
+    link = preset(st["link"])
+    expect_ms = 5.0 + (st["down_bytes_per_frame"] / link.bytes_per_s + link.latency_s) * 1e3
+    assert abs(st["arrival_ms_p50"] - expect_ms) < 0.5, (st["arrival_ms_p50"], expect_ms)
+    assert st["arrival_ms_p50"] <= res["exposure_to_output_ms_p50"] <= st["arrival_ms_p50"] + 2.5
