@@ -311,14 +311,17 @@ class HeadEmulator:
     def _validate_spans(self, spans: np.ndarray) -> tuple:
         """(spans, window ids, pixel slices per window, pixels) of a valid set, else _Reject."""
         ids, slices, total, in_win, start = [], [], 0, 0, 0
+        p_wid = p_row = -1          # the previous span's window and row (ids and rows are ≥ 0)
         for i, (wid, row, c0, c1) in enumerate(spans.tolist()):
             if row >= self.height or c1 > self.width:
                 raise _Reject(ErrorCode.SPAN_OUTSIDE, i)
             if c0 >= c1:
                 raise _Reject(ErrorCode.SPAN_EMPTY, i)
-            if i and (wid < spans[i - 1, 0] or (wid == spans[i - 1, 0] and row <= spans[i - 1, 1])):
+            if i and (wid < p_wid or (wid == p_wid and row <= p_row)):
                 raise _Reject(ErrorCode.SPAN_ORDER, i)
-            if not i or wid != spans[i - 1, 0]:
+            new_window = not i or wid != p_wid
+            p_wid, p_row = wid, row
+            if new_window:
                 if len(ids) + 1 > LIMITS["max_windows"]:
                     raise _Reject(ErrorCode.WINDOW_COUNT, i)
                 if ids:

@@ -76,15 +76,25 @@ def decode_spans(tail: bytes) -> np.ndarray:
 
 def pack10(values) -> bytes:
     """10-bit values as an LSB-first bit stream: value i occupies bits [10i, 10i+10)."""
-    v = np.asarray(values, dtype=np.uint64)
-    if v.size and int(v.max()) > 0x3FF:
-        raise ProtocolUsageError("pixel value above 1023 cannot be packed in 10 bits")
+    a = np.asarray(values)
+    if a.size and (int(a.max()) > 0x3FF or int(a.min()) < 0):
+        raise ProtocolUsageError("pixel value outside 0..1023 cannot be packed in 10 bits")
+    return _pack10_kernel(np.ascontiguousarray(a, dtype=np.uint16).ravel()).tobytes()
+
+
+@njit(cache=True)
+def _pack10_kernel(v):
+    """Bit-stream pack of uint16 values ≤ 1023 (LSB first), ``ceil(10 n / 8)`` bytes."""
     n = v.size
-    pad = (-n) % 4
-    v = np.concatenate([v, np.zeros(pad, np.uint64)]).reshape(-1, 4)
-    word = v[:, 0] | (v[:, 1] << 10) | (v[:, 2] << 20) | (v[:, 3] << 30)  # 40 bits per group
-    out = np.stack([(word >> (8 * k)) & 0xFF for k in range(5)], axis=1).astype(np.uint8).ravel()
-    return out[: (10 * n + 7) // 8].tobytes()
+    out = np.zeros((10 * n + 7) // 8, np.uint8)
+    for i in range(n):
+        bit = 10 * i
+        byte = bit >> 3
+        word = np.uint32(v[i]) << (bit & 7)
+        out[byte] |= np.uint8(word & 0xFF)
+        if byte + 1 < out.size:
+            out[byte + 1] |= np.uint8((word >> 8) & 0xFF)
+    return out
 
 
 def unpack10(data: bytes, n: int) -> np.ndarray:

@@ -157,6 +157,11 @@ def test_pack10_bit_layout_by_hand():
     vals = np.random.default_rng(0).integers(0, 1024, 1001)
     assert (payloads.unpack10(payloads.pack10(vals), 1001) == vals).all()
     assert len(payloads.pack10(vals)) == (1001 * 10 + 7) // 8
+    # 5 values end mid-byte: 50 bits → 7 bytes, the last one's high bits zero (Σ v_i·2^(10i))
+    assert payloads.pack10([1, 2, 3, 4, 1023]).hex() == "0108300001ff03"
+    for bad in ([1024], [-1], [5, 70000]):
+        with pytest.raises(errors.ProtocolUsageError):
+            payloads.pack10(bad)
 
 
 def test_spans_roundtrip_and_bad_input():
