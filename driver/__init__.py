@@ -14,3 +14,53 @@ __version__ = "0.1.0"
 # SCHED_FIFO loop thread pinned to one CPU can livelock (the FIFO thread spins waiting for
 # a worker that can never run). Set before numpy is first imported; an explicit setting wins.
 _os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+
+def _numba_cache_dir() -> None:
+    """Point numba's on-disk cache at a folder named after the package's sources.
+
+    ``@njit(cache=True)`` revalidates a cached function against its own source file only: a
+    changed kernel or constant it uses from another module leaves its cached machine code
+    stale (after a ``git pull``, the old code would run). The cache therefore lives in
+    ``$XDG_CACHE_HOME/gyrostar/numba/<hash of every .py file of the package>`` (default
+    ``~/.cache``): any change starts a fresh cache (one cold compile), the newest four are
+    kept. An explicit ``NUMBA_CACHE_DIR`` wins.
+    """
+    import hashlib
+    import shutil
+    import sys
+    from pathlib import Path
+
+    if _os.environ.get("NUMBA_CACHE_DIR"):
+        return
+    here = Path(__file__).resolve().parent
+    dirs = [here]
+    for name in ("mocks", "hil"):                  # sub-packages inside (installed) or beside (editable)
+        for cand in (here / name, here.parent / name):
+            if cand.is_dir() and cand != here:
+                dirs.append(cand)
+                break
+    h = hashlib.sha256()
+    for d in dirs:
+        for p in sorted(d.rglob("*.py")):
+            h.update(str(p.relative_to(d)).encode())
+            try:
+                h.update(p.read_bytes())
+            except OSError:
+                pass
+    base = Path(_os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "gyrostar" / "numba"
+    target = base / h.hexdigest()[:16]
+    try:
+        target.mkdir(parents=True, exist_ok=True)
+        old = sorted((p for p in base.iterdir() if p.is_dir() and p != target), key=lambda p: p.stat().st_mtime)
+        for p in old[:-3]:
+            shutil.rmtree(p, ignore_errors=True)
+        _os.utime(target)
+    except OSError:
+        return                                     # unwritable home: numba's default (beside the sources)
+    _os.environ["NUMBA_CACHE_DIR"] = str(target)
+    if "numba" in sys.modules:                     # imported before gyrostar: set its config too
+        sys.modules["numba"].config.CACHE_DIR = str(target)
+
+
+_numba_cache_dir()
