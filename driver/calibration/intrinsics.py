@@ -31,11 +31,14 @@ NAMES = ("f_px", "cx_px", "cy_px", "k1", "k2", "k3", "p1", "p2")
 @dataclass
 class StarFields:
     """Identified stars: ``field`` (N,) int (any ids; renumbered 0..F-1 in order), ``uv`` (N, 2)
-    px, ``ref`` (N, 3) ICRS."""
+    px, ``ref`` (N, 3) ICRS; ``star`` (N,) int, optional: the catalogue star of each
+    observation (a tracked star seen in many fields keeps its own centroid error: with it the
+    fit's σ counts stars, not observations — see :func:`fit`)."""
 
     field: np.ndarray
     uv: np.ndarray
     ref: np.ndarray
+    star: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.field = np.asarray(self.field, dtype=np.int64)
@@ -54,6 +57,10 @@ class StarFields:
         if np.any((counts > 0) & (counts < 3)):
             raise ConfigError("every field needs at least 3 identified stars")
         self.ref = self.ref / np.linalg.norm(self.ref, axis=1)[:, None]
+        if self.star is not None:
+            self.star = np.asarray(self.star, dtype=np.int64)
+            if self.star.shape != (n,):
+                raise ConfigError(f"star table: star ids {self.star.shape} must be ({n},)")
 
     @property
     def n_fields(self) -> int:
@@ -63,7 +70,8 @@ class StarFields:
 @dataclass
 class IntrinsicsFit:
     theta: np.ndarray        # [f, cx, cy, k1, k2, k3, p1, p2]
-    sigma: np.ndarray        # 1-σ of theta (0 where fixed)
+    sigma: np.ndarray        # 1-σ of theta (0 where fixed): per star when the table names its stars
+    sigma_iid: np.ndarray    # 1-σ as if every observation's error were independent
     attitudes: np.ndarray    # (F, 3, 3) ICRS → body
     residuals: np.ndarray    # (N, 2) px, observed − model
     inlier: np.ndarray       # (N,) bool
@@ -212,11 +220,45 @@ def fit(stars: StarFields, theta0: np.ndarray, free: np.ndarray | None = None, a
     dof = max(2 * inlier.sum() - free.sum() - 3 * nf, 1)
     s2 = float((res[inlier] ** 2).sum() / dof)
     sigma = np.zeros(8)
+    sigma_iid = np.zeros(8)
     if free.any():
-        cov = np.linalg.inv(red) * s2
-        sigma[free] = np.sqrt(np.clip(np.diag(cov), 0, None))
+        red_inv = np.linalg.inv(red)
+        sigma_iid[free] = np.sqrt(np.clip(np.diag(red_inv * s2), 0, None))
+        sigma[:] = sigma_iid
+        if stars.star is not None:
+            sigma[free] = np.sqrt(np.clip(np.diag(_per_star_cov(stars, theta, att, free, inlier, w, red_inv)), 0, None))
     rms = float(np.sqrt((res[inlier] ** 2).mean()))
-    return IntrinsicsFit(theta, sigma, att, res, inlier, rms, iterations)
+    return IntrinsicsFit(theta, sigma, sigma_iid, att, res, inlier, rms, iterations)
+
+
+def _per_star_cov(stars: StarFields, theta, att, free, inlier, w, red_inv) -> np.ndarray:
+    """Covariance of the free intrinsics with the observations of one star as one cluster
+    (sandwich estimator, attitudes profiled out): ``R⁻¹ (Σ_g S_g S_gᵀ) R⁻¹ · G/(G−1)`` where
+    ``S_g`` sums over star g's observations the score ``w J̃ᵀ r`` of the reduced problem
+    (``J̃ = J_θ − J_a V_f⁻¹ W_fᵀ``, f the observation's field) and ``R`` is its normal matrix.
+    A star that keeps its centroid error in every field counts once, not once per field."""
+    fid = stars.field
+    nf = stars.n_fields
+    s = np.einsum("nij,nj->ni", att[fid], stars.ref)
+    pred, jt, js = project(theta, s, jac=True)
+    res = stars.uv - pred
+    ja = np.einsum("nab,nbc->nac", js, _cross_mat(s))
+    jt = jt[:, :, free]
+    wi = w * inlier
+    vj = np.zeros((nf, 3, 3))
+    np.add.at(vj, fid, np.einsum("n,nai,naj->nij", wi, ja, ja))
+    wj = np.zeros((nf, jt.shape[2], 3))
+    np.add.at(wj, fid, np.einsum("n,nai,naj->nij", wi, jt, ja))
+    vj += np.eye(3)[None] * 1e-12 * np.trace(vj, axis1=1, axis2=2)[:, None, None].clip(1e-30)
+    proj = np.einsum("fij,fkj->fik", np.linalg.inv(vj), wj)          # V_f⁻¹ W_fᵀ: (F, 3, p)
+    jr = jt - np.einsum("naj,njk->nak", ja, proj[fid])                # J̃ (N, 2, p)
+    score = np.einsum("n,nai,na->ni", wi, jr, res)                    # (N, p)
+    groups = np.unique(stars.star[inlier], return_inverse=True)[1]
+    sg = np.zeros((groups.max() + 1 if len(groups) else 0, score.shape[1]))
+    np.add.at(sg, groups, score[inlier])
+    g = len(sg)
+    meat = sg.T @ sg * (g / (g - 1) if g > 1 else 1.0)
+    return red_inv @ meat @ red_inv
 
 
 def model_difference(params_a: np.ndarray, params_b: np.ndarray, n_grid: int = 21) -> tuple[float, float]:

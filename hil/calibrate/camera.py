@@ -17,7 +17,11 @@ and a fraction of misidentified stars (``--outliers``) are added.
 Principal-point precision: in a narrow field a principal-point shift is almost a pure
 attitude change; it is seen only through the second-order perspective term (≈ δc·x²,
 x ≤ tan(half field)), so σ(c) ≈ σ_centroid / (⟨x²⟩ √N_stars): 0.5 px needs tens of
-thousands of star observations at 0.02 px for the 8.8° xing2012 camera.
+thousands of star observations at 0.02 px for the 8.8° xing2012 camera. When the table names
+each observation's star (``star_id``, as ``--export calib`` writes), the reported σ treats a
+star's observations as one cluster (a tracked star keeps its own centroid error from field to
+field: fixed pattern, pixel phase), so it counts the stars, not the observations; the σ as if
+every observation were independent is reported beside it (``sigma_iid``).
 """
 
 from __future__ import annotations
@@ -62,7 +66,9 @@ def load_table(path):
         from ...calibration.report import read_npz
 
         z = read_npz(path, ("field", "uv", "ref"))
-        return StarFields(z["field"], z["uv"], z["ref"])
+        star = z.get("star_id")            # --export calib names each observation's star
+        return StarFields(z["field"], z["uv"], z["ref"],
+                          star=star if star is not None and star.shape == z["field"].shape else None)
     if path.suffix == ".csv":
         try:
             tab = np.genfromtxt(path, delimiter=",", names=True)
@@ -161,7 +167,10 @@ def run(args) -> int:
     for i, name in enumerate(NAMES):
         table.add(name, res.theta[i], units.get(name, "1"), None if tvec is None else tvec[i])
         table.rows[name]["sigma"] = float(res.sigma[i])
-    extra = {"fixed": sorted(fixed), "n_fields": int(stars.n_fields), "n_stars": int(len(stars.field)),
+    extra = {"sigma_basis": (f"per star ({len(np.unique(stars.star))} stars; their observations' errors "
+                             "correlated)") if stars.star is not None else "independent observations",
+             "sigma_iid": {n: float(res.sigma_iid[i]) for i, n in enumerate(NAMES)},
+             "fixed": sorted(fixed), "n_fields": int(stars.n_fields), "n_stars": int(len(stars.field)),
              "n_rejected": int((~res.inlier).sum()), "residual_rms_before_px": before.rms_px,
              "residual_rms_after_px": res.rms_px}
     checks = None

@@ -105,3 +105,50 @@ def test_camera_from_a_csv_star_table(tmp_path, capsys):
     assert out["parameters"]["f_px"]["value"] == pytest.approx(true.focal_length_px, rel=1e-4)
     assert out["parameters"]["k1"]["value"] == pytest.approx(-0.2, abs=0.02)
     assert calfile.load(tmp_path / "r" / "calibration.toml").camera.residual_rms_px < 0.03
+
+
+def _tracked_fields(seed, per_star_px, noise_px=0.05, n_stars=40, n_fields=400):
+    """A tracker's calibration table: the same stars in every field (small attitude changes),
+    each star with its own fixed centroid error of ``per_star_px`` RMS plus independent
+    noise; truth k1 = 0.3 on an 8.8° field."""
+    from gyrostar.calibration.intrinsics import StarFields, project, rotvec_dcm
+
+    rng = np.random.default_rng(seed)
+    theta = np.array([6640.0, 515.5, 508.5, 0.3, 0.0, 0.0, 0.0, 0.0])
+    xy = rng.uniform(-0.07, 0.07, (n_stars, 2))
+    ref = np.column_stack([xy, np.ones(n_stars)])
+    ref /= np.linalg.norm(ref, axis=1)[:, None]
+    bias = rng.normal(0.0, per_star_px, (n_stars, 2))
+    att = rotvec_dcm(rng.normal(0.0, 2e-3, (n_fields, 3)))
+    field = np.repeat(np.arange(n_fields), n_stars)
+    star = np.tile(np.arange(n_stars), n_fields)
+    s = np.einsum("nij,nj->ni", att[field], ref[star])
+    uv = project(theta, s) + bias[star] + rng.normal(0.0, noise_px, (len(field), 2))
+    return StarFields(field, uv, ref[star], star=star), theta
+
+
+def test_per_star_sigma_counts_stars_not_observations():
+    """With per-star centroid errors the principal point's σ from iid observations is far too
+    small; the per-star (cluster) σ covers the real scatter over seeds, and equals the iid σ
+    when the errors are independent."""
+    from gyrostar.calibration.intrinsics import fit
+
+    free = np.array([1, 1, 1, 1, 0, 0, 0, 0], bool)
+    errs, sig, sig_iid = [], [], []
+    for seed in range(6):
+        stars, theta = _tracked_fields(seed, per_star_px=0.02)
+        r = fit(stars, theta + np.array([3.0, 1.0, -1.0, 0.01, 0, 0, 0, 0]), free=free)
+        errs.append(r.theta[1] - theta[1])
+        sig.append(r.sigma[1])
+        sig_iid.append(r.sigma_iid[1])
+    errs, sig, sig_iid = np.array(errs), np.array(sig), np.array(sig_iid)
+    assert np.all(sig > 4 * sig_iid)                          # 40 stars, not 16 000 observations
+    assert np.sqrt(np.mean(errs ** 2)) > 3 * np.mean(sig_iid)  # the iid σ does not cover the scatter
+    assert np.all(np.abs(errs) < 4 * sig)                     # the per-star σ does
+    # independent errors: the two agree (on average: 40 clusters make one estimate scatter ±20 %)
+    ratio = []
+    for seed in range(10, 16):
+        stars, theta = _tracked_fields(seed, per_star_px=0.0)
+        r = fit(stars, theta, free=free)
+        ratio.append(r.sigma[1:3] / r.sigma_iid[1:3])
+    assert 0.75 < np.mean(ratio) < 1.25
