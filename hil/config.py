@@ -3,7 +3,7 @@
 A **flatsat config** says which devices the loop talks to and where outputs go::
 
     [head]    kind = "emulator" | "firmware-host" | "serial";  url, baudrate, program,
-              link (preset: uart-921k | uart-3m | usb-fs), mode (stream | request), pixel_format
+              link (preset: uart-921k | uart-3m | usb-fs | usb-hs), mode (stream | request), pixel_format
     [gyro]    kind = "emulator" | "i2c" | "spi";  model, i2c_bus, i2c_address, spi_bus, ...
     [sim]     preset, gyro_errors, catalog, mag_limit        (simulated devices only)
     [loop]    rates, window size, identification settings
@@ -38,13 +38,14 @@ class HeadConfig:
     exposure_ms: float = 10.0
     gain: int = 1
     # the head link (gyrostar.transport.linkrate preset): simulated links are paced at its line
-    # rate and the loop budgets its windows with it. A 100 Hz head moves 0.3-0.5 MB/s, within
-    # USB full speed (0.9 MB/s), beyond a 921.6 kBd UART. "none": unpaced (head tests only)
-    link: Literal["uart-921k", "uart-3m", "usb-fs", "none"] = "usb-fs"
+    # rate and the loop budgets its windows with it. A 100 Hz head moves 0.15-0.5 MB/s, within
+    # USB full speed (0.9 MB/s), beyond a 921.6 kBd UART; USB high speed (the default) also
+    # keeps the exposure -> output time under 9 ms. "none": unpaced (head tests only)
+    link: Literal["uart-921k", "uart-3m", "usb-fs", "usb-hs", "none"] = "usb-hs"
     mode: Literal["stream", "request"] = "stream"   # streaming head, or CAPTURE request by request
     pixel_format: Literal["packed10", "u16"] = "packed10"
     # lost-in-space image: the spot windows the head finds itself (FIND_SPOTS: a few kB on any
-    # link) or the whole frame (1.3 MB: 1.5 s on usb-fs, 14 s on uart-921k; bring-up, old firmware)
+    # link) or the whole frame (1.3 MB: 0.16 s on usb-hs, 1.5 s on usb-fs, 14 s on uart-921k; bring-up)
     acquire: Literal["spots", "full_frame"] = "spots"
 
     def validate(self):

@@ -38,7 +38,7 @@ MEANING = {
     "head.retries": "retries after a timeout or a corrupt reply",
     "head.exposure_ms": "exposure time, ms",
     "head.gain": "sensor gain setting",
-    "head.link": "line-rate model of the simulated link (uart-921k, uart-3m, usb-fs)",
+    "head.link": "line-rate model of the simulated link (uart-921k, uart-3m, usb-fs, usb-hs)",
     "gyro.kind": "emulator: BMI088 register model; i2c: /dev/i2c-N; spi: /dev/spidevB.D",
     "gyro.model": "gyro part",
     "gyro.i2c_bus": "N of /dev/i2c-N",

@@ -238,9 +238,13 @@ class CoupledLoop:
             self.flags_pending |= R.FLAG_OVERRUN
         self.t_step_prev = t_step
         if self.streaming:
-            # frames the stream port already measured update the filter before this step's samples
-            self._guarded(self._stream_phase, t_step)
-            return self._gyro_phase()
+            # frames the stream port already measured update the filter before this step's
+            # samples; the next windows are planned after the outputs (off the exposure →
+            # output path) and from the newest sample
+            self._guarded(self._stream_take, t_step)
+            n_out = self._gyro_phase()
+            self._guarded(self._stream_command, t_step)
+            return n_out
         done = self.image.result()       # the readout handed over last step: apply it before this
         if done is not None:             # step's samples, so their outputs are the first to carry it
             self._process_windows(*done, t_step)
@@ -390,9 +394,8 @@ class CoupledLoop:
             self.next_frame_t = max(self.next_frame_t + 1.0 / self.p.frame_hz, now)
             self._command_windows(now)
 
-    def _stream_phase(self, now: float) -> None:
-        """Streaming head: take in the frames the port has measured, command the windows of
-        the frame two ahead of the newest one (while the next one integrates)."""
+    def _stream_take(self, now: float) -> None:
+        """Streaming head: take in the frames the port has measured (their updates)."""
         self._sync_uv()
         head = self.head
         while True:
@@ -438,6 +441,12 @@ class CoupledLoop:
             if self.frame_t[0] != self.frame_t[0]:
                 self.frame_t[0] = res.t_mid
             self.frame_t[1] = res.t_mid
+
+    def _stream_command(self, now: float) -> None:
+        """Streaming head: reconnect or acquire when due, else command the windows of the
+        frame two ahead of the newest one (while the next one integrates)."""
+        self._sync_uv()
+        head = self.head
         if self.head_down_since is not None:
             if not head.busy and now >= self.next_reconnect_t:
                 self.next_reconnect_t = now + self.p.reconnect_every_s

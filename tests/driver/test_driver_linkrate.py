@@ -23,6 +23,15 @@ def test_usb_fs_is_below_its_theoretical_bulk_rate():
     assert p.latency_s >= 1e-3
 
 
+def test_usb_hs_is_below_its_theoretical_bulk_rate_and_waits_a_microframe():
+    p = PRESETS["usb-hs"]
+    assert p.bytes_per_s < 13 * 512 * 8000  # 53.2 MB/s: 13 bulk packets per 125 µs microframe
+    assert p.latency_s >= 125e-6
+    # a streamed frame of 1.7 kB: the microframe plus 0.21 ms of bytes, against 2.9 ms on usb-fs
+    assert p.wire_time(1700) == pytest.approx(125e-6 + 1700 / 8e6)
+    assert p.wire_time(1700) < PRESETS["usb-fs"].wire_time(1700) / 8
+
+
 def test_unknown_preset_names_the_known_ones():
     with pytest.raises(KeyError, match="uart-921k"):
         preset("uart-9600")

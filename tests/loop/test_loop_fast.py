@@ -28,7 +28,7 @@ def _head(link_name):
     return clock, head
 
 
-@pytest.mark.parametrize("name", ["uart-921k", "uart-3m", "usb-fs"])
+@pytest.mark.parametrize("name", ["uart-921k", "uart-3m", "usb-fs", "usb-hs"])
 def test_ping_takes_its_wire_time(name):
     clock, head = _head(name)
     link = head.open_link()
