@@ -184,6 +184,7 @@ def setup(cfg: TrialConfig) -> dict:
         return _SETUP[key]
     from ..catalog import load_catalog
     from .extended import ExtendedIdentifier
+    from .faint import faint_stars
     from .grid import GridIdentifier, GridParams, load_grid_database
     from .index import load_index
     from .pyramid import Pyramid
@@ -191,8 +192,9 @@ def setup(cfg: TrialConfig) -> dict:
 
     cam = _camera(cfg)
     diag = 2.0 * math.degrees(math.atan(0.5 * math.hypot(cam.width_px, cam.height_px) / cam.focal_length_px))
-    sky = Sky(load_catalog(cfg.catalog, min(cfg.mag_limit + 1.0, 10.0) if cfg.catalog == "gaia"
-                           else cfg.mag_limit + 1.0))
+    deep = load_catalog(cfg.catalog, min(cfg.mag_limit + 1.0, 10.0) if cfg.catalog == "gaia"
+                        else cfg.mag_limit + 1.0)
+    sky = Sky(deep)
     sigma = max(cfg.total_pos_noise, 0.3)
     out = {"camera": cam, "sky": sky}
     if cfg.method == "pyramid":
@@ -203,8 +205,10 @@ def setup(cfg: TrialConfig) -> dict:
         fast = load_index(cfg.catalog, cfg.mag_limit, sep, FAST_PER_FIELD) if per_field == 0 else None
         # measured magnitudes in the search and the bound, never trusted beyond the paper-001
         # camera's 0.2 mag (a field generated with exact magnitudes still gets a 0.2 mag window)
+        # labels next to a star the index leaves out (fainter than its limit, or the fainter
+        # of a close double) are dropped: the sensor sees such stars now and then
         out["ident"] = Pyramid(index, cam, sigma_px=sigma, fast_index=fast,
-                               sigma_mag=max(cfg.total_mag_noise, MAG_SIGMA_FLOOR))
+                               sigma_mag=max(cfg.total_mag_noise, MAG_SIGMA_FLOOR), faint=faint_stars(deep, index))
         if cfg.peer:
             from .peers import load_peer
 

@@ -154,6 +154,19 @@ def _voxel_cells(vectors, h, g):
 
 
 @njit(cache=True)
+def voxel_span(center, chord, h, g):
+    """The voxel index ranges ``(lo0, hi0, lo1, hi1, lo2, hi2)`` (inclusive) that hold every
+    unit vector within ``chord`` of ``center`` (grid of ``g`` cells of edge ``h`` per axis)."""
+    lo0 = max(0, int(np.floor((center[0] - chord + 1.0) / h)))
+    hi0 = min(g - 1, int(np.floor((center[0] + chord + 1.0) / h)))
+    lo1 = max(0, int(np.floor((center[1] - chord + 1.0) / h)))
+    hi1 = min(g - 1, int(np.floor((center[1] + chord + 1.0) / h)))
+    lo2 = max(0, int(np.floor((center[2] - chord + 1.0) / h)))
+    hi2 = min(g - 1, int(np.floor((center[2] + chord + 1.0) / h)))
+    return lo0, hi0, lo1, hi1, lo2, hi2
+
+
+@njit(cache=True)
 def cone_query(vox_vec, vox_stars, vox_start, h, g, center, radius, n_max):
     """Indexes (ascending) of the stars within ``radius`` of unit ``center`` among the first
     ``n_max`` (stars are sorted by V, so that is a magnitude limit).
@@ -162,12 +175,7 @@ def cone_query(vox_vec, vox_stars, vox_start, h, g, center, radius, n_max):
     first), so a cell is one sequential read and the scan stops at the limit."""
     chord = 2.0 * np.sin(radius / 2.0)
     cosr = np.cos(radius)
-    lo0 = max(0, int(np.floor((center[0] - chord + 1.0) / h)))
-    hi0 = min(g - 1, int(np.floor((center[0] + chord + 1.0) / h)))
-    lo1 = max(0, int(np.floor((center[1] - chord + 1.0) / h)))
-    hi1 = min(g - 1, int(np.floor((center[1] + chord + 1.0) / h)))
-    lo2 = max(0, int(np.floor((center[2] - chord + 1.0) / h)))
-    hi2 = min(g - 1, int(np.floor((center[2] + chord + 1.0) / h)))
+    lo0, hi0, lo1, hi1, lo2, hi2 = voxel_span(center, chord, h, g)
     cap = 64
     out = np.empty(cap, dtype=np.int64)
     n = 0

@@ -24,6 +24,13 @@ residuals of every identified star are within ``label_tol``.
 5. The per-star check (:class:`gyrostar.starid.star_check.StarCheck`, swappable): each
    label's own χ² (position, and magnitude when given) after QUEST; failures are
    unlabelled, the attitude re-solved over the rest, and fewer than three reject.
+6. The absent-star check (:mod:`gyrostar.starid.absent`): a catalog star the sensor surely
+   detects that the attitude puts on the sensor with no spot near it rejects the solution
+   (``absent_max`` such stars allowed, default 0).
+7. With ``faint`` (:mod:`gyrostar.starid.faint`: the catalog stars the index leaves out, a
+   little fainter than its limit), a label whose spot lies within ``label_tol`` of such a
+   star is dropped (the spot may be that star, its index neighbour missed), the attitude
+   solved again over the rest; fewer than three labels left reject.
 
 Expected false matches for a sky of N navigation stars and tolerance ε (rad): a triangle
 with side θ_ij and angle φ_k at vertex k:  E₃ = N ρ² ε³ sin θ_ij / (π sin φ_k)
@@ -58,17 +65,20 @@ from ..attitude import quat_to_dcm
 from ..camera import unproject_many
 from ..core.quest import quest
 from ..errors import ConfigError
-from .index import StarIndex, cone_query
+from .absent import BLEND_PX, EDGE_PX, MARGIN_MAG, absent_stars
+from .faint import drop_near_faint
+from .index import StarIndex, cone_query, voxel_span
 from .kvector import query
 from .result import StarIdResult, to_body_vectors
 from .star_check import StarCheck, check_stars
-from .verify import verify_matches
+from .verify import solve, verify_matches
 
-ST_OK, ST_TOO_FEW, ST_NO_MATCH, ST_REJECTED, ST_STAR_CHECK, ST_SPARSE, ST_BAD = 0, 1, 2, 3, 4, 5, 6
+ST_OK, ST_TOO_FEW, ST_NO_MATCH, ST_REJECTED, ST_STAR_CHECK, ST_SPARSE, ST_BAD, ST_ABSENT = range(8)
 STATUS_TEXT = {ST_OK: "ok", ST_TOO_FEW: "fewer than 3 stars", ST_NO_MATCH: "no unique pyramid",
                ST_REJECTED: "rejected by verification", ST_STAR_CHECK: "fewer than 3 stars pass the per-star check",
                ST_SPARSE: "every spot fits one pyramid but too few stars for p_false_max",
-               ST_BAD: "centroids must be finite pixel coordinates"}
+               ST_BAD: "centroids must be finite pixel coordinates",
+               ST_ABSENT: "the attitude puts surely-seen stars where no spot is"}
 _MAX_CAND = 256
 
 
@@ -234,12 +244,7 @@ def _confirm(b, nb, i, j, k, x, y, z, vec, is_nav, vstart, vstars, vvec, vh, vg,
         # voxel cells around the prediction (cone_query inline, without its allocation)
         chord = 2.0 * np.sin(radius / 2.0)
         cosr = np.cos(radius)
-        lo0 = max(0, int(np.floor((p[0] - chord + 1.0) / vh)))
-        hi0 = min(vg - 1, int(np.floor((p[0] + chord + 1.0) / vh)))
-        lo1 = max(0, int(np.floor((p[1] - chord + 1.0) / vh)))
-        hi1 = min(vg - 1, int(np.floor((p[1] + chord + 1.0) / vh)))
-        lo2 = max(0, int(np.floor((p[2] - chord + 1.0) / vh)))
-        hi2 = min(vg - 1, int(np.floor((p[2] + chord + 1.0) / vh)))
+        lo0, hi0, lo1, hi1, lo2, hi2 = voxel_span(p, chord, vh, vg)
         for c0 in range(lo0, hi0 + 1):
             for c1 in range(lo1, hi1 + 1):
                 cell = (c0 * vg + c1) * vg
@@ -613,13 +618,37 @@ def label_rest(b, q, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, tol, m
 
 
 @njit(cache=True)
+def post_checks(q, b, match, n_ok, cam, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, label_tol, absent,
+                fvec, fstart, fh, fg):
+    """The checks after the per-star check, on an accepted solution: absent stars
+    (``absent`` = [absent_max, margin mag, near rad, edge px, index limit V]; empty: off,
+    :func:`gyrostar.starid.absent.absent_stars`), then labels next to a faint star the index
+    leaves out (the faint stars' voxel grid ``fvec, fstart, fh, fg``; no stars: off,
+    :func:`gyrostar.starid.faint.drop_near_faint`), dropped in place and the attitude solved
+    again. Returns ``(status, q, n_ok)``."""
+    if absent.shape[0] > 0:
+        if absent_stars(q, b, match, cam, vec, vmag, vvec, vstars, vstart, vh, vg, fov_radius, absent[4], absent[1],
+                        absent[2], absent[3]) > absent[0]:
+            return ST_ABSENT, q, n_ok
+    if fvec.shape[0] > 0 and drop_near_faint(q, b, match, fvec, fstart, fh, fg, label_tol) > 0:
+        n_ok = 0
+        for i in range(match.shape[0]):
+            if match[i] >= 0:
+                n_ok += 1
+        if n_ok < 3:
+            return ST_STAR_CHECK, q, 0
+        q = solve(b, vec, match)
+    return ST_OK, q, n_ok
+
+
+@njit(cache=True)
 def pyramid_identify_uv(uv, cam, tiers, lab_nloc, vec, vmag, ids, vstart, vstars, vvec, vh, vg, eps, label_tol, max_sep,
                         fov_radius, p_false_max, max_triangles, mark, budgets, mag, check, mwin, lab_sorted_v,
-                        n_sigma):
+                        n_sigma, absent, fvec, fstart, fh, fg):
     """One compiled call: centroids ``uv`` (n, 2) px → body vectors → :func:`pyramid_core` →
     the per-star check :func:`gyrostar.starid.star_check.check_stars` (scalars ``check`` from
     ``StarCheck.settings()``; empty: no check here). ``mag`` (n,) measured V or empty; the search
-    uses it when ``mwin`` > 0 (:func:`pyramid_core`).
+    uses it when ``mwin`` > 0 (:func:`pyramid_core`); then :func:`post_checks`.
     Returns ``(match, catalog ids, q, status, p_false, n_ok)``; status ``ST_BAD`` for a
     non-finite centroid."""
     n = uv.shape[0]
@@ -644,6 +673,9 @@ def pyramid_identify_uv(uv, cam, tiers, lab_nloc, vec, vmag, ids, vstart, vstars
             st = ST_STAR_CHECK
         else:
             q = qc
+    if st == ST_OK:
+        st, q, n_ok = post_checks(q, b, match, n_ok, cam, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius,
+                                  label_tol, absent, fvec, fstart, fh, fg)
     if st != ST_OK:
         match[:] = -1
     out_ids = -np.ones(n, dtype=np.int64)
@@ -682,6 +714,10 @@ class Pyramid:
     ``n_sigma·sigma_mag`` of its measured V, in the search, the confirming star and the labels,
     and every star's term of the false-match count is multiplied by the share of stars that
     window admits. 0: positions only (magnitudes then reach the per-star check alone).
+    ``absent_max``: how many surely-seen catalog stars the solved attitude may put on the
+    sensor with no spot near them (:mod:`gyrostar.starid.absent`; -1: no check).
+    ``faint``: a :class:`gyrostar.starid.faint.FaintStars` of the same catalog (None: labels
+    are not checked against the stars the index leaves out).
     """
 
     index: StarIndex
@@ -695,10 +731,14 @@ class Pyramid:
     max_triangles: int = 400
     check: object = None
     sigma_mag: float = 0.0
+    absent_max: int = 0
+    faint: object = None
 
     def __post_init__(self) -> None:
-        if not (self.sigma_px > 0 and self.n_sigma > 0 and self.max_triangles >= 1 and self.sigma_mag >= 0):
-            raise ConfigError("pyramid needs sigma_px > 0, n_sigma > 0, max_triangles ≥ 1 and sigma_mag ≥ 0")
+        if not (self.sigma_px > 0 and self.n_sigma > 0 and self.max_triangles >= 1 and self.sigma_mag >= 0
+                and self.absent_max >= -1):
+            raise ConfigError("pyramid needs sigma_px > 0, n_sigma > 0, max_triangles ≥ 1, sigma_mag ≥ 0 and "
+                              "absent_max ≥ -1")
         self.mwin = self.n_sigma * self.sigma_mag
         if not (len(self.budgets) >= 1 and all(int(k) >= 3 for k in self.budgets)
                 and list(self.budgets) == sorted(self.budgets)):
@@ -732,6 +772,12 @@ class Pyramid:
                                    min_stars=3)
         # a StarCheck runs inside the compiled call; another stage runs after it
         self._fused = self.check.settings() if isinstance(self.check, StarCheck) else np.empty(0)
+        near = self.label_tol + BLEND_PX / self.camera.focal_length_px
+        self._absent_cfg = np.empty(0) if self.absent_max < 0 else np.array(
+            [float(self.absent_max), MARGIN_MAG, near, EDGE_PX, self.index.mag_limit])
+        f = self.faint
+        self._faint_grid = (np.empty((0, 3)), np.zeros(2, np.int64), 1.0, 1) if f is None else (
+            f.vox_vec, f.vox_start, float(f.vox_h), int(f.vox_g))
         self._no_mag = np.empty(0)
 
     def identify_vectors(self, b: np.ndarray, mag=None) -> StarIdResult:
@@ -749,6 +795,11 @@ class Pyramid:
             q, full, n_ok = self.check.apply(b, mag, ix.vectors, ix.vmag, full)
             if n_ok == 0:
                 st = ST_STAR_CHECK
+            else:
+                full = np.array(full, dtype=np.int64)
+                st, q, n_ok = post_checks(np.asarray(q, np.float64), b, full, n_ok, self._params, ix.vectors, ix.vmag,
+                                          ix.vox_start, ix.vox_stars, ix.vox_vec, ix.vox_h, ix.vox_g, self.fov_radius,
+                                          self.label_tol, self._absent_cfg, *self._faint_grid)
         return StarIdResult.make(ix, full, q, st == ST_OK, self._status(st, n_ok, pf), pf, "pyramid")
 
     def identify(self, uv: np.ndarray, mag=None) -> StarIdResult:
@@ -768,7 +819,7 @@ class Pyramid:
             pts, self._params, self._tiers, self._lab_nloc, ix.vectors, ix.vmag, ix.ids, ix.vox_start, ix.vox_stars,
             ix.vox_vec, ix.vox_h, ix.vox_g, self.eps, self.label_tol, ix.max_sep, self.fov_radius, self.p_false_max,
             self.max_triangles, self._mark, self._budgets, m, self._fused, self.mwin, self._lab_sorted_v,
-            self.n_sigma)
+            self.n_sigma, self._absent_cfg, *self._faint_grid)
         if st == ST_BAD:
             raise ConfigError(STATUS_TEXT[ST_BAD])
         return StarIdResult(match, ids, q, st == ST_OK, self._status(st, n_ok, pf), float(pf), "pyramid")

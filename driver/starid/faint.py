@@ -1,0 +1,91 @@
+"""Faint neighbours: catalog stars the sensor may see that the star index leaves out.
+
+An index stops at its limiting magnitude and keeps one star of each close double. The
+sensor does not stop there: with magnitude noise σ_m a star up to ~3σ_m fainter than the
+limit is sometimes detected, and an index star near the limit is sometimes missed. A spot
+of such a faint star, next to an index star that was missed, gets that index star's label
+— the attitude is right, one label is wrong. :class:`FaintStars` holds the left-out stars
+(every catalog star not in the index down to ``index.mag_limit + depth_mag``) so an
+identifier can drop a label whose spot is within its tolerance of one of them.
+Directions are ICRS unit vectors.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+from numba import njit
+
+from ..attitude import quat_to_dcm
+from ..errors import ConfigError
+from .index import voxel_grid, voxel_span
+
+DEPTH_MAG = 0.6     # mag below the index limit: 3σ of the 0.2 mag sensor noise of paper 001
+
+
+VOX_H = 0.02        # voxel edge of the faint stars' grid (unit-vector units, ~1.1°)
+
+
+@dataclasses.dataclass
+class FaintStars:
+    """Unit vectors (m, 3) of the catalog stars an index leaves out, in a voxel grid
+    (``gyrostar.starid.index.voxel_grid``: ``vox_vec`` the vectors in cell order, ``vox_start``
+    each cell's first, ``vox_g`` cells per axis of edge ``vox_h``)."""
+
+    vectors: np.ndarray
+    depth_mag: float
+
+    def __post_init__(self) -> None:
+        self.vectors = np.ascontiguousarray(self.vectors, dtype=np.float64).reshape(-1, 3)
+        self.vox_h = VOX_H
+        self.vox_g, self.vox_start, order = voxel_grid(self.vectors, VOX_H)
+        self.vox_vec = np.ascontiguousarray(self.vectors[order])
+
+
+@njit(cache=True)
+def drop_near_faint(q, b, match, vox_vec, vox_start, h, g, radius):
+    """Unlabel (``match[i] = -1``, in place) every labelled spot ``b`` (n, 3, body) that
+    attitude ``q`` (ICRS → body) puts within ``radius`` (rad) of a faint star of the grid
+    (:class:`FaintStars`); returns how many."""
+    a = quat_to_dcm(q)
+    cosr = math.cos(radius)
+    chord = 2.0 * math.sin(0.5 * radius)
+    dropped = 0
+    c = np.empty(3)
+    for i in range(b.shape[0]):
+        if match[i] < 0:
+            continue
+        for k in range(3):           # body → ICRS: Aᵀ b
+            c[k] = a[0, k] * b[i, 0] + a[1, k] * b[i, 1] + a[2, k] * b[i, 2]
+        lo0, hi0, lo1, hi1, lo2, hi2 = voxel_span(c, chord, h, g)
+        near = False
+        for x in range(lo0, hi0 + 1):
+            for y in range(lo1, hi1 + 1):
+                base = (x * g + y) * g
+                for p in range(vox_start[base + lo2], vox_start[base + hi2 + 1]):
+                    if vox_vec[p, 0] * c[0] + vox_vec[p, 1] * c[1] + vox_vec[p, 2] * c[2] >= cosr:
+                        near = True
+                        break
+                if near:
+                    break
+            if near:
+                break
+        if near:
+            match[i] = -1
+            dropped += 1
+    return dropped
+
+
+def faint_stars(catalog, index, depth_mag: float = DEPTH_MAG) -> FaintStars:
+    """The stars of ``catalog`` (a :class:`gyrostar.catalog.StarCatalog` at least
+    ``depth_mag`` deeper than ``index``) that ``index`` (a :class:`StarIndex` of the same
+    catalog) leaves out, down to ``index.mag_limit + depth_mag``."""
+    if not depth_mag >= 0.0:
+        raise ConfigError(f"faint-star depth must be ≥ 0 mag, got {depth_mag!r}")
+    if len(catalog.vmag) and float(np.max(catalog.vmag)) < index.mag_limit + depth_mag - 0.05:
+        raise ConfigError(f"catalog {catalog.name} reaches V {float(np.max(catalog.vmag)):.2f}, not the "
+                          f"{index.mag_limit + depth_mag:.2f} the faint-star check needs")
+    keep = (catalog.vmag <= index.mag_limit + depth_mag) & ~np.isin(catalog.ids, index.ids)
+    return FaintStars(catalog.vectors[keep], float(depth_mag))
