@@ -179,7 +179,10 @@ def _camera(cfg: TrialConfig):
 
 def setup(cfg: TrialConfig) -> dict:
     """Camera, sky, index and identifier of a configuration (cached per process)."""
-    key = dataclasses.replace(cfg, pos_noise_px=0.0, mag_noise=0.0, update_period_s=1.0, false_stars=0)
+    # fields of any noise share a setup, but the identifier's tolerances follow the noise
+    key = (dataclasses.replace(cfg, pos_noise_px=0.0, mag_noise=0.0, cat_pos_noise_px=0.0, cat_mag_noise=0.0,
+                               update_period_s=1.0, false_stars=0),
+           max(cfg.total_pos_noise, 0.3), max(cfg.total_mag_noise, MAG_SIGMA_FLOOR))
     if key in _SETUP:
         return _SETUP[key]
     from ..catalog import load_catalog
