@@ -338,11 +338,16 @@ def _lost_in_space_bytes(n_spots: int = 64, box: int = 7, width: int = 1024, hei
     return {"spots": down, "full_frame": full}
 
 
+EXPOSURE_S = 0.010   # the streaming head's exposure (s)
+GYRO_HZ = 400.0      # gyro output rate (Hz): an update waits half a period on average
+
+
 def bench_link(quick: bool) -> dict:
     """Per link preset: bytes per frame at rest and at 5 °/s with 10 stars (paper 000's 6×6
     trajectory windows, PACKED10), link utilisation at 100 Hz, the highest frame rate the
-    link carries within the loop's 0.8 budget, the rate a paced stream really sustains, and
-    the wire time of a lost-in-space image (the head's FIND_SPOTS windows vs a full frame)."""
+    link carries within the loop's 0.8 budget, the rate a paced stream really sustains, the
+    wire time of a lost-in-space image (the head's FIND_SPOTS windows vs a full frame), and
+    the exposure → output floor the link allows (no host time, no head readout)."""
     from gyrostar.fwtools.wirecount import star_trajectory_windows
     from gyrostar.loop.linkbudget import frame_bytes, windows_bytes
     from gyrostar.transport.linkrate import PRESETS
@@ -364,13 +369,18 @@ def bench_link(quick: bool) -> dict:
                "utilisation_100hz_5dps": p.utilisation(per, 100.0),
                "max_frame_hz_5dps_budget_0.8": p.max_frame_hz(per, 0.8),
                "lost_in_space_bytes": lis,
-               "lost_in_space_wire_s": {k: p.wire_time(v) for k, v in lis.items()}}
+               "lost_in_space_wire_s": {k: p.wire_time(v) for k, v in lis.items()},
+               # the design's exposure → output floor with no host time: half the exposure,
+               # the frame on this wire, half a gyro period (the wait for the next output)
+               "exposure_to_output_floor_ms": {
+                   k: 1e3 * (0.5 * EXPOSURE_S + p.wire_time(sizes[k][0]) + 0.5 / GYRO_HZ) for k in sizes}}
         if not quick:
             fig["measured_5dps_at_100hz"] = _measured_rate(name, sets["5dps"], 2.0)
         m = fig.get("measured_5dps_at_100hz", {})
         fig["note"] = (f"{name}: {sizes['rest'][0]}/{sizes['5dps'][0]} B down at rest/5°/s, "
                        f"util@100Hz {fig['utilisation_100hz_5dps']:.2f}, "
-                       f"max {fig['max_frame_hz_5dps_budget_0.8']:.0f} Hz"
+                       f"max {fig['max_frame_hz_5dps_budget_0.8']:.0f} Hz, "
+                       f"exposure→output floor {fig['exposure_to_output_floor_ms']['5dps']:.1f} ms"
                        + (f", paced stream {m['frames_per_s']:.0f} fps" if "frames_per_s" in m else "")
                        + f"; lost-in-space {lis['spots']} B in {1e3 * p.wire_time(lis['spots']):.0f} ms (head's spots)"
                        f" vs {lis['full_frame'] / 1e6:.2f} MB in {p.wire_time(lis['full_frame']):.1f} s (full frame)")
