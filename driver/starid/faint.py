@@ -79,13 +79,11 @@ def drop_near_faint(q, b, match, vox_vec, vox_start, h, g, radius):
 
 
 def faint_stars(catalog, index, depth_mag: float = DEPTH_MAG) -> FaintStars:
-    """The stars of ``catalog`` (a :class:`gyrostar.catalog.StarCatalog` at least
+    """The stars of ``catalog`` (a :class:`gyrostar.catalog.StarCatalog`, ideally
     ``depth_mag`` deeper than ``index``) that ``index`` (a :class:`StarIndex` of the same
-    catalog) leaves out, down to ``index.mag_limit + depth_mag``."""
+    catalog) leaves out, down to ``index.mag_limit + depth_mag`` or as deep as the catalog
+    goes (a catalog that ends at the index's limit leaves only the pruned doubles)."""
     if not depth_mag >= 0.0:
         raise ConfigError(f"faint-star depth must be ≥ 0 mag, got {depth_mag!r}")
-    if len(catalog.vmag) and float(np.max(catalog.vmag)) < index.mag_limit + depth_mag - 0.05:
-        raise ConfigError(f"catalog {catalog.name} reaches V {float(np.max(catalog.vmag)):.2f}, not the "
-                          f"{index.mag_limit + depth_mag:.2f} the faint-star check needs")
     keep = (catalog.vmag <= index.mag_limit + depth_mag) & ~np.isin(catalog.ids, index.ids)
     return FaintStars(catalog.vectors[keep], float(depth_mag))

@@ -123,3 +123,17 @@ def test_a_wrong_attitude_that_leaves_bright_stars_without_spots_is_rejected(qia
                         sigma_mag=pyr.sigma_mag, absent_max=-1)
     r = unchecked.identify(f.uv, mag=f.mag)
     assert r.ok and score(r.ids, f.truth, f.alt)[1] >= 1
+
+
+def test_faint_stars_are_the_catalog_stars_the_index_leaves_out():
+    from gyrostar.catalog import load_catalog
+    from gyrostar.starid.faint import faint_stars
+    from gyrostar.starid.index import load_index
+
+    ix = load_index("hip2", 6.5, 14.15, 0)
+    shallow, deep = load_catalog("hip2", 6.5), load_catalog("hip2", 7.5)
+    pruned = faint_stars(shallow, ix)           # a catalog ending at the limit: the pruned doubles only
+    assert len(pruned.vectors) == len(shallow.ids) - len(ix.ids) > 0
+    more = faint_stars(deep, ix, depth_mag=0.6)
+    n_beyond = int(((deep.vmag > ix.mag_limit) & (deep.vmag <= ix.mag_limit + 0.6)).sum())
+    assert len(more.vectors) == len(pruned.vectors) + n_beyond
