@@ -265,14 +265,17 @@ def camera_sigma(cfg: hc.FlatsatConfig, scen: hc.Scenario, calib) -> float:
 
 def make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock=None, e_per_dn=None, irq=None, scen=None,
               camera_sigma_px=None):
-    from ..catalog import load_catalog
+    from ..catalog import GAIA_G_LIMIT, load_catalog
     from ..loop.coupled import CoupledLoop
     from ..starid.faint import DEPTH_MAG, faint_stars
     from ..starid.pyramid import Pyramid
 
     idx = star_index(cfg, camera)
     # the sky holds stars beyond the index's limit: a lost-in-space label next to one is dropped
-    ident = Pyramid(idx, camera, faint=faint_stars(load_catalog(cfg.sim.catalog, idx.mag_limit + DEPTH_MAG), idx))
+    depth = idx.mag_limit + DEPTH_MAG
+    if cfg.sim.catalog == "gaia":
+        depth = min(depth, GAIA_G_LIMIT)
+    ident = Pyramid(idx, camera, faint=faint_stars(load_catalog(cfg.sim.catalog, depth), idx))
     budget = None
     if getattr(head, "streaming", False) and cfg.head.link != "none":
         from ..loop.linkbudget import LinkBudget

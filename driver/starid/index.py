@@ -204,6 +204,9 @@ def n_brighter(vmag, mag_max):
     return np.searchsorted(vmag, mag_max, side="right")
 
 
+MAX_PAIRS = 50_000_000   # star pairs an index may hold (~3 GB while it is built)
+
+
 def build_index(catalog, max_sep_deg: float, per_field: int = 0, thin_radius_deg: float | None = None,
                 vox_h: float = 0.05, double_sep_deg: float = DOUBLE_SEP_DEG) -> StarIndex:
     """Build the index of a :class:`gyrostar.catalog.StarCatalog` (no cache)."""
@@ -216,6 +219,13 @@ def build_index(catalog, max_sep_deg: float, per_field: int = 0, thin_radius_deg
     keep = select_navigation_stars(catalog.vectors, 0, thin, math.radians(double_sep_deg))
     vec = np.ascontiguousarray(catalog.vectors[keep])
     nav = select_navigation_stars(vec, per_field, thin)
+    # a uniform sky of n stars has n²·(1 − cos θ)/4 pairs within θ; each costs ~60 B while built
+    pairs = len(nav) ** 2 * (1.0 - math.cos(max_sep)) / 4.0
+    if pairs > MAX_PAIRS:
+        raise ConfigError(f"a star index of {catalog.name} to V {float(catalog.vmag[-1]):.1f} with pairs to "
+                          f"{max_sep_deg:.1f}° would hold ~{pairs / 1e6:.0f} M pairs (~{pairs * 60 / 1e9:.0f} GB to "
+                          f"build, limit {MAX_PAIRS / 1e6:.0f} M): lower the limiting magnitude ([loop] mag_limit, "
+                          f"--mag-limit) or thin the navigation stars (--per-field)")
     theta, a, b = star_pairs(vec[nav], max_sep)
     a = nav[a].astype(np.int32)
     b = nav[b].astype(np.int32)

@@ -78,3 +78,14 @@ def test_bad_parameters():
         sidx.build_index(_random_sky(100), 90.0)
     with pytest.raises(ConfigError):
         sidx.build_index(_random_sky(100), 5.0, per_field=-1)
+
+
+def test_an_index_too_large_to_build_is_a_config_error_before_it_is_built():
+    """A uniform sky of n stars has n²(1 − cos θ)/4 pairs within θ: 40 000 stars to 40°
+    hold ~94 M pairs (~6 GB to build) — refused in one line, not an out-of-memory kill."""
+    rng = np.random.default_rng(1)
+    v = rng.normal(size=(40_000, 3))
+    v /= np.linalg.norm(v, axis=1)[:, None]
+    cat = StarCatalog("synthetic", np.arange(len(v)), v, np.linspace(1.0, 9.0, len(v)), 2025.0, None)
+    with pytest.raises(ConfigError, match=r"~9\d M pairs"):
+        sidx.build_index(cat, 40.0)
