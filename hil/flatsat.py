@@ -83,6 +83,10 @@ class Truth:
         self._cache: dict = {}
         self._lock = threading.Lock()
         self.on_restart: list = []
+        # the integrator's compiled kernel loaded (or compiled) now, not at the first truth
+        # query while the loop runs
+        self.q_at(self.t_origin + 1e-3, "warm-up")
+        self._cache.clear()
 
     def restart(self, t_origin: float) -> None:
         """Scenario time 0 is now ``t_origin`` (host s): call just before the loop starts."""

@@ -687,13 +687,22 @@ class HeadEmulator:
         self.wait_stopped()
 
     def warm_up(self, q0) -> None:
-        """Render once at the current exposure (numba load, fixed-pattern noise), so the first
-        CAPTURE of a run takes its normal time."""
+        """Run every compiled kernel once at the current exposure — rendering (and its
+        fixed-pattern noise), the spot finder, the 10-bit packer, the attitude integrator —
+        so neither the first CAPTURE of a run nor its first FIND_SPOTS or streamed frame
+        compiles (a compile takes seconds of CPU from the loop under test on a shared host)."""
         import numpy as np
 
+        from ..protocol.payloads import pack10
+        from .spot_finder import find_spots
+        from .trajectory import Constant, integrate
+
         sky = self._sky_for(self.exposure_us)
-        sky.render_frame(q0, np.zeros(3), frame=0)
+        img, _ = sky.render_frame(q0, np.zeros(3), frame=0)
         sky.render_windows(np.array([[0, 10, 10, 16]], np.int32), q0, np.zeros(3), frame=0)
+        find_spots(np.asarray(img)[:64, :64], 96, 8, 7)
+        pack10(np.arange(8, dtype=np.uint16))
+        integrate(np.asarray(q0, float), Constant((0.0, 0.0, 1e-3)), np.array([0.0, 0.02]), max_step_s=0.01)
 
     def __enter__(self):
         self.start()

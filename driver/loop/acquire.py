@@ -94,7 +94,9 @@ def detect_spots(img, n_sigma, max_spots, box):
 
 
 @njit(cache=True)
-def _window_moments(spans, values, n_windows, low, bg):
+def window_moments(spans, values, n_windows, low, bg):
+    """Per window id 1..``n_windows`` (row ``id − 1``): Σ w·u, Σ w·v, Σ w over the pixels above
+    ``low``, w = value − ``bg`` (spans (m, 4) int64 [id, row, c0, c1), values in span order)."""
     out = np.zeros((n_windows, 3))
     k = 0
     for i in range(spans.shape[0]):
@@ -120,7 +122,7 @@ def spots_from_windows(spans: np.ndarray, values: np.ndarray, background: float,
     if len(spans) == 0:
         return np.zeros((0, 3))
     n = int(spans[:, 0].max())
-    m = _window_moments(np.ascontiguousarray(spans, np.int64), np.ascontiguousarray(values, np.float64), n,
+    m = window_moments(np.ascontiguousarray(spans, np.int64), np.ascontiguousarray(values, np.float64), n,
                         background + 2.0 * sigma, background)
     m = m[m[:, 2] > 0]
     spots = np.column_stack([m[:, 0] / m[:, 2], m[:, 1] / m[:, 2], m[:, 2]])

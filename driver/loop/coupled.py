@@ -727,6 +727,7 @@ def warmup() -> dict:
         (_unpack10_kernel, (np.frombuffer(bytes(20), np.uint8), 16)),   # full-frame chunks (head worker)
         (substeps_for, (rates, 0.0025, 6666.0, 0.25)),
         (acquire.detect_spots, (img, 6.0, 40, 7)),
+        (acquire.window_moments, (spans.astype(np.int64), vals, 1, 2.0, 1.0)),    # the head's spot list
         (convert_frames, (np.frombuffer(bytes(12), np.uint8), 2, 1e-3, np.eye(3), 0.0, 0.0025, 0.0, 0, 0,
                           np.zeros(8, np.int32), np.zeros(4), np.zeros(4, np.int64), np.zeros((4, 3)),
                           np.zeros(4, np.uint8), 0)),
