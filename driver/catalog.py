@@ -48,6 +48,12 @@ HIP2_EPOCH = 1991.25
 GAIA_EPOCH = 2016.0
 GAIA_G_LIMIT = 10.0
 _MAS = math.pi / (180.0 * 3600.0 * 1000.0)  # rad per milliarcsecond
+
+
+def deepest_limit(name: str, mag_limit: float) -> float:
+    """``mag_limit``, or the catalog ``name``'s own depth when it stops short of it (gaia:
+    G < ``GAIA_G_LIMIT``): the deepest limit :func:`load_catalog` accepts up to ``mag_limit``."""
+    return min(mag_limit, GAIA_G_LIMIT) if name == "gaia" else mag_limit
 _MATCH_RAD = 2.0 / 206264.806  # 2 arcsec
 
 

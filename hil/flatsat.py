@@ -85,8 +85,9 @@ class Truth:
         self.on_restart: list = []
         # the integrator's compiled kernel loaded (or compiled) now, not at the first truth
         # query while the loop runs
-        self.q_at(self.t_origin + 1e-3, "warm-up")
-        self._cache.clear()
+        from ..mocks.trajectory import integrate
+
+        integrate(self.q0, self.profile, np.array([0.0, 1e-3]))
 
     def restart(self, t_origin: float) -> None:
         """Scenario time 0 is now ``t_origin`` (host s): call just before the loop starts."""
@@ -269,17 +270,15 @@ def camera_sigma(cfg: hc.FlatsatConfig, scen: hc.Scenario, calib) -> float:
 
 def make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock=None, e_per_dn=None, irq=None, scen=None,
               camera_sigma_px=None):
-    from ..catalog import GAIA_G_LIMIT, load_catalog
+    from ..catalog import deepest_limit, load_catalog
     from ..loop.coupled import CoupledLoop
     from ..starid.faint import DEPTH_MAG, faint_stars
     from ..starid.pyramid import Pyramid
 
     idx = star_index(cfg, camera)
     # the sky holds stars beyond the index's limit: a lost-in-space label next to one is dropped
-    depth = idx.mag_limit + DEPTH_MAG
-    if cfg.sim.catalog == "gaia":
-        depth = min(depth, GAIA_G_LIMIT)
-    ident = Pyramid(idx, camera, faint=faint_stars(load_catalog(cfg.sim.catalog, depth), idx))
+    deep = load_catalog(cfg.sim.catalog, deepest_limit(cfg.sim.catalog, idx.mag_limit + DEPTH_MAG))
+    ident = Pyramid(idx, camera, faint=faint_stars(deep, idx))
     budget = None
     if getattr(head, "streaming", False) and cfg.head.link != "none":
         from ..loop.linkbudget import LinkBudget

@@ -180,12 +180,15 @@ def _camera(cfg: TrialConfig):
 def setup(cfg: TrialConfig) -> dict:
     """Camera, sky, index and identifier of a configuration (cached per process)."""
     # fields of any noise share a setup, but the identifier's tolerances follow the noise
+    sigma = max(cfg.total_pos_noise, 0.3)
+    # measured magnitudes in the search and the bound, never trusted beyond the paper-001
+    # camera's 0.2 mag (a field generated with exact magnitudes still gets a 0.2 mag window)
+    sigma_mag = max(cfg.total_mag_noise, MAG_SIGMA_FLOOR)
     key = (dataclasses.replace(cfg, pos_noise_px=0.0, mag_noise=0.0, cat_pos_noise_px=0.0, cat_mag_noise=0.0,
-                               update_period_s=1.0, false_stars=0),
-           max(cfg.total_pos_noise, 0.3), max(cfg.total_mag_noise, MAG_SIGMA_FLOOR))
+                               update_period_s=1.0, false_stars=0), sigma, sigma_mag)
     if key in _SETUP:
         return _SETUP[key]
-    from ..catalog import load_catalog
+    from ..catalog import deepest_limit, load_catalog
     from .extended import ExtendedIdentifier
     from .faint import faint_stars
     from .grid import GridIdentifier, GridParams, load_grid_database
@@ -195,10 +198,8 @@ def setup(cfg: TrialConfig) -> dict:
 
     cam = _camera(cfg)
     diag = 2.0 * math.degrees(math.atan(0.5 * math.hypot(cam.width_px, cam.height_px) / cam.focal_length_px))
-    deep = load_catalog(cfg.catalog, min(cfg.mag_limit + 1.0, 10.0) if cfg.catalog == "gaia"
-                        else cfg.mag_limit + 1.0)
+    deep = load_catalog(cfg.catalog, deepest_limit(cfg.catalog, cfg.mag_limit + 1.0))
     sky = Sky(deep)
-    sigma = max(cfg.total_pos_noise, 0.3)
     out = {"camera": cam, "sky": sky}
     if cfg.method == "pyramid":
         per_field = cfg.per_field if cfg.per_field >= 0 else (12 if cfg.catalog == "gaia" else 0)
@@ -206,12 +207,10 @@ def setup(cfg: TrialConfig) -> dict:
         index = load_index(cfg.catalog, cfg.mag_limit, sep, per_field)
         # thinned first tier (the brightest stars per field) unless the index is thinned already
         fast = load_index(cfg.catalog, cfg.mag_limit, sep, FAST_PER_FIELD) if per_field == 0 else None
-        # measured magnitudes in the search and the bound, never trusted beyond the paper-001
-        # camera's 0.2 mag (a field generated with exact magnitudes still gets a 0.2 mag window)
         # labels next to a star the index leaves out (fainter than its limit, or the fainter
         # of a close double) are dropped: the sensor sees such stars now and then
-        out["ident"] = Pyramid(index, cam, sigma_px=sigma, fast_index=fast,
-                               sigma_mag=max(cfg.total_mag_noise, MAG_SIGMA_FLOOR), faint=faint_stars(deep, index))
+        out["ident"] = Pyramid(index, cam, sigma_px=sigma, fast_index=fast, sigma_mag=sigma_mag,
+                               faint=faint_stars(deep, index))
         if cfg.peer:
             from .peers import load_peer
 

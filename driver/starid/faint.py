@@ -13,18 +13,15 @@ Directions are ICRS unit vectors.
 from __future__ import annotations
 
 import dataclasses
-import math
 
 import numpy as np
 from numba import njit
 
 from ..attitude import quat_to_dcm
 from ..errors import ConfigError
-from .index import voxel_grid, voxel_span
+from .index import any_within, voxel_grid
 
 DEPTH_MAG = 0.6     # mag below the index limit: 3σ of the 0.2 mag sensor noise of paper 001
-
-
 VOX_H = 0.02        # voxel edge of the faint stars' grid (unit-vector units, ~1.1°)
 
 
@@ -50,8 +47,6 @@ def drop_near_faint(q, b, match, vox_vec, vox_start, h, g, radius):
     attitude ``q`` (ICRS → body) puts within ``radius`` (rad) of a faint star of the grid
     (:class:`FaintStars`); returns how many."""
     a = quat_to_dcm(q)
-    cosr = math.cos(radius)
-    chord = 2.0 * math.sin(0.5 * radius)
     dropped = 0
     c = np.empty(3)
     for i in range(b.shape[0]):
@@ -59,20 +54,7 @@ def drop_near_faint(q, b, match, vox_vec, vox_start, h, g, radius):
             continue
         for k in range(3):           # body → ICRS: Aᵀ b
             c[k] = a[0, k] * b[i, 0] + a[1, k] * b[i, 1] + a[2, k] * b[i, 2]
-        lo0, hi0, lo1, hi1, lo2, hi2 = voxel_span(c, chord, h, g)
-        near = False
-        for x in range(lo0, hi0 + 1):
-            for y in range(lo1, hi1 + 1):
-                base = (x * g + y) * g
-                for p in range(vox_start[base + lo2], vox_start[base + hi2 + 1]):
-                    if vox_vec[p, 0] * c[0] + vox_vec[p, 1] * c[1] + vox_vec[p, 2] * c[2] >= cosr:
-                        near = True
-                        break
-                if near:
-                    break
-            if near:
-                break
-        if near:
+        if any_within(vox_vec, vox_start, h, g, c, radius):
             match[i] = -1
             dropped += 1
     return dropped

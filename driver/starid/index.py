@@ -167,6 +167,21 @@ def voxel_span(center, chord, h, g):
 
 
 @njit(cache=True)
+def any_within(vox_vec, vox_start, h, g, center, radius):
+    """Whether any vector of the voxel grid (``vox_vec`` in cell order, ``vox_start`` each
+    cell's first) lies within ``radius`` (rad) of unit ``center``; stops at the first."""
+    cosr = np.cos(radius)
+    lo0, hi0, lo1, hi1, lo2, hi2 = voxel_span(center, 2.0 * np.sin(radius / 2.0), h, g)
+    for i in range(lo0, hi0 + 1):
+        for j in range(lo1, hi1 + 1):
+            base = (i * g + j) * g
+            for p in range(vox_start[base + lo2], vox_start[base + hi2 + 1]):
+                if vox_vec[p, 0] * center[0] + vox_vec[p, 1] * center[1] + vox_vec[p, 2] * center[2] >= cosr:
+                    return True
+    return False
+
+
+@njit(cache=True)
 def cone_query(vox_vec, vox_stars, vox_start, h, g, center, radius, n_max):
     """Indexes (ascending) of the stars within ``radius`` of unit ``center`` among the first
     ``n_max`` (stars are sorted by V, so that is a magnitude limit).
