@@ -445,7 +445,6 @@ class CoupledLoop:
     def _stream_command(self, now: float) -> None:
         """Streaming head: reconnect or acquire when due, else command the windows of the
         frame two ahead of the newest one (while the next one integrates)."""
-        self._sync_uv()
         head = self.head
         if self.head_down_since is not None:
             if not head.busy and now >= self.next_reconnect_t:
@@ -529,6 +528,7 @@ class CoupledLoop:
         """Plan and command windows: for the next CAPTURE, or (streaming) for stream frame
         ``frame`` whose exposure starts at host time ``t_exp`` (on the head's own timer: no
         command-to-exposure jitter to cover)."""
+        self._sync_uv()
         f = self.filter
         if f.valid:
             self.tracks.fill_from_catalog(f.q, now)
