@@ -41,6 +41,7 @@ class AlignFit:
     coarse_offset: float      # s
     n_windows: int
     gyro_map: np.ndarray | None = None   # M, camera ← gyro (3, 3): rotation and the gyro's scale/cross-axis errors
+    rotation_sigma_gyro: np.ndarray | None = None  # 1-σ the same fit would reach with a noiseless camera (rad)
 
     @property
     def quaternion(self) -> np.ndarray:
@@ -85,7 +86,8 @@ def coarse_offset(gi: GyroIntegral, t_c: np.ndarray, phi1: np.ndarray, max_offse
 
 
 def fit_alignment(t_g: np.ndarray, w_g: np.ndarray, t_c: np.ndarray, q_c: np.ndarray, lag: int = 10,
-                  max_offset: float = 0.05, coarse_step: float = 0.5e-3, iterations: int = 15) -> AlignFit:
+                  max_offset: float = 0.05, coarse_step: float = 0.5e-3, iterations: int = 15,
+                  arw: float | None = None) -> AlignFit:
     """Estimate ``R``, ``δt`` and ``b`` (see module docstring).
 
     The window increments are fitted with a general linear map ``M`` (camera ← gyro: rotation,
@@ -95,7 +97,12 @@ def fit_alignment(t_g: np.ndarray, w_g: np.ndarray, t_c: np.ndarray, q_c: np.nda
     linear least squares per camera axis; δt minimises the profile likelihood Σ_a log RSS_a (each
     camera axis its own noise: roll is noisier), first on a ``coarse_step`` grid over
     ±``max_offset``, then by a bounded scalar search. ``R`` is the rotation factor of ``M``
-    (polar decomposition), ``b = M⁻¹(M b)``. ``iterations`` is kept for callers; unused."""
+    (polar decomposition), ``b = M⁻¹(M b)``. ``iterations`` is kept for callers; unused.
+
+    With the gyro's angle random walk ``arw`` (N, rad/√s) the fit also reports
+    ``rotation_sigma_gyro``: the 1-σ of the same windows if the camera were noiseless, each
+    window's increment carrying only the gyro's N²·T — the limit this slew sets whatever the
+    star tracker (about N / (ω⊥ √T_run) per axis)."""
     from scipy.optimize import minimize_scalar
 
     t_c = np.asarray(t_c, float)
@@ -147,7 +154,12 @@ def fit_alignment(t_g: np.ndarray, w_g: np.ndarray, t_c: np.ndarray, q_c: np.nda
     var_m = var_row[:, None] * np.diag(xtx_inv)[None, :3]        # var of M[a, j]
     rot_sigma = 0.5 * np.sqrt(np.array([var_m[2, 1] + var_m[1, 2], var_m[0, 2] + var_m[2, 0],
                                         var_m[1, 0] + var_m[0, 1]]))
-    return AlignFit(rot, dt_off, bias, rot_sigma, dt_sigma, np.sqrt((res ** 2).mean(axis=0)), d0, n, m)
+    rot_sigma_gyro = None
+    if arw is not None and arw > 0:
+        var_g = arw * arw * float(np.mean(span)) * np.diag(xtx_inv)[:3]   # var of M[a, j], any row a
+        rot_sigma_gyro = 0.5 * np.sqrt(np.array([var_g[1] + var_g[2], var_g[2] + var_g[0], var_g[0] + var_g[1]]))
+    return AlignFit(rot, dt_off, bias, rot_sigma, dt_sigma, np.sqrt((res ** 2).mean(axis=0)), d0, n, m,
+                    rot_sigma_gyro)
 
 
 def _increments(q: np.ndarray, idx: np.ndarray, lag: int) -> np.ndarray:

@@ -55,6 +55,8 @@ def read_npz(path, needed: set[str] | tuple[str, ...], what: str = "INPUT") -> d
     path = Path(path)
     if path.is_dir():
         raise ConfigError(f"{what} {path} is a folder, not an .npz file")
+    if path.is_file() and not zipfile.is_zipfile(path) and path.read_bytes()[:6] != b"\x93NUMPY":
+        raise ConfigError(f"{what} {path} is not an .npz archive (no zip header)")
     try:
         loaded = np.load(path, allow_pickle=False)
         if not hasattr(loaded, "files"):
@@ -128,6 +130,10 @@ class ParamTable:
                 label = name if len(vals[0]) == 1 else f"{name}[{i}]"
                 cells = [f"{v[i]:.7g}" if i < len(v) and np.isfinite(v[i]) else "" for v in vals]
                 lines.append(escape(f"{label:<28} {cells[0]:>14} {cells[1]:>14} {cells[2]:>12}  {row['unit']}"))
+            for key, val in row.items():       # further columns (1-σ, limits) under their row
+                if key not in ("value", "unit", "truth", "error"):
+                    vals = np.atleast_1d(np.asarray(val, float)).ravel()
+                    lines.append(escape(f"  {key:<26} " + " ".join(f"{v:.4g}" for v in vals)))
         return "\n".join(lines)
 
 

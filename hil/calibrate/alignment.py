@@ -56,6 +56,17 @@ def mount_rotation() -> np.ndarray:
     return rotvec_dcm(np.radians(np.array([TRUE_MOUNT_DEG])))[0]
 
 
+def gyro_arw(cal) -> tuple[float, str]:
+    """The gyro's angle random walk N (rad/√s) for the precision limit: the calibration
+    file's [gyro_static] (mean of the axes) when it has one, else the BMI088 datasheet value
+    the loop uses."""
+    if cal is not None and cal.gyro_static is not None:
+        return float(np.mean(cal.gyro_static.arw_rad_per_sqrt_s)), "[gyro_static]"
+    from ...loop.coupled import LoopParams
+
+    return float(LoopParams.gyro_arw), "BMI088 datasheet (0.014 °/s/√Hz)"
+
+
 def simulate(args):
     """(t_g, rate, t_cam, q_cam, truth) of a simulated slew."""
     from ...cli.output import progress
@@ -88,6 +99,7 @@ def run(args) -> int:
     folder = report.report_dir(args, "alignment")
     truth = None
     extra_in = {}
+    target = None
     if source == "simulate":
         t_g, rate, t_cam, q_cam, truth = simulate(args)
     else:
@@ -100,7 +112,8 @@ def run(args) -> int:
         if gs is None:
             raise ConfigError(f"{args.gyro_cal} has no [gyro_scale] table")
         rate = (np.asarray(rate) - np.asarray(gs.bias_rps)) @ np.asarray(gs.correction).T
-    fit = fit_alignment(t_g, rate, t_cam, q_cam, lag=args.lag, max_offset=args.max_offset_ms * 1e-3)
+    arw, arw_from = gyro_arw(target)
+    fit = fit_alignment(t_g, rate, t_cam, q_cam, lag=args.lag, max_offset=args.max_offset_ms * 1e-3, arw=arw)
     table = report.ParamTable()
     q = fit.quaternion
     extra = {"n_windows": fit.n_windows, "coarse_offset_ms": fit.coarse_offset * 1e3,
@@ -124,6 +137,10 @@ def run(args) -> int:
         checks = {"alignment_arcsec": report.check(ang, 20.0, "arcsec"),
                   "time_offset_ms": report.check((fit.time_offset - truth["time_offset_s"]) * 1e3, 0.5, "ms")}
     table.rows["q_gyro_to_camera"]["sigma_arcsec"] = (fit.rotation_sigma / ARCSEC).tolist()
+    # what this slew allows at all: the same fit with a noiseless camera (the gyro's ARW alone)
+    table.rows["q_gyro_to_camera"]["sigma_gyro_limit_arcsec"] = (fit.rotation_sigma_gyro / ARCSEC).tolist()
+    extra["gyro_arw_rad_per_sqrt_s"] = arw
+    extra["gyro_arw_from"] = arw_from
     table.rows["time_offset_ms"]["sigma"] = fit.time_offset_sigma * 1e3
     cal = calfile.AlignmentCal(tuple(float(v) for v in q), float(fit.time_offset),
                                float(np.sqrt(np.mean(fit.residual_rms**2)) / ARCSEC))

@@ -79,6 +79,40 @@ def test_gyro_scale_and_cross_axis_errors_do_not_shift_the_time_offset():
     np.testing.assert_allclose(fit.bias, bias, atol=2e-6)
 
 
+def test_gyro_noise_limit_matches_the_scatter_of_the_rotation():
+    """With a noiseless camera and a white-noise gyro of known ARW N, the rotation's scatter
+    over noise draws is the fit's gyro-only 1-σ (``rotation_sigma_gyro``), and the fit's own
+    1-σ (from its residuals) agrees with it: the limit a slew sets, whatever the camera."""
+    fs, arw = 2000.0, 1.7277e-4                       # BMI088 N, rad/√s
+    t = np.arange(0, 30, 1 / fs)
+    amp, per = np.radians([8, 6, 5]), np.array([2.0, 2.6, 3.1])
+
+    def omega(tt):
+        return amp * np.sin(2 * np.pi * tt[:, None] / per)
+
+    w = omega(t)
+    q = np.empty((len(t), 4))
+    q[0] = [0, 0, 0, 1]
+    for i in range(1, len(t)):
+        q[i] = quat_propagate(q[i - 1], 0.5 * (w[i] + w[i - 1]), 1 / fs)
+    r = rotvec_dcm(np.radians([[0.2, -0.3, 0.1]]))[0]
+    tg = np.arange(0.2, 29.8, 1 / 400.0)
+    k = np.arange(100, len(t) - 100, 20)               # camera at 100 Hz
+    rng = np.random.default_rng(5)
+    errs, fits = [], []
+    for _ in range(30):
+        wg = omega(tg) @ r + rng.normal(0.0, arw * np.sqrt(400.0), (len(tg), 3))
+        fit = fit_alignment(tg, wg, t[k], q[k], lag=5, max_offset=4e-3, arw=arw)
+        d = fit.rotation @ r.T                          # small rotation: its rotation vector
+        errs.append(0.5 * np.array([d[2, 1] - d[1, 2], d[0, 2] - d[2, 0], d[1, 0] - d[0, 1]]))
+        fits.append(fit)
+    scatter = np.sqrt(np.mean(np.square(errs), axis=0))
+    limit = fits[0].rotation_sigma_gyro
+    assert np.all(limit / ARCSEC > 20.0)                # N / (ω⊥ √T): tens of arcsec here
+    np.testing.assert_allclose(scatter, limit, rtol=0.4)       # 30 draws: ±13 % 1-σ on an RMS
+    np.testing.assert_allclose(np.mean([f.rotation_sigma for f in fits], axis=0), limit, rtol=0.25)
+
+
 def test_alignment_simulated_meets_acceptance(tmp_path, capsys):
     # 240 s of slews at 10 Hz; a gyro with 1/4 of the BMI088 noise density keeps the
     # ARW-limited rotation error at σ ≈ N/(ω⊥√T) ≈ 2.5″ per axis, so 20″ is an 8-σ bound
