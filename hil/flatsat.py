@@ -18,6 +18,7 @@ import dataclasses
 import logging
 import math
 import threading
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -310,6 +311,7 @@ class Flatsat:
     device_truth: Truth | None = None   # the emulated devices' scenario (also on a half-real flatsat)
     calibration: object = None          # gyrostar.calibration.apply.RunCalibration in use
     true_camera: object = None          # the simulated head's real optics (may differ from ``camera``)
+    device_cpu: DeviceCpu | None = None  # CPU the loop's thread spends inside in-process emulated devices
 
     def start_scenario(self, t0: float) -> None:
         """Scenario time 0 of the emulated devices is host time ``t0`` (just before the loop starts)."""
@@ -535,6 +537,7 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
     head_clock = taps.RecordingClock(head_base, writer, channel=CH_HEAD_CLOCK) if writer else head_base
     closers = []
     faults = FaultPlan(scen)
+    device_cpu = None
 
     # gyro bus
     if cfg.gyro.kind == "emulator":
@@ -547,8 +550,9 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
         model.truth_log = False    # the run's truth is the simulator's; the model's test log grows ~90 kB/s
         smbus = FaultyBus(model.smbus(cfg.gyro.i2c_address, bus_hz=None), clock=base, seed=seed)
         faults.gyro_bus = smbus
-        regs = I2CRegisters(I2CBus(smbus, name="emulated i2c"), cfg.gyro.i2c_address)
-        irq = _IrqLine(model)
+        device_cpu = DeviceCpu()
+        regs = I2CRegisters(I2CBus(device_cpu.wrap(smbus), name="emulated i2c"), cfg.gyro.i2c_address)
+        irq = device_cpu.wrap(_IrqLine(model))
         if writer:
             irq = taps.RecordingClock(irq, writer, channel=CH_IRQ)
         wiring["gyro"] = "BMI088 register model on a fake SMBus (mocks), driven by gyrostar.gyro.Bmi088Gyro"
@@ -607,11 +611,47 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
     return Flatsat(cfg, scen, camera, rec_clock, base, gyro, head, truth if cfg.simulated else None,
                    simulated_clock=fast, wiring=wiring, lat_clock=lat_clock, e_per_dn=e_per_dn, faults=faults,
                    closers=tuple(closers), irq=irq, lockstep=lockstep, device_truth=truth, calibration=calib,
-                   true_camera=sim.camera if sim is not None else None)
+                   true_camera=sim.camera if sim is not None else None, device_cpu=device_cpu)
 
 
 CH_IRQ = 5
 FAST_T0 = 1000.0    # s: start of the simulated clock in fast mode
+
+
+class DeviceCpu:
+    """CPU seconds (thread time) spent inside the in-process emulated gyro — its fake bus,
+    register model and truth — by whichever thread called it (the loop's, in a run). A real
+    flatsat spends that time in the kernel's I2C/SPI driver and its GPIO edge read instead;
+    the run reports it beside the loop's CPU so the flight code's own share is visible."""
+
+    def __init__(self):
+        self.cpu_s = 0.0
+
+    def wrap(self, obj):
+        """``obj`` with every public method timed into :attr:`cpu_s`."""
+        return _Metered(obj, self)
+
+
+class _Metered:
+    def __init__(self, obj, meter: DeviceCpu):
+        self._obj = obj
+        self._meter = meter
+
+    def __getattr__(self, name):
+        attr = getattr(self._obj, name)
+        if name.startswith("_") or not callable(attr):
+            return attr
+        meter = self._meter
+        tt = time.thread_time
+
+        def timed(*args, **kwargs):
+            c0 = tt()
+            try:
+                return attr(*args, **kwargs)
+            finally:
+                meter.cpu_s += tt() - c0
+
+        return timed
 
 
 class _IrqLine:

@@ -124,3 +124,34 @@ def test_real_serial_head_with_emulated_gyro_runs(tmp_path):
     assert res["counters"]["acquisitions"] >= 2 and res["link"]["requests"] >= res["counters"]["acquisitions"]
     assert res["attitude_error_arcsec_1sigma"] is None          # no truth for a half-real flatsat
     assert "no truth" in res["wiring"]["sky"]
+
+
+def test_device_cpu_meter_times_calls_and_passes_everything_through():
+    """The emulated gyro's CPU meter: return values and exceptions pass through unchanged,
+    attributes stay readable, and the thread CPU of each call (here ≥ 20 ms of busy work) is
+    added, errors included."""
+    import time
+
+    from gyrostar.hil.flatsat import DeviceCpu
+
+    class Dev:
+        addr = 0x68
+
+        def busy(self, ms):
+            t0 = time.thread_time()
+            while time.thread_time() - t0 < ms * 1e-3:
+                pass
+            return ms
+
+        def fail(self):
+            self.busy(20)
+            raise OSError(121, "Remote I/O error")
+
+    meter = DeviceCpu()
+    dev = meter.wrap(Dev())
+    assert dev.addr == 0x68
+    assert dev.busy(20) == 20
+    assert 0.020 <= meter.cpu_s < 0.2
+    with pytest.raises(OSError):
+        dev.fail()
+    assert 0.040 <= meter.cpu_s < 0.4
