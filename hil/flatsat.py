@@ -548,7 +548,13 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
         offset = scen.truth.gyro_time_offset_ms * 1e-3   # a sample stamped t measured scenario time t + offset
         model = Bmi088GyroModel(base, StreamRates(gsamp, lambda: truth.t_origin - offset))
         model.truth_log = False    # the run's truth is the simulator's; the model's test log grows ~90 kB/s
-        smbus = FaultyBus(model.smbus(cfg.gyro.i2c_address, bus_hz=None), clock=base, seed=seed)
+        # fast mode: each transfer takes its wire time on the simulated clock at the BMI088's
+        # fastest I2C clock (a FIFO status read and a one-frame burst about 0.3 ms at 400 kHz).
+        # Real time keeps the emulated bus instantaneous: a blocking wait there hands the GIL to
+        # the threads around the loop while the simulator's processes hold the two cores
+        # (docs/FLATSAT.md §7, "The emulated gyro's bus")
+        smbus = FaultyBus(model.smbus(cfg.gyro.i2c_address, bus_hz=GYRO_I2C_HZ if fast else None), clock=base,
+                          seed=seed)
         faults.gyro_bus = smbus
         device_cpu = DeviceCpu()
         regs = I2CRegisters(I2CBus(device_cpu.wrap(smbus), name="emulated i2c"), cfg.gyro.i2c_address)
@@ -616,6 +622,7 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
 
 CH_IRQ = 5
 FAST_T0 = 1000.0    # s: start of the simulated clock in fast mode
+GYRO_I2C_HZ = 400e3  # the emulated gyro's I2C clock: the BMI088's fast mode, its highest
 
 
 class DeviceCpu:
@@ -651,6 +658,7 @@ class _Metered:
             finally:
                 meter.cpu_s += tt() - c0
 
+        self.__dict__[name] = timed      # made once: later look-ups find it without __getattr__
         return timed
 
 

@@ -7,9 +7,10 @@ i2c-dev driver does. It honours smbus2's limits (block transfers ≤ 32 bytes) a
 pointer (and writes any further bytes), a read message reads from the pointer.
 
 A model implements ``i2c_decode(reg_byte) -> (reg, autoinc)``, ``read(reg, n, autoinc)`` and
-``write(reg, data, autoinc)``. With ``clock`` and ``bus_hz`` set, every transaction advances
-the simulated clock by its wire time (9 clocks per byte plus start/stop) after the device
-has answered from its state at the start of the transfer, so bursts take time as on a real bus.
+``write(reg, data, autoinc)``. With ``clock`` and ``bus_hz`` set, every transaction takes its
+wire time (9 clocks per byte plus start/stop) after the device has answered from its state at the start of the transfer,
+so bursts take time as on a real bus: ``clock.sleep`` (a simulated clock advances; the host
+clock blocks the caller, as a real transfer does), else ``clock.advance``.
 """
 
 from __future__ import annotations
@@ -50,7 +51,11 @@ class FakeSMBus:
     def _wire(self, nbytes: int) -> None:
         self.transactions += 1
         if self.clock is not None and self.bus_hz:
-            self.clock.advance((9 * (nbytes + 1) + 2) / self.bus_hz)
+            dt = (9 * (nbytes + 1) + 2) / self.bus_hz
+            # a simulated clock's sleep advances it; the host clock's blocks the caller, as a
+            # real i2c-dev transfer blocks the thread that asked for it
+            wait = getattr(self.clock, "sleep", None) or self.clock.advance
+            wait(dt)
 
     def _read(self, addr, reg, n):
         dev = self._dev(addr)
@@ -113,6 +118,8 @@ class FakeSMBus:
                         r, inc = dev.i2c_decode(raw[0])
                         self._wire(1 + len(raw))
                         dev.write(r, raw[1:], inc)
+                    else:
+                        self._wire(len(raw))       # the register pointer alone: address and one byte
 
 
 __all__ = ["FakeSMBus", "i2c_msg", "nack"]
