@@ -20,19 +20,8 @@ def test_wahba_svd_recovers_a_rotation():
     assert rotation_angle(wahba_svd(a, a @ r.T), r) < 1e-12
 
 
-def test_alignment_noiseless_recovers_rotation_offset_and_bias():
-    fs = 2000.0
-    t = np.arange(0, 40, 1 / fs)
-    amp, per = np.radians([8, 6, 5]), np.array([2.0, 2.6, 3.1])
-
-    def omega(tt):
-        return amp * np.sin(2 * np.pi * tt[:, None] / per)
-
-    w = omega(t)
-    q = np.empty((len(t), 4))
-    q[0] = [0, 0, 0, 1]
-    for i in range(1, len(t)):
-        q[i] = quat_propagate(q[i - 1], 0.5 * (w[i] + w[i - 1]), 1 / fs)
+def test_alignment_noiseless_recovers_rotation_offset_and_bias(sine_slew):
+    t, q, omega = sine_slew(2000.0, 40.0)
     r = rotvec_dcm(np.radians([[1.0, -2.0, 30.0]]))[0]
     dt_true, bias = 3.7e-3, np.radians([0.05, -0.02, 0.01])
     tg = np.arange(0.2, 39.8, 1 / 400.0)
@@ -79,22 +68,12 @@ def test_gyro_scale_and_cross_axis_errors_do_not_shift_the_time_offset():
     np.testing.assert_allclose(fit.bias, bias, atol=2e-6)
 
 
-def test_gyro_noise_limit_matches_the_scatter_of_the_rotation():
+def test_gyro_noise_limit_matches_the_scatter_of_the_rotation(sine_slew):
     """With a noiseless camera and a white-noise gyro of known ARW N, the rotation's scatter
     over noise draws is the fit's gyro-only 1-σ (``rotation_sigma_gyro``), and the fit's own
     1-σ (from its residuals) agrees with it: the limit a slew sets, whatever the camera."""
-    fs, arw = 2000.0, 1.7277e-4                       # BMI088 N, rad/√s
-    t = np.arange(0, 30, 1 / fs)
-    amp, per = np.radians([8, 6, 5]), np.array([2.0, 2.6, 3.1])
-
-    def omega(tt):
-        return amp * np.sin(2 * np.pi * tt[:, None] / per)
-
-    w = omega(t)
-    q = np.empty((len(t), 4))
-    q[0] = [0, 0, 0, 1]
-    for i in range(1, len(t)):
-        q[i] = quat_propagate(q[i - 1], 0.5 * (w[i] + w[i - 1]), 1 / fs)
+    arw = 1.7277e-4                                   # BMI088 N, rad/√s
+    t, q, omega = sine_slew(2000.0, 30.0)
     r = rotvec_dcm(np.radians([[0.2, -0.3, 0.1]]))[0]
     tg = np.arange(0.2, 29.8, 1 / 400.0)
     k = np.arange(100, len(t) - 100, 20)               # camera at 100 Hz

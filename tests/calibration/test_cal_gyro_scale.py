@@ -63,24 +63,13 @@ def test_gyro_scale_simulated_rate_table_within_200_ppm(tmp_path, capsys):
     assert code == 0
 
 
-def test_gyro_scale_from_slew_file_with_alignment(tmp_path, capsys):
+def test_gyro_scale_from_slew_file_with_alignment(tmp_path, capsys, sine_slew):
     # noiseless slews; gyro mounted 90° about z and 3 ms late; S recovered in gyro axes
-    from gyrostar.attitude import dcm_to_quat, quat_propagate
+    from gyrostar.attitude import dcm_to_quat
     from gyrostar.calibration import calfile
     from gyrostar.calibration.intrinsics import rotvec_dcm
 
-    fs = 1000.0
-    t = np.arange(0, 30, 1 / fs)
-    amp, per = np.radians([8, 6, 5]), np.array([2.0, 2.6, 3.1])
-
-    def omega(tt):
-        return amp * np.sin(2 * np.pi * tt[:, None] / per)
-
-    w = omega(t)
-    q = np.empty((len(t), 4))
-    q[0] = [0, 0, 0, 1]
-    for i in range(1, len(t)):
-        q[i] = quat_propagate(q[i - 1], 0.5 * (w[i] + w[i - 1]), 1 / fs)
+    t, q, omega = sine_slew(1000.0, 30.0)
     r = rotvec_dcm(np.radians([[0.0, 0.0, 90.0]]))[0]
     offset = 3e-3
     tg = np.arange(0.1, 29.9, 1 / 400.0)
