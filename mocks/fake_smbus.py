@@ -8,9 +8,10 @@ pointer (and writes any further bytes), a read message reads from the pointer.
 
 A model implements ``i2c_decode(reg_byte) -> (reg, autoinc)``, ``read(reg, n, autoinc)`` and
 ``write(reg, data, autoinc)``. With ``clock`` and ``bus_hz`` set, every transaction takes its
-wire time (9 clocks per byte plus start/stop) after the device has answered from its state at the start of the transfer,
-so bursts take time as on a real bus: ``clock.sleep`` (a simulated clock advances; the host
-clock blocks the caller, as a real transfer does), else ``clock.advance``.
+wire time (9 clocks per byte plus start/stop) after the device has answered from its state
+at the start of the transfer, so bursts take time as on a real bus: ``clock.sleep`` (a
+simulated clock advances; the host clock blocks the caller, as a real transfer does), else
+``clock.advance``.
 """
 
 from __future__ import annotations
