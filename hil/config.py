@@ -68,6 +68,7 @@ class HeadConfig:
 class GyroConfig:
     kind: Literal["emulator", "i2c", "spi"] = "emulator"
     model: Literal["bmi088", "l3gd20h"] = "bmi088"
+    emulator_bus: Literal["i2c", "spi"] = "i2c"
     i2c_bus: int = 1
     i2c_address: int = 0x68
     spi_bus: int = 0

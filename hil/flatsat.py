@@ -446,8 +446,9 @@ def preflight(cfg: hc.FlatsatConfig, scen: hc.Scenario, simulated_clock: bool = 
 
     Any mix of real and emulated devices is allowed: an emulated device takes its scenario
     from the simulator, a real one its physics from the bench. What cannot work: the gyro
-    emulator for a part it does not model, faults injected into a real device, an eclipse
-    on a real sensor, and a simulated clock with a real device (real devices keep real time).
+    emulator for a part it does not model, faults injected into a real device, a NACK on the
+    emulated gyro's SPI bus, an eclipse on a real sensor, and a simulated clock with a real
+    device (real devices keep real time).
     """
     import os
 
@@ -460,6 +461,9 @@ def preflight(cfg: hc.FlatsatConfig, scen: hc.Scenario, simulated_clock: bool = 
         if f.kind in GYRO_FAULTS and not emulated_gyro(cfg):
             raise ConfigError(f"scenario '{scen.name}' injects '{f.kind}', which needs the emulated gyro "
                               f"(gyro.kind = '{cfg.gyro.kind}')")
+        if f.kind == "gyro-nack" and emulated_gyro(cfg) and cfg.gyro.emulator_bus == "spi":
+            raise ConfigError(f"scenario '{scen.name}' injects 'gyro-nack', which an SPI bus cannot give (it has "
+                              "no acknowledge): set gyro.emulator_bus = \"i2c\"")
     if scen.eclipse and not emulated_head(cfg):
         raise ConfigError(f"scenario '{scen.name}' has an eclipse, which needs an emulated head "
                           f"(head.kind = '{cfg.head.kind}')")
@@ -553,15 +557,26 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
         # Real time keeps the emulated bus instantaneous: a blocking wait there hands the GIL to
         # the threads around the loop while the simulator's processes hold the two cores
         # (docs/FLATSAT.md §7, "The emulated gyro's bus")
-        smbus = FaultyBus(model.smbus(cfg.gyro.i2c_address, bus_hz=GYRO_I2C_HZ if fast else None), clock=base,
-                          seed=seed)
-        faults.gyro_bus = smbus
         device_cpu = DeviceCpu()
-        regs = I2CRegisters(I2CBus(device_cpu.wrap(smbus), name="emulated i2c"), cfg.gyro.i2c_address)
+        if cfg.gyro.emulator_bus == "spi":
+            from ..gyro import bmi088
+
+            # SPI needs no NACK injection (it has no acknowledge); a transfer of a status byte and a
+            # frame takes about 25 µs at 5 MHz: charged in fast mode, negligible in real time
+            spi = model.spidev(cfg.gyro.spi_hz)
+            spi.clock = base if fast else None
+            regs = bmi088.spi_registers(device_cpu.wrap(spi), name="emulated spi")
+            wiring["gyro"] = (f"BMI088 register model on a fake spidev at {cfg.gyro.spi_hz / 1e6:g} MHz (mocks), "
+                              "driven by gyrostar.gyro.Bmi088Gyro")
+        else:
+            smbus = FaultyBus(model.smbus(cfg.gyro.i2c_address, bus_hz=GYRO_I2C_HZ if fast else None),
+                              clock=base, seed=seed)
+            faults.gyro_bus = smbus
+            regs = I2CRegisters(I2CBus(device_cpu.wrap(smbus), name="emulated i2c"), cfg.gyro.i2c_address)
+            wiring["gyro"] = "BMI088 register model on a fake SMBus (mocks), driven by gyrostar.gyro.Bmi088Gyro"
         irq = device_cpu.wrap(_IrqLine(model))
         if writer:
             irq = taps.RecordingClock(irq, writer, channel=CH_IRQ)
-        wiring["gyro"] = "BMI088 register model on a fake SMBus (mocks), driven by gyrostar.gyro.Bmi088Gyro"
     elif cfg.gyro.kind == "i2c":
         regs = I2CRegisters(I2CBus.open(cfg.gyro.i2c_bus), cfg.gyro.i2c_address)
         wiring["gyro"] = f"{cfg.gyro.model} on /dev/i2c-{cfg.gyro.i2c_bus} address 0x{cfg.gyro.i2c_address:02X}"

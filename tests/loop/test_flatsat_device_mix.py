@@ -66,6 +66,51 @@ def test_gyro_fault_on_real_gyro_refused(tmp_path):
         preflight(cfg, scen)
 
 
+def test_gyro_nack_refused_on_the_emulated_spi_bus(tmp_path):
+    cfg = hc.load_flatsat(_cfg({"kind": "emulator"}, {"kind": "emulator", "emulator_bus": "spi"},
+                               tmp_path / "f.toml"))
+    scen = hc.load_scenario("sim2")
+    scen.faults = [hc.Fault(kind="gyro-nack", at_s=1.0, seconds=1.0)]
+    with pytest.raises(ConfigError, match="no acknowledge"):
+        preflight(cfg, scen)
+
+
+def test_emulated_gyro_on_spi_tracks_takes_its_wire_time_and_replays(tmp_path):
+    """The emulated BMI088 on a fake spidev in fast mode: the loop tracks at the floor's
+    scale, every SPI transfer (a status read and a burst per 400 Hz step) moves the simulated
+    clock by exactly its wire time, 8 bits per byte at gyro.spi_hz, and the log replays
+    bit-exactly."""
+    from gyrostar.hil.replay import replay
+    from gyrostar.hil.runner import run_flatsat
+    from gyrostar.mocks.fake_spidev import FakeSpiDev
+
+    cfg = hc.load_flatsat(_cfg({"kind": "emulator"}, {"kind": "emulator", "emulator_bus": "spi"},
+                               tmp_path / "f.toml"))
+    wire = []
+    orig = FakeSpiDev.xfer2
+
+    def xfer2(self, values, *a, **k):
+        t0 = self.clock.now() if self.clock is not None else None
+        rx = orig(self, values, *a, **k)
+        if t0 is not None:
+            wire.append((self.clock.now() - t0, len(values), self.max_speed_hz))
+        return rx
+
+    FakeSpiDev.xfer2 = xfer2
+    try:
+        res = run_flatsat(cfg, hc.load_scenario("demo"), duration=3.0, seed=3, folder=tmp_path / "run",
+                          plots=False, status=False, fast=True)
+    finally:
+        FakeSpiDev.xfer2 = orig
+    assert "spidev" in res["wiring"]["gyro"]
+    assert res["samples_lost"] == 0 and res["frames"] > 200
+    assert 0.5 < res["measured_over_floor"] < 2.0
+    assert len(wire) > 2 * 400 * 2                     # status read and burst per 400 Hz step
+    for dt, n, hz in wire:
+        assert dt == pytest.approx(8 * n / hz, rel=1e-9, abs=1e-12)
+    assert replay(res["log"])["bit_exact"]
+
+
 def test_simulated_clock_refused_with_a_real_device(tmp_path):
     cfg = hc.load_flatsat(_cfg({"kind": "serial", "url": "socket://127.0.0.1:9"}, {"kind": "emulator"},
                                tmp_path / "f.toml"))
