@@ -552,11 +552,6 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
         offset = scen.truth.gyro_time_offset_ms * 1e-3   # a sample stamped t measured scenario time t + offset
         model = Bmi088GyroModel(base, StreamRates(gsamp, lambda: truth.t_origin - offset))
         model.truth_log = False    # the run's truth is the simulator's; the model's test log grows ~90 kB/s
-        # fast mode: each transfer takes its wire time on the simulated clock at the BMI088's
-        # fastest I2C clock (a FIFO status read and a one-frame burst about 0.3 ms at 400 kHz).
-        # Real time keeps the emulated bus instantaneous: a blocking wait there hands the GIL to
-        # the threads around the loop while the simulator's processes hold the two cores
-        # (docs/FLATSAT.md §7, "The emulated gyro's bus")
         device_cpu = DeviceCpu()
         if cfg.gyro.emulator_bus == "spi":
             from ..gyro import bmi088
@@ -569,6 +564,11 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
             wiring["gyro"] = (f"BMI088 register model on a fake spidev at {cfg.gyro.spi_hz / 1e6:g} MHz (mocks), "
                               "driven by gyrostar.gyro.Bmi088Gyro")
         else:
+            # fast mode: each transfer takes its wire time on the simulated clock at the BMI088's
+            # fastest I2C clock (a FIFO status read and a one-frame burst about 0.3 ms at 400 kHz).
+            # Real time keeps the emulated bus instantaneous: a blocking wait there hands the GIL
+            # to the threads around the loop while the simulator's processes hold the two cores
+            # (docs/FLATSAT.md §7, "The emulated gyro's bus")
             smbus = FaultyBus(model.smbus(cfg.gyro.i2c_address, bus_hz=GYRO_I2C_HZ if fast else None),
                               clock=base, seed=seed)
             faults.gyro_bus = smbus

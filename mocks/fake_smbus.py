@@ -7,11 +7,9 @@ i2c-dev driver does. It honours smbus2's limits (block transfers ≤ 32 bytes) a
 pointer (and writes any further bytes), a read message reads from the pointer.
 
 A model implements ``i2c_decode(reg_byte) -> (reg, autoinc)``, ``read(reg, n, autoinc)`` and
-``write(reg, data, autoinc)``. With ``clock`` and ``bus_hz`` set, every transaction takes its
-wire time (9 clocks per byte plus start/stop) after the device has answered from its state
-at the start of the transfer, so bursts take time as on a real bus: ``clock.sleep`` (a
-simulated clock advances; the host clock blocks the caller, as a real transfer does), else
-``clock.advance``.
+``write(reg, data, autoinc)``. With ``clock`` and ``bus_hz`` set, every transaction advances
+the simulated clock by its wire time (9 clocks per byte plus start/stop) after the device
+has answered from its state at the start of the transfer, so bursts take time as on a real bus.
 """
 
 from __future__ import annotations
@@ -52,11 +50,7 @@ class FakeSMBus:
     def _wire(self, nbytes: int) -> None:
         self.transactions += 1
         if self.clock is not None and self.bus_hz:
-            dt = (9 * (nbytes + 1) + 2) / self.bus_hz
-            # a simulated clock's sleep advances it; the host clock's blocks the caller, as a
-            # real i2c-dev transfer blocks the thread that asked for it
-            wait = getattr(self.clock, "sleep", None) or self.clock.advance
-            wait(dt)
+            self.clock.advance((9 * (nbytes + 1) + 2) / self.bus_hz)
 
     def _read(self, addr, reg, n):
         dev = self._dev(addr)

@@ -45,6 +45,11 @@ def check_source(args) -> str:
     return "simulate" if args.simulate else "live" if live else "file"
 
 
+def _is_npy(path: Path) -> bool:
+    with open(path, "rb") as fh:
+        return fh.read(6) == b"\x93NUMPY"
+
+
 def read_npz(path, needed: set[str] | tuple[str, ...], what: str = "INPUT") -> dict:
     """The arrays of an ``.npz`` input, every one of ``needed`` present and non-empty; a file
     that is not an ``.npz`` archive, an empty archive or a missing/empty array is a
@@ -55,7 +60,7 @@ def read_npz(path, needed: set[str] | tuple[str, ...], what: str = "INPUT") -> d
     path = Path(path)
     if path.is_dir():
         raise ConfigError(f"{what} {path} is a folder, not an .npz file")
-    if path.is_file() and not zipfile.is_zipfile(path) and path.read_bytes()[:6] != b"\x93NUMPY":
+    if path.is_file() and not zipfile.is_zipfile(path) and not _is_npy(path):
         raise ConfigError(f"{what} {path} is not an .npz archive (no zip header)")
     try:
         loaded = np.load(path, allow_pickle=False)
