@@ -142,6 +142,10 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
     main_thread = threading.current_thread() is threading.main_thread()
     if main_thread:
         signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+    def unblock():
+        if main_thread:
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT, signal.SIGTERM})
+
     try:
         folder.mkdir(parents=True, exist_ok=True)
         writer = lf.LogWriter(folder / "flatsat.gslog", background=True) if record else None
@@ -149,13 +153,17 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
             writer.meta(meta)
             writer.flush()      # on disk before anything can fail: a failed run's log still says what it was
     except FileExistsError as exc:
+        unblock()
         raise ConfigError(f"{folder} already holds a log (flatsat.gslog): choose another run folder") from exc
     except OSError as exc:
+        unblock()
         raise ConfigError(f"run folder {folder}: {exc.strerror or exc}") from exc
-    finally:
-        if main_thread:
-            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT, signal.SIGTERM})
+    except BaseException:
+        unblock()
+        raise
     try:
+        # a Ctrl-C held while the log came into being is delivered here, where the log records it
+        unblock()
         return _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer, on_output, probe,
                         fast, keep_arrays, calib=calib, timemap=timemap)
     except BaseException as exc:

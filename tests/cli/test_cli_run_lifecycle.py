@@ -137,6 +137,30 @@ def test_ctrl_c_during_start_up(tmp_path):
     assert not (out / "summary.json").exists()
 
 
+def test_ctrl_c_held_while_the_log_is_created_is_recorded(tmp_path, monkeypatch):
+    """A Ctrl-C that arrives while the log and its META come into being is held until META is
+    on disk, then delivered where the log records it: the log says the run was interrupted
+    (once the held signal was delivered outside that guard and the log said nothing)."""
+    from gyrostar.hil import config as hc
+    from gyrostar.hil.runner import run_flatsat
+
+    flush = lf.LogWriter.flush
+
+    def flush_then_ctrl_c(self):
+        flush(self)
+        if not getattr(self, "_interrupted", False):
+            self._interrupted = True
+            os.kill(os.getpid(), signal.SIGINT)     # blocked here: pending until the guard lifts
+
+    monkeypatch.setattr(lf.LogWriter, "flush", flush_then_ctrl_c)
+    with pytest.raises(KeyboardInterrupt):
+        run_flatsat(hc.load_flatsat(), hc.load_scenario("demo"), duration=1.0, seed=1, folder=tmp_path / "run",
+                    plots=False, status=False, fast=True)
+    recs = _records(tmp_path / "run" / "flatsat.gslog")
+    assert recs[0][0] == "meta"
+    assert any(k == "event" and json.loads(p).get("aborted") == "interrupted" for k, p in recs)
+
+
 def test_ctrl_c_mid_run_keeps_summary_and_plots(tmp_path):
     """SIGINT once the loop records outputs: summary.json and plots of the part that ran."""
 
