@@ -22,7 +22,7 @@ import statistics
 import time
 
 import numpy as np
-from gyrostar.core.centroid import cog, smear_fit
+from gyrostar.core.centroid import MERGE_PX, cog, smear_fit
 from gyrostar.core.joint_filter import joint_add_star, joint_init, joint_predict, joint_update, joint_workspace
 from gyrostar.core.motion import MODEL_PINHOLE, predict_trajectory, step_spot
 from gyrostar.core.quest import quest
@@ -208,8 +208,21 @@ def np_cog(spans, vals, bg, thr):
     return (w @ cols[m]) / w.sum(), (w @ rows[m]) / w.sum()
 
 
+def _np_merge(offs):
+    """The path points grouped as smear_fit groups them (runs within MERGE_PX of their first)."""
+    groups, j = [], 0
+    while j < len(offs):
+        k = j + 1
+        while k < len(offs) and np.all(np.abs(offs[k] - offs[j]) <= MERGE_PX):
+            k += 1
+        groups.append((offs[j:k].mean(axis=0), (k - j) / len(offs)))
+        j = k
+    return np.array([g[0] for g in groups]), np.array([g[1] for g in groups])
+
+
 def np_smear_fit(spans, vals, bg, u0, v0, offs, sig, noise_var, e_per_dn, n_iter, tol):
     cols, rows = _span_coords(spans)
+    offs, gw = _np_merge(offs)
     d = vals - bg
     wgt = 1.0 / (noise_var + np.maximum(d, 0) / e_per_dn)
     flux = max(d.sum(), 1.0)
@@ -225,8 +238,8 @@ def np_smear_fit(spans, vals, bg, u0, v0, offs, sig, noise_var, e_per_dn, n_iter
         ey = 0.5 * (erf((lo_r + 1) * k) - erf(lo_r * k))
         dx = pdf * (np.exp(-0.5 * (lo_c / sig) ** 2) - np.exp(-0.5 * ((lo_c + 1) / sig) ** 2))
         dy = pdf * (np.exp(-0.5 * (lo_r / sig) ** 2) - np.exp(-0.5 * ((lo_r + 1) / sig) ** 2))
-        t = (ex * ey).mean(axis=0)
-        J = np.column_stack([flux * (dx * ey).mean(axis=0), flux * (ex * dy).mean(axis=0), t])
+        t = gw @ (ex * ey)
+        J = np.column_stack([flux * (gw @ (dx * ey)), flux * (gw @ (ex * dy)), t])
         r = d - flux * t
         A = J.T @ (J * wgt[:, None])
         step = np.linalg.solve(A, J.T @ (wgt * r))

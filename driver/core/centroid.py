@@ -344,7 +344,20 @@ def _inv3_sym(a):
     return out
 
 
-MERGE_PX = 0.02   # px: trajectory offsets this close are one PSF evaluation in smear_fit
+@njit(cache=True, inline="always")
+def _erf_pdf(z, inv_s, k_pdf):
+    """(erf(z/(√2σ)), k_pdf·exp(−z²/2σ²)) with one exponential for both (``inv_s`` = 1/(√2σ)):
+    erf by Abramowitz & Stegun 7.1.26, |error| ≤ 1.5e-7 (a pixel integral off by ≤ 1.5e-7
+    of the flux, five orders below its photon noise)."""
+    x = z * inv_s
+    ex = math.exp(-x * x)
+    ax = abs(x)
+    t = 1.0 / (1.0 + 0.3275911 * ax)
+    y = 1.0 - t * (0.254829592 + t * (-0.284496736 + t * (1.421413741 + t * (-1.453152027 + t * 1.061405429)))) * ex
+    return (y if x >= 0.0 else -y), k_pdf * ex
+
+
+MERGE_PX = 0.5    # px: trajectory offsets this close are one PSF evaluation in smear_fit
 
 
 @njit(cache=True)
@@ -360,8 +373,11 @@ def smear_fit(spans, values, bg, u0, v0, offsets, sigma_psf, noise_var, e_per_dn
 
     Consecutive offsets within ``MERGE_PX`` of a group's first are evaluated once, at the
     group's mean with the group's weight (a spot at rest: one PSF instead of one per
-    trajectory point); the model differs from the full sum by ≲ (MERGE_PX/σ)²/8 of the PSF's
-    shape, its first moment not at all.
+    trajectory point; a 6 px smear sampled every 0.25 px: 9 instead of 25). The groups keep
+    the path's first moment exactly; each loses its own spread, at most MERGE_PX²/12 of
+    variance along the path (≤ 2.9 % of σ² at σ = 0.85 px, the PSF 1.4 % narrower along the
+    path inside one group), and the group means, ≤ 0.75 px apart, sample the smear far below
+    the PSF's width (the comb's ripple is ~2·exp(−2π²σ²/h²) < 1e-11 of the flux).
     """
     m_all = offsets.shape[0]
     if spans.shape[0] == 0 or m_all == 0:
@@ -418,24 +434,17 @@ def smear_fit(spans, values, bg, u0, v0, offsets, sigma_psf, noise_var, e_per_dn
     e_row = np.empty(nr + 1)
     p_row = np.empty(nr + 1)
     k_pdf = 1.0 / (sigma_psf * math.sqrt(2.0 * math.pi))
-    inv_sig = 1.0 / sigma_psf
     for it in range(1, n_iter + 1):
         for j in range(m):
             cu = u + grp[j, 0]
             cv = v + grp[j, 1]
             for c in range(nc + 1):
-                z = c0 + c - 0.5 - cu
-                e_col[c] = math.erf(z * inv_s)
-                a_ = z * inv_sig
-                p_col[c] = k_pdf * math.exp(-0.5 * a_ * a_)
+                e_col[c], p_col[c] = _erf_pdf(c0 + c - 0.5 - cu, inv_s, k_pdf)
             for c in range(nc):
                 ex[j, c] = 0.5 * (e_col[c + 1] - e_col[c])
                 dx[j, c] = p_col[c] - p_col[c + 1]
             for r in range(nr + 1):
-                z = r0 + r - 0.5 - cv
-                e_row[r] = math.erf(z * inv_s)
-                a_ = z * inv_sig
-                p_row[r] = k_pdf * math.exp(-0.5 * a_ * a_)
+                e_row[r], p_row[r] = _erf_pdf(r0 + r - 0.5 - cv, inv_s, k_pdf)
             for r in range(nr):
                 ey[j, r] = 0.5 * (e_row[r + 1] - e_row[r])
                 dy[j, r] = p_row[r] - p_row[r + 1]
