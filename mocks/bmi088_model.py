@@ -40,6 +40,7 @@ FIFO_FRAMES = 100
 RESET_BUSY_S = 0.030
 BIST_S = 0.010
 DRDY_S = 300e-6
+AHEAD = 64  # samples computed ahead per source call, for a source whose output is a function of its state()
 RANGE_DPS = {0: 2000.0, 1: 1000.0, 2: 500.0, 3: 250.0, 4: 125.0}
 ODR_HZ = {0: 2000.0, 1: 2000.0, 2: 1000.0, 3: 400.0, 4: 200.0, 5: 100.0, 6: 200.0, 7: 100.0}
 WRITABLE = {0x0F, 0x10, 0x11, 0x14, 0x15, 0x16, 0x18, 0x1E, 0x34, 0x3C, 0x3D, 0x3E}
@@ -62,6 +63,7 @@ class Bmi088GyroModel(RegisterModelBase):
         self.bist_fail = False
         self.lock = threading.RLock()
         self._k_next = 0  # global index of the next sample to be produced
+        self._ahead = None  # (first index, times, FIFO bytes, LSB, source state) computed ahead
         self._popped: list[np.ndarray] = []
         self._popped_raw: list[np.ndarray] = []
         self._power_on(clock.now() if t_power_on is None else t_power_on)
@@ -119,7 +121,7 @@ class Bmi088GyroModel(RegisterModelBase):
         if keep == 0 or pos[-1] != n_new - 1:
             pos = np.append(pos, n_new - 1)
         idx = k0 + pos
-        raw = quantize(self.source(idx, t_first + T * pos), self.range_dps / 32768.0)
+        raw = self._raw(idx, t_first + T * pos, T)
         self.latest_raw = raw[-1].copy()
         if mode in (0x40, 0x80) and before + n_new > FIFO_FRAMES:
             self.overrun = True
@@ -131,6 +133,29 @@ class Bmi088GyroModel(RegisterModelBase):
                     self.watermark_edges.append(self.t_watermark)
             self.fifo_idx = np.concatenate([self.fifo_idx, idx[:keep]])[-FIFO_FRAMES:]
             self.fifo_raw = np.concatenate([self.fifo_raw, raw[:keep]])[-FIFO_FRAMES:]
+
+    def _raw(self, idx: np.ndarray, t: np.ndarray, T: float) -> np.ndarray:
+        """FIFO bytes (n, 6) of samples ``idx`` taken at ``t``: from the block computed ahead when
+        it holds exactly these samples at exactly these times, range and source state; else from
+        the source, with the next ``AHEAD`` samples at one period each (the times the following
+        one-sample advances will ask, to the bit) computed in the same call."""
+        lsb = self.range_dps / 32768.0
+        state_of = getattr(self.source, "state", None)
+        state = state_of() if state_of is not None else None
+        a = self._ahead
+        if a is not None and a[3] == lsb and a[4] == state:
+            j0 = int(idx[0]) - a[0]
+            j1 = int(idx[-1]) - a[0] + 1
+            if j0 >= 0 and j1 <= len(a[1]) and j1 - j0 == len(idx) and \
+                    (a[1][j0] == t[0] if j1 == j0 + 1 else np.array_equal(a[1][j0:j1], t)):
+                return a[2][j0:j1]     # (consecutive indices: the usual one-sample advance)
+        if state is None:
+            return quantize(self.source(idx, t), lsb)
+        k1 = int(idx[-1]) + 1
+        t_ahead = np.add.accumulate(np.concatenate([[self._t_next], np.full(AHEAD - 1, T)]))
+        raw = quantize(self.source(np.concatenate([idx, k1 + np.arange(AHEAD)]), np.concatenate([t, t_ahead])), lsb)
+        self._ahead = (k1, t_ahead, raw[len(idx):], lsb, state)
+        return raw[:len(idx)]
 
     def _check_busy(self) -> None:
         if self.clock.now() < self._busy_until:

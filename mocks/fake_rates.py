@@ -101,6 +101,11 @@ class StreamRates:
         self.stream = stream
         self.origin = origin
 
+    def state(self) -> float:
+        """What the rates depend on besides (k, t): the origin (a register model may compute
+        samples ahead while it holds)."""
+        return self.origin()
+
     def __call__(self, k: np.ndarray, t: np.ndarray) -> np.ndarray:
         ts = np.maximum(np.asarray(t, float) - self.origin(), 0.0)
         return self.stream.meas_at(ts * self.stream.odr_hz - 1.0)
