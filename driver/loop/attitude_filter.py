@@ -23,10 +23,10 @@ import math
 
 import numpy as np
 
-from ..attitude import quat_conj, quat_mult, quat_normalize, quat_propagate, quat_to_dcm, rotvec_to_quat
-from ..core.mekf import mekf_update
+from ..attitude import quat_conj, quat_mult, quat_normalize
 from . import record as R
 from .kernels import predict_batch
+from .update_kernel import q_at_history, update_at_mid
 
 QD_MARGIN = 1.1          # the prior at t_mid, P − Q_Δ, is used when P exceeds Q_Δ by this factor on every axis
 HIST = 8192              # gyro samples of history (20 s at 400 Hz) for delayed measurements: a lost-in-
@@ -81,14 +81,7 @@ class AttitudeFilter:
     def q_at(self, t: float) -> np.ndarray:
         """Attitude estimate at host time ``t`` (s): the newest sample at or before it,
         propagated to ``t`` with the current rate (≤ one gyro period)."""
-        if self.ts[0] != self.ts[0]:
-            return self.q.copy()
-        masked = np.where(self.hist_t <= t, self.hist_t, -np.inf)
-        best = int(np.argmax(masked))
-        best_t = masked[best]
-        if not np.isfinite(best_t):
-            return self.q.copy()
-        return quat_propagate(self.hist_q[best], self.omega, t - best_t)
+        return q_at_history(self.q, self.ts, self.hist_t, self.hist_q, float(t))
 
     def update(self, t_mid: float, b_mid, refs, sigmas, accepted, min_used: int = 1) -> int:
         """Star directions measured at mid-exposure ``t_mid`` (body unit vectors (n, 3)),
@@ -108,78 +101,19 @@ class AttitudeFilter:
 
         Also sets the mid-exposure product (:attr:`mid`): the updated attitude carried back
         to ``t_mid`` along R, with the attitude block of Φ P⁺_mid Φᵀ rotated back to the body
-        axes at ``t_mid``."""
-        q_prior_mid = self.q_at(t_mid)
-        rq = quat_mult(self.q, quat_conj(q_prior_mid))                    # body(t_mid) → body(now)
-        rot = quat_to_dcm(rq)
-        bvecs = np.ascontiguousarray(b_mid @ rot.T)
-        lag = max((self.t_last if self.t_last is not None else t_mid) - t_mid, 0.0)
-        qd = self.prm[1] ** 2 * lag
-        P = self.P
-        if qd > 0 and min(P[0, 0], P[1, 1], P[2, 2]) > QD_MARGIN * qd:   # else: no usable prior at t_mid
-            for i in range(3):
-                P[i, i] -= qd
-        else:
-            qd = 0.0
-        p_prior_mid = rot.T @ P[:3, :3] @ rot
-        saved = (self.q.copy(), self.b.copy(), P.copy())
-        n = int(mekf_update(self.q, self.b, P, bvecs, np.ascontiguousarray(refs),
-                            np.ascontiguousarray(sigmas), GATE, accepted))
-        if 0 < n < min_used:
-            self.q[:], self.b[:], P[:, :] = saved
-            n = 0
-        if n:
-            self._correct_history(t_mid, saved[0])
-            q_mid = quat_mult(quat_conj(rq), self.q)
-            p_mid = rot.T @ P[:3, :3] @ rot
-            self._smooth_previous(t_mid, q_prior_mid, p_prior_mid, q_mid, p_mid)
-            self.mid[0] = t_mid
-            self.mid[1:5] = q_mid
-            self.mid[5:] = p_mid.ravel()
-        # back to now: the walk since t_mid, less what the gyro's low-pass takes out of it
-        back = self.prm[1] ** 2 * max(lag - self.kappa, 0.0) if qd > 0 else 0.0
-        for i in range(3):
-            P[i, i] += back
-        return n
+        axes at ``t_mid``.
 
-    def _correct_history(self, t_mid: float, q_old: np.ndarray) -> None:
-        """Carry this update's correction into the attitude history from ``t_mid`` on: each
-        entry keeps its gyro rotation to now, q_t ← q_t ⊗ q_old⁻¹ ⊗ q_new. A frame whose
-        mid-exposure falls before an update that was applied after it (the pixels of frame
-        n − 1 arriving later than frame n's mid-exposure, as at speed on the streaming head)
-        would otherwise be carried to now through the uncorrected history and apply the
-        same correction a second time."""
-        corr = quat_mult(quat_conj(q_old), self.q)
-        for i in np.flatnonzero(self.hist_t >= t_mid):
-            self.hist_q[i] = quat_normalize(quat_mult(self.hist_q[i], corr))
-
-    def _smooth_previous(self, t_mid, q_prior, p_prior, q_post, p_post) -> None:
-        """The previous frame's mid-exposure attitude smoothed with this frame (one-lag
-        Rauch–Tung–Striebel on the attitude error): this frame's correction δ (its filtered
-        attitude against its prior, both at its mid-exposure) is carried back through the
-        gyro rotation R between the two mid-exposures with the gain C = P_k Rᵀ (P⁻_k+1)⁻¹:
-        q_s = δq(C δ) ⊗ q_k, P_s = P_k + C (P_k+1 − P⁻_k+1) Cᵀ. Sets :attr:`smoothed`.
-        Frames more than ``SMOOTH_GAP_S`` apart (a coast between them) are not combined: the
-        previous product is passed on as it was filtered."""
-        prev = self.mid
-        if not np.isfinite(prev[0]):
-            return
-        if t_mid - prev[0] > SMOOTH_GAP_S:
-            self.smoothed[:] = prev
-            return
-        q_k = prev[1:5]
-        p_k = prev[5:].reshape(3, 3)
-        r = quat_to_dcm(quat_mult(q_prior, quat_conj(q_k)))       # body(mid_k) → body(mid_k+1), the gyro's
-        d = quat_mult(q_post, quat_conj(q_prior))
-        delta = 2.0 * d[:3] * (1.0 if d[3] >= 0 else -1.0)      # correction at mid_k+1 (rad, its body axes)
-        try:
-            c = p_k @ r.T @ np.linalg.inv(p_prior)
-        except np.linalg.LinAlgError:
-            return
-        self.smoothed[0] = prev[0]
-        self.smoothed[1:5] = quat_normalize(quat_mult(rotvec_to_quat(c @ delta), q_k))
-        ps = p_k + c @ (p_post - p_prior) @ c.T
-        self.smoothed[5:] = (0.5 * (ps + ps.T)).ravel()
+        One compiled call (:func:`gyrostar.loop.update_kernel.update_at_mid`), the history
+        corrected from ``t_mid`` on included (a frame whose mid-exposure falls before an update
+        applied after it — frame n − 1's pixels arriving later than frame n's mid-exposure,
+        as at speed on the streaming head — would otherwise apply the same correction twice).
+        The smoothed product (:attr:`smoothed`) is the previous frame's mid-exposure attitude
+        smoothed with this frame (one-lag Rauch–Tung–Striebel on the attitude error; frames
+        more than ``SMOOTH_GAP_S`` apart are not combined)."""
+        return int(update_at_mid(self.q, self.b, self.P, self.ts, self.hist_t, self.hist_q, self.prm, self.kappa,
+                                 self.mid, self.smoothed, float(t_mid), np.ascontiguousarray(b_mid, np.float64),
+                                 np.ascontiguousarray(refs, np.float64), np.ascontiguousarray(sigmas, np.float64),
+                                 accepted, int(min_used), GATE, QD_MARGIN, SMOOTH_GAP_S))
 
     def set_attitude(self, q_ident, t_mid: float, now: float, cov_rad2: np.ndarray) -> None:
         """A lost-in-space attitude ``q_ident`` measured at ``t_mid`` with covariance ``cov_rad2``

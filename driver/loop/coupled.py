@@ -41,7 +41,7 @@ from ..errors import DeviceError, GyrostarError, LinkLostError
 from ..head.client import HeadTimeoutError
 from . import modes
 from . import record as R
-from .attitude_filter import GATE, AttitudeFilter, fix_covariance
+from .attitude_filter import GATE, QD_MARGIN, SMOOTH_GAP_S, AttitudeFilter, fix_covariance
 from .floor import FloorInputs
 from .image import ImagePipeline
 from .outputs import OutputStage
@@ -700,7 +700,7 @@ def warmup() -> dict:
     from ..core.motion import substeps_for
     from ..gyro.convert import convert_frames
     from ..protocol.payloads import _unpack10_kernel
-    from . import acquire, image_kernels, kernels
+    from . import acquire, image_kernels, kernels, update_kernel
     from .warmup import warm
 
     cam = np.array([6666.0, 511.5, 511.5, 0, 0, 0, 0, 0, 1024, 1024])
@@ -736,6 +736,10 @@ def warmup() -> dict:
         (image_kernels.measure_windows, (spans, vals, np.array([0], np.int64), np.zeros((2, 2)),
                                          np.array([0], np.int64), np.array([2], np.int64), cam, 0.85, 4.0, 30.0,
                                          5.0, 10, 1e-3)),
+        (update_kernel.update_at_mid, (af.q, af.b, af.P, af.ts, af.hist_t, af.hist_q, af.prm, af.kappa, af.mid,
+                                       af.smoothed, 0.0, ref, ref, np.array([1e-5, 1e-5]), np.zeros(2, np.uint8), 1,
+                                       GATE, QD_MARGIN, SMOOTH_GAP_S)),
+        (update_kernel.q_at_history, (af.q, af.ts, af.hist_t, af.hist_q, 0.0)),
     ]
     return warm(calls)
 

@@ -1,0 +1,152 @@
+"""numba kernel of the loop's per-frame path: one image's update applied at its mid-exposure.
+
+:func:`update_at_mid` does in one compiled call what
+:meth:`gyrostar.loop.attitude_filter.AttitudeFilter.update` documents: the prior at
+``t_mid`` from the attitude history, the directions carried to now, the MEKF update on
+P − Q_Δ, the history corrected from ``t_mid`` on, the mid-exposure product and the one-lag
+smoothed product of the frame before, and the walk since ``t_mid`` added back. Frames as in
+:mod:`gyrostar.attitude` (q ICRS → body, [x, y, z, w]); angles rad, times s.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ..attitude import quat_conj, quat_mult, quat_normalize, quat_propagate, quat_to_dcm, rotvec_to_quat
+from ..core.mekf import mekf_update
+
+
+@njit(cache=True)
+def q_at_history(q, ts, hist_t, hist_q, t):
+    """Attitude at time ``t`` (s): the newest history entry at or before it, propagated to
+    ``t`` with the current rate ``ts[1:]`` (≤ one gyro period); ``q`` when there is none."""
+    if ts[0] != ts[0]:
+        return q.copy()
+    best = -1
+    best_t = -np.inf
+    for i in range(hist_t.shape[0]):
+        if hist_t[i] <= t and hist_t[i] > best_t:
+            best = i
+            best_t = hist_t[i]
+    if best < 0:
+        return q.copy()
+    return quat_propagate(hist_q[best], ts[1:], t - best_t)
+
+
+@njit(cache=True)
+def _rt_p_r(rot, P):
+    """rotᵀ · P[:3, :3] · rot (3×3): an attitude covariance from now's body axes to t_mid's."""
+    out = np.empty((3, 3))
+    tmp = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            tmp[i, j] = P[i, 0] * rot[0, j] + P[i, 1] * rot[1, j] + P[i, 2] * rot[2, j]
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = rot[0, i] * tmp[0, j] + rot[1, i] * tmp[1, j] + rot[2, i] * tmp[2, j]
+    return out
+
+
+@njit(cache=True)
+def _inv3(a):
+    """Inverse of a 3×3 matrix by cofactors; ok False when it is singular."""
+    c00 = a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1]
+    c01 = a[1, 2] * a[2, 0] - a[1, 0] * a[2, 2]
+    c02 = a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]
+    det = a[0, 0] * c00 + a[0, 1] * c01 + a[0, 2] * c02
+    out = np.empty((3, 3))
+    if det == 0.0 or det != det:
+        return out, False
+    k = 1.0 / det
+    out[0, 0] = c00 * k
+    out[1, 0] = c01 * k
+    out[2, 0] = c02 * k
+    out[0, 1] = (a[0, 2] * a[2, 1] - a[0, 1] * a[2, 2]) * k
+    out[1, 1] = (a[0, 0] * a[2, 2] - a[0, 2] * a[2, 0]) * k
+    out[2, 1] = (a[0, 1] * a[2, 0] - a[0, 0] * a[2, 1]) * k
+    out[0, 2] = (a[0, 1] * a[1, 2] - a[0, 2] * a[1, 1]) * k
+    out[1, 2] = (a[0, 2] * a[1, 0] - a[0, 0] * a[1, 2]) * k
+    out[2, 2] = (a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]) * k
+    return out, True
+
+
+@njit(cache=True)
+def _smooth_previous(mid, smoothed, t_mid, q_prior, p_prior, q_post, p_post, gap_s):
+    """One-lag Rauch–Tung–Striebel of the previous mid-exposure product ``mid`` with this
+    frame (see ``AttitudeFilter.update``); writes ``smoothed``. Frames more than ``gap_s``
+    apart pass the previous product on as filtered."""
+    if not math.isfinite(mid[0]):
+        return
+    if t_mid - mid[0] > gap_s:
+        smoothed[:] = mid
+        return
+    q_k = mid[1:5].copy()
+    p_k = mid[5:].copy().reshape(3, 3)
+    r = quat_to_dcm(quat_mult(q_prior, quat_conj(q_k)))       # body(mid_k) → body(mid_k+1), the gyro's
+    d = quat_mult(q_post, quat_conj(q_prior))
+    sgn = 1.0 if d[3] >= 0 else -1.0
+    delta = np.array([2.0 * d[0] * sgn, 2.0 * d[1] * sgn, 2.0 * d[2] * sgn])
+    inv, ok = _inv3(p_prior)
+    if not ok:
+        return
+    c = p_k @ np.ascontiguousarray(r.T) @ inv
+    smoothed[0] = mid[0]
+    smoothed[1:5] = quat_normalize(quat_mult(rotvec_to_quat(c @ delta), q_k))
+    ps = p_k + c @ (p_post - p_prior) @ np.ascontiguousarray(c.T)
+    for i in range(3):
+        for j in range(3):
+            smoothed[5 + 3 * i + j] = 0.5 * (ps[i, j] + ps[j, i])
+
+
+@njit(cache=True)
+def update_at_mid(q, b, P, ts, hist_t, hist_q, prm, kappa, mid, smoothed, t_mid, b_mid, refs, sigmas, accepted,
+                  min_used, gate, qd_margin, gap_s):
+    """Apply one image (body unit vectors ``b_mid`` (n, 3) measured at ``t_mid``, catalog
+    vectors ``refs`` (n, 3), σ ``sigmas`` (n,) rad) now; ``accepted`` (n,) uint8 written.
+    State q, b, P, history and ``mid``/``smoothed`` in place (layouts of ``AttitudeFilter``).
+    Returns the count of stars used (0: not applied, fewer than ``min_used`` passed)."""
+    q_prior_mid = q_at_history(q, ts, hist_t, hist_q, t_mid)
+    rq = quat_mult(q, quat_conj(q_prior_mid))                       # body(t_mid) → body(now)
+    rot = quat_to_dcm(rq)
+    bvecs = np.ascontiguousarray(b_mid @ np.ascontiguousarray(rot.T))
+    t_last = ts[0] if ts[0] == ts[0] else t_mid
+    lag = max(t_last - t_mid, 0.0)
+    qd = prm[1] ** 2 * lag
+    if qd > 0 and min(P[0, 0], P[1, 1], P[2, 2]) > qd_margin * qd:   # else: no usable prior at t_mid
+        for i in range(3):
+            P[i, i] -= qd
+    else:
+        qd = 0.0
+    p_prior_mid = _rt_p_r(rot, P)
+    q_old = q.copy()
+    b_old = b.copy()
+    P_old = P.copy()
+    n = mekf_update(q, b, P, bvecs, refs, sigmas, gate, accepted)
+    if 0 < n < min_used:
+        q[:] = q_old
+        b[:] = b_old
+        P[:, :] = P_old
+        n = 0
+    if n:
+        # the correction carried into the history from t_mid on (each entry keeps its gyro
+        # rotation to now): a later-arriving earlier frame must not apply it a second time
+        corr = quat_mult(quat_conj(q_old), q)
+        for i in range(hist_t.shape[0]):
+            if hist_t[i] >= t_mid:
+                hist_q[i] = quat_normalize(quat_mult(hist_q[i], corr))
+        q_mid = quat_mult(quat_conj(rq), q)
+        p_mid = _rt_p_r(rot, P)
+        _smooth_previous(mid, smoothed, t_mid, q_prior_mid, p_prior_mid, q_mid, p_mid, gap_s)
+        mid[0] = t_mid
+        mid[1:5] = q_mid
+        for i in range(3):
+            for j in range(3):
+                mid[5 + 3 * i + j] = p_mid[i, j]
+    # back to now: the walk since t_mid, less what the gyro's low-pass takes out of it
+    back = prm[1] ** 2 * max(lag - kappa, 0.0) if qd > 0 else 0.0
+    for i in range(3):
+        P[i, i] += back
+    return n
