@@ -14,6 +14,7 @@ Two halves, kept apart so that replay can reuse the second:
 
 from __future__ import annotations
 
+import bisect
 import dataclasses
 import logging
 import math
@@ -56,9 +57,22 @@ def scenario_profile(scen: hc.Scenario):
             self.t0, self.t1 = np.array(self.t0), np.array(self.t1)
             self.w0, self.w1 = np.array(self.w0), np.array(self.w1)
             self.duration_s = float(self.t1[-1])
+            self._t1_list = self.t1.tolist()
+            self._last = len(self.t0) - 1
+            self._span = np.where(np.isfinite(self.t1), self.t1 - self.t0, 1.0)
 
         def rate(self, t):
             t = np.atleast_1d(np.asarray(t, dtype=np.float64))
+            if t.ndim == 1 and len(t):
+                # the usual query (an exposure, an integration step) lies in one segment: the
+                # same arithmetic on scalars of that segment
+                ia = min(bisect.bisect_right(self._t1_list, t[0]), self._last)
+                ib = min(bisect.bisect_right(self._t1_list, t[-1]), self._last)
+                if ia == ib and ia == min(bisect.bisect_right(self._t1_list, float(t.min())), self._last) \
+                        and ia == min(bisect.bisect_right(self._t1_list, float(t.max())), self._last):
+                    span = self._span[ia]
+                    f = np.clip((t - self.t0[ia]) / span, 0.0, 1.0)[:, None]
+                    return (1.0 - f) * self.w0[ia] + f * self.w1[ia]
             i = np.clip(np.searchsorted(self.t1, t, side="right"), 0, len(self.t0) - 1)
             span = np.where(np.isfinite(self.t1[i]), self.t1[i] - self.t0[i], 1.0)
             f = np.clip((t - self.t0[i]) / span, 0.0, 1.0)[:, None]

@@ -77,22 +77,33 @@ def decode_spans(tail: bytes) -> np.ndarray:
 def pack10(values) -> bytes:
     """10-bit values as an LSB-first bit stream: value i occupies bits [10i, 10i+10)."""
     a = np.asarray(values)
-    if a.size and (int(a.max()) > 0x3FF or int(a.min()) < 0):
+    if a.dtype != np.uint16:       # (uint16: the kernel checks the range as it packs)
+        if a.size and (int(a.max()) > 0x3FF or int(a.min()) < 0):
+            raise ProtocolUsageError("pixel value outside 0..1023 cannot be packed in 10 bits")
+    out = _pack10_kernel(np.ascontiguousarray(a, dtype=np.uint16).ravel())
+    if out.size and out[-1] == _PACK10_BAD:
         raise ProtocolUsageError("pixel value outside 0..1023 cannot be packed in 10 bits")
-    return _pack10_kernel(np.ascontiguousarray(a, dtype=np.uint16).ravel()).tobytes()
+    return out[:-1].tobytes()
+
+
+_PACK10_BAD = 0xFF   # the kernel's trailing status byte: a value did not fit in 10 bits
 
 
 @njit(cache=True)
 def _pack10_kernel(v):
-    """Bit-stream pack of uint16 values ≤ 1023 (LSB first), ``ceil(10 n / 8)`` bytes."""
+    """Bit-stream pack of uint16 values (LSB first): ``ceil(10 n / 8)`` bytes, then one status
+    byte, 0 or ``_PACK10_BAD`` (0xFF) when a value exceeds 1023 (the packing stops there)."""
     n = v.size
-    out = np.zeros((10 * n + 7) // 8, np.uint8)
+    out = np.zeros((10 * n + 7) // 8 + 1, np.uint8)
     for i in range(n):
+        if v[i] > 0x3FF:
+            out[out.size - 1] = 0xFF
+            return out
         bit = 10 * i
         byte = bit >> 3
         word = np.uint32(v[i]) << (bit & 7)
         out[byte] |= np.uint8(word & 0xFF)
-        if byte + 1 < out.size:
+        if byte + 1 < out.size - 1:
             out[byte + 1] |= np.uint8((word >> 8) & 0xFF)
     return out
 
