@@ -433,7 +433,8 @@ def _run_realtime(fs, loop, gate, sched, duration: float, step_wall: list, line,
         sched.done()
         gate.loop_exit(sched.deadline)
         boundary.step_done()
-        if line is not None and loop.last_output is not None:
+        if line is not None and loop.last_output is not None and line.due():
+            # the truth row (an attitude integration) only when the line redraws, not every step
             line.update(loop.last_output, fs.truth_at(loop.last_output["t"]), step_wall[-1] * 1e6,
                         sched.overruns, duration, t0=t_start)
     return cpu

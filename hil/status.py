@@ -28,6 +28,10 @@ class StatusLine:
             self._live = Live("", console=Console(stderr=True), auto_refresh=False, transient=False)
             self._live.start()
 
+    def due(self) -> bool:
+        """Whether the next :meth:`update` would redraw (a caller computes its truth row only then)."""
+        return self.enabled and time.monotonic() - self._last >= self.period_s
+
     def update(self, rec, truth=None, step_us: float | None = None, overruns: int = 0,
                duration_s: float | None = None, force: bool = False, t0: float = 0.0) -> None:
         if not self.enabled or rec is None:

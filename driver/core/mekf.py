@@ -17,6 +17,8 @@ and reset into ``q`` (``q ← δq(a) ⊗ q``, ``b ← b + Δb``) after each imag
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
@@ -129,48 +131,90 @@ def mekf_update(q, b, P, body_vecs, ref_vecs, sigmas, gate, accepted):
     vectors (n, 3), per-star σ (rad). Stars failing the χ² gate (2 dof on the tangent-plane
     innovation) are skipped; ``accepted`` (n,) uint8 is written. Returns the count used.
     """
+    # H = [[b̂]×, 0] projected on the tangent plane: G = T·[b̂]× (2×3), the bias columns zero;
+    # every product below is written out for that structure (no BLAS/LAPACK call per star)
     dx = np.zeros(6)
     n_ok = 0
     a = quat_to_dcm(q)
+    bh = np.empty(3)
+    G = np.empty((2, 3))
+    PG = np.empty((6, 2))       # P Gᵀ over the attitude columns
+    K = np.empty((6, 2))
+    GP = np.empty((2, 6))       # G P[:3, :]
+    M = np.empty((6, 6))
     for i in range(body_vecs.shape[0]):
         accepted[i] = 0
         r = ref_vecs[i]
-        bh = a @ r
-        # predicted vector after the error-state corrections made so far in this image
-        corr = dx[:3]
-        bh = bh - np.cross(corr, bh)
-        bh /= np.sqrt(bh @ bh)
-        z = body_vecs[i] / np.sqrt(body_vecs[i] @ body_vecs[i])
-        nu = z - bh
-        H = np.zeros((3, 6))
-        H[0, 1] = -bh[2]
-        H[0, 2] = bh[1]
-        H[1, 0] = bh[2]
-        H[1, 2] = -bh[0]
-        H[2, 0] = -bh[1]
-        H[2, 1] = bh[0]
-        # the measurement is 2-D: project on the tangent plane (two orthonormal axes ⟂ bh)
-        t1 = np.cross(bh, np.array([1.0, 0.0, 0.0]))
-        if t1 @ t1 < 0.1:
-            t1 = np.cross(bh, np.array([0.0, 1.0, 0.0]))
-        t1 /= np.sqrt(t1 @ t1)
-        t2 = np.cross(bh, t1)
-        T = np.empty((2, 3))
-        T[0] = t1
-        T[1] = t2
-        H2 = T @ H
-        nu2 = T @ nu
-        S = H2 @ P @ H2.T
-        S[0, 0] += sigmas[i] * sigmas[i]
-        S[1, 1] += sigmas[i] * sigmas[i]
-        Si = np.linalg.inv(S)
-        d2 = nu2 @ Si @ nu2
+        p0 = a[0, 0] * r[0] + a[0, 1] * r[1] + a[0, 2] * r[2]
+        p1 = a[1, 0] * r[0] + a[1, 1] * r[1] + a[1, 2] * r[2]
+        p2 = a[2, 0] * r[0] + a[2, 1] * r[1] + a[2, 2] * r[2]
+        # predicted vector after the error-state corrections made so far in this image: b̂ − δθ × b̂
+        bh[0] = p0 - (dx[1] * p2 - dx[2] * p1)
+        bh[1] = p1 - (dx[2] * p0 - dx[0] * p2)
+        bh[2] = p2 - (dx[0] * p1 - dx[1] * p0)
+        nb = math.sqrt(bh[0] * bh[0] + bh[1] * bh[1] + bh[2] * bh[2])
+        bh[0] /= nb
+        bh[1] /= nb
+        bh[2] /= nb
+        zv = body_vecs[i]
+        nz = math.sqrt(zv[0] * zv[0] + zv[1] * zv[1] + zv[2] * zv[2])
+        nu0 = zv[0] / nz - bh[0]
+        nu1 = zv[1] / nz - bh[1]
+        nu2_ = zv[2] / nz - bh[2]
+        # the measurement is 2-D: the tangent plane (two orthonormal axes ⟂ b̂): t1 = b̂ × x̂ (or × ŷ)
+        t10, t11, t12 = 0.0, bh[2], -bh[1]
+        if t11 * t11 + t12 * t12 < 0.1:
+            t10, t11, t12 = -bh[2], 0.0, bh[0]
+        nt = math.sqrt(t10 * t10 + t11 * t11 + t12 * t12)
+        t10 /= nt
+        t11 /= nt
+        t12 /= nt
+        t20 = bh[1] * t12 - bh[2] * t11
+        t21 = bh[2] * t10 - bh[0] * t12
+        t22 = bh[0] * t11 - bh[1] * t10
+        # rows of T·[b̂]×, [b̂]× = [[0, −b2, b1], [b2, 0, −b0], [−b1, b0, 0]]
+        G[0, 0] = t11 * bh[2] - t12 * bh[1]
+        G[0, 1] = -t10 * bh[2] + t12 * bh[0]
+        G[0, 2] = t10 * bh[1] - t11 * bh[0]
+        G[1, 0] = t21 * bh[2] - t22 * bh[1]
+        G[1, 1] = -t20 * bh[2] + t22 * bh[0]
+        G[1, 2] = t20 * bh[1] - t21 * bh[0]
+        y0 = t10 * nu0 + t11 * nu1 + t12 * nu2_
+        y1 = t20 * nu0 + t21 * nu1 + t22 * nu2_
+        for j in range(6):
+            PG[j, 0] = P[j, 0] * G[0, 0] + P[j, 1] * G[0, 1] + P[j, 2] * G[0, 2]
+            PG[j, 1] = P[j, 0] * G[1, 0] + P[j, 1] * G[1, 1] + P[j, 2] * G[1, 2]
+        var = sigmas[i] * sigmas[i]
+        s00 = G[0, 0] * PG[0, 0] + G[0, 1] * PG[1, 0] + G[0, 2] * PG[2, 0] + var
+        s01 = G[0, 0] * PG[0, 1] + G[0, 1] * PG[1, 1] + G[0, 2] * PG[2, 1]
+        s10 = G[1, 0] * PG[0, 0] + G[1, 1] * PG[1, 0] + G[1, 2] * PG[2, 0]
+        s11 = G[1, 0] * PG[0, 1] + G[1, 1] * PG[1, 1] + G[1, 2] * PG[2, 1] + var
+        det = s00 * s11 - s01 * s10
+        if not det > 0.0:
+            continue
+        i00 = s11 / det
+        i01 = -s01 / det
+        i10 = -s10 / det
+        i11 = s00 / det
+        d2 = y0 * (i00 * y0 + i01 * y1) + y1 * (i10 * y0 + i11 * y1)
         if d2 > gate:
             continue
-        K = P @ H2.T @ Si
-        dx += K @ nu2  # nu2 is already taken at the corrected estimate
-        IKH = np.eye(6) - K @ H2
-        P[:, :] = IKH @ P @ IKH.T + (sigmas[i] * sigmas[i]) * (K @ K.T)
+        for j in range(6):
+            K[j, 0] = PG[j, 0] * i00 + PG[j, 1] * i10
+            K[j, 1] = PG[j, 0] * i01 + PG[j, 1] * i11
+            dx[j] += K[j, 0] * y0 + K[j, 1] * y1      # y is already taken at the corrected estimate
+        # Joseph form: P ← (I − K H) P (I − K H)ᵀ + σ² K Kᵀ, with K H = [K G, 0]
+        for c in range(6):
+            GP[0, c] = G[0, 0] * P[0, c] + G[0, 1] * P[1, c] + G[0, 2] * P[2, c]
+            GP[1, c] = G[1, 0] * P[0, c] + G[1, 1] * P[1, c] + G[1, 2] * P[2, c]
+        for j in range(6):
+            for c in range(6):
+                M[j, c] = P[j, c] - (K[j, 0] * GP[0, c] + K[j, 1] * GP[1, c])
+        for j in range(6):
+            mg0 = M[j, 0] * G[0, 0] + M[j, 1] * G[0, 1] + M[j, 2] * G[0, 2]
+            mg1 = M[j, 0] * G[1, 0] + M[j, 1] * G[1, 1] + M[j, 2] * G[1, 2]
+            for c in range(6):
+                P[j, c] = M[j, c] - (mg0 * K[c, 0] + mg1 * K[c, 1]) + var * (K[j, 0] * K[c, 0] + K[j, 1] * K[c, 1])
         accepted[i] = 1
         n_ok += 1
     # reset: fold the error state into the global state
