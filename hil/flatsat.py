@@ -716,6 +716,8 @@ def _sim_head(cfg, scen, sim, truth, seed, faults, lockstep):
     sky = Sky(cat, sim, seed=seed, false_spots=scen.false_spots or None)
     emu = HeadEmulator(sky, ScenarioScene(truth, sim.detector.exposure_s), noise=True,
                        clock=dev_clock)
+    # its kernels compiled (cold cache) or loaded now, not at its first frame inside the run
+    emu.warm_up(truth.q0)
     head = SimHead(emu, dev_clock, link_preset(cfg.head.link), lockstep)
     head.start()
     faults.head_emulator = head

@@ -629,7 +629,9 @@ class CoupledLoop:
         n = len(sig)
         if n < 3:
             return np.ones(n, np.bool_)
-        tol = max(CONSISTENT_SIGMA * float(np.median(sig)), CONSISTENT_MIN_PX / self.f_px)
+        srt = np.sort(sig)       # the median (np.median's value, without its overhead)
+        med = float(srt[n // 2]) if n % 2 else float((srt[n // 2 - 1] + srt[n // 2]) / 2)
+        tol = max(CONSISTENT_SIGMA * med, CONSISTENT_MIN_PX / self.f_px)
         _, match, n_ok, _ = verify_matches(np.ascontiguousarray(b_mid, np.float64),
                                            np.ascontiguousarray(refs, np.float64), np.arange(n, dtype=np.int64),
                                            tol)
