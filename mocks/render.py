@@ -61,6 +61,18 @@ def star_paths(params, vecs_icrs, quats):
 
 
 @njit(cache=True, nogil=True)
+def weighted_mean_paths(paths, wts):
+    """Σ_k wts[k] · paths[:, k, :] (n, 2): a path's weighted time average."""
+    n, m = paths.shape[0], paths.shape[1]
+    out = np.zeros((n, 2))
+    for s in range(n):
+        for k in range(m):
+            out[s, 0] += wts[k] * paths[s, k, 0]
+            out[s, 1] += wts[k] * paths[s, k, 1]
+    return out
+
+
+@njit(cache=True, nogil=True)
 def star_boxes(paths, sigma, width, height):
     """Per star pixel box int64 (n, 4) ``[r0, r1, c0, c1)`` clipped to the sensor (empty if off)."""
     n, m = paths.shape[0], paths.shape[1]

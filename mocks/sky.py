@@ -185,15 +185,16 @@ class Sky:
         """
         cand = self._cand
         if cand is not None:
-            c_bore, c_radius, c_idx = cand
+            c_bore, c_radius, c_idx, c_vec = cand
             off = math.acos(max(-1.0, min(1.0, float(c_bore @ bore))))
             if off + reach <= c_radius:
-                keep = self.catalog.vectors[c_idx] @ bore > math.cos(min(reach, math.pi))
+                keep = c_vec @ bore > math.cos(min(reach, math.pi))
                 return c_idx[keep]
         radius = min(reach + math.radians(2.0), math.pi)
         c_idx = np.flatnonzero(self.catalog.vectors @ bore > math.cos(radius))
-        self._cand = (bore.copy(), radius, c_idx)
-        return c_idx[self.catalog.vectors[c_idx] @ bore > math.cos(min(reach, math.pi))]
+        c_vec = np.ascontiguousarray(self.catalog.vectors[c_idx])     # the candidates' vectors, kept
+        self._cand = (bore.copy(), radius, c_idx, c_vec)
+        return c_idx[c_vec @ bore > math.cos(min(reach, math.pi))]
 
     def signal_frame(self, exp: Exposure) -> np.ndarray:
         """Mean photo-signal of the stars (e⁻) over the whole sensor, float64 (H, W)."""
@@ -248,4 +249,4 @@ def _simpson_mean(paths: np.ndarray) -> np.ndarray:
     wts[1:-1:2] = 4.0
     wts[2:-1:2] = 2.0
     wts /= wts.sum()
-    return np.einsum("skd,k->sd", paths, wts)
+    return render.weighted_mean_paths(paths, wts)
