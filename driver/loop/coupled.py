@@ -44,6 +44,7 @@ from . import record as R
 from .attitude_filter import GATE, QD_MARGIN, SMOOTH_GAP_S, AttitudeFilter, fix_covariance
 from .floor import FloorInputs
 from .image import ImagePipeline
+from .image_kernels import MEAS_MISS, MEAS_OK
 from .outputs import OutputStage
 from .tracks import MODEL, StarTracks
 
@@ -559,8 +560,6 @@ class CoupledLoop:
         self.pending = plan
 
     def _process_windows(self, pend: dict, res, measured: tuple, now: float) -> None:
-        from .image_kernels import MEAS_MISS, MEAS_OK
-
         self._sync_uv()
         self.c.frames += 1
         lag = res.t_start - pend["t_submit"]
@@ -575,13 +574,15 @@ class CoupledLoop:
         live = tr.active[wins] & (tr.nav[wins] == pend["nav"])   # dropped/replaced meanwhile: skip
         tr.misses[wins[live & (state == MEAS_MISS)]] += 1
         use = live & (state == MEAS_OK)
-        if float(np.linalg.norm(self.filter.omega)) > self.p.max_track_rate:
+        w = self.filter.omega
+        if math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]) > self.p.max_track_rate:
             use[:] = False          # spots smeared past what the centroid model holds: coast on the gyro
         slots = wins[use]
         updated = 0
         if len(slots):
             acc = np.zeros(len(slots), np.uint8)
-            ok = self._consistent(b_mid[use], tr.ref[slots], sig[use])
+            b_use, r_use, s_use = b_mid[use], tr.ref[slots], sig[use]
+            ok = self._consistent(b_use, r_use, s_use)
             # the first image after a lost-in-space fix confirms it: only stars that checked
             # each other (:meth:`_consistent`) may, and at least 4 — the fix's wide prior lets a
             # wrong centroid (a blend, a star at a window's edge) through every gate, and with
@@ -597,8 +598,7 @@ class CoupledLoop:
             min_used = max(CONFIRM_MIN_STARS, self.p.min_stars) if wide else self.p.min_stars
             if np.any(ok):
                 sub = np.zeros(int(ok.sum()), np.uint8)
-                updated = self.filter.update(res.t_mid, b_mid[use][ok], tr.ref[slots][ok], sig[use][ok], sub,
-                                             min_used)
+                updated = self.filter.update(res.t_mid, b_use[ok], r_use[ok], s_use[ok], sub, min_used)
                 acc[ok] = sub
             self.c.inconsistent_stars += int(np.count_nonzero(~ok))
             self.c.updates += updated
@@ -607,7 +607,7 @@ class CoupledLoop:
                 self.flags_pending |= R.FLAG_UPDATE_APPLIED
                 # its first output: the next sample's stamp
                 t_next = (self.filter.t_last or now) + self.filter.prm[0] + self.p.gyro_delay_s
-                self.floor.add(res.t_mid, t_next, 1.0 / float(np.sum(1.0 / sig[use][good] ** 2)), updated)
+                self.floor.add(res.t_mid, t_next, 1.0 / float(np.sum(1.0 / s_use[good] ** 2)), updated)
             self.c.rejected_updates += int(np.count_nonzero(~good))
             wrong = tr.score(slots, good)
             if updated >= self.p.min_stars:
