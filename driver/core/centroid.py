@@ -376,8 +376,9 @@ def smear_fit(spans, values, bg, u0, v0, offsets, sigma_psf, noise_var, e_per_dn
     trajectory point; a 6 px smear sampled every 0.25 px: 9 instead of 25). The groups keep
     the path's first moment exactly; each loses its own spread, at most MERGE_PX²/12 of
     variance along the path (≤ 2.9 % of σ² at σ = 0.85 px, the PSF 1.4 % narrower along the
-    path inside one group), and the group means, ≤ 0.75 px apart, sample the smear far below
-    the PSF's width (the comb's ripple is ~2·exp(−2π²σ²/h²) < 1e-11 of the flux).
+    path inside one group), and the group means, h ≤ 1 px apart (0.75 px on the loop's 0.25 px
+    path spacing), sample the smear well below the PSF's width: the comb's ripple,
+    ~2·exp(−2π²σ²/h²), is 2e-11 of the flux at h = 0.75 px and 1.3e-6 at 1 px.
     """
     m_all = offsets.shape[0]
     if spans.shape[0] == 0 or m_all == 0:
