@@ -139,12 +139,8 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
             "started_utc": datetime.now(UTC).isoformat(), "calibration": calib.meta(), "time": timemap.meta()}
     # the log file and its META record come into being together: a Ctrl-C in between is held
     # until META is on disk, so a log never exists without saying what run it was
-    main_thread = threading.current_thread() is threading.main_thread()
-    if main_thread:
-        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
-    def unblock():
-        if main_thread:
-            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT, signal.SIGTERM})
+    held = _HeldSignals()
+    unblock = held.release
 
     try:
         folder.mkdir(parents=True, exist_ok=True)
@@ -177,6 +173,33 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
     finally:
         if writer:
             writer.close()
+
+
+class _HeldSignals:
+    """SIGINT and SIGTERM held while it is in force: Python-level handlers record them, and
+    :meth:`release` puts the handlers found before back and raises a held signal through them.
+    (A signal mask would not do: the kernel gives a process-directed signal to any thread that
+    does not block it, and a handler-free thread — a library's worker — then trips Python's
+    handler in the main thread at once, inside the region that was to hold it.) In force only
+    on the main thread, where Python runs signal handlers."""
+
+    def __init__(self):
+        self.held: list[int] = []
+        self.prev: dict = {}
+        if threading.current_thread() is threading.main_thread():
+            for s in (signal.SIGINT, signal.SIGTERM):
+                old = signal.signal(s, self._hold)
+                self.prev[s] = signal.SIG_DFL if old is None else old
+
+    def _hold(self, signum, frame):
+        self.held.append(signum)
+
+    def release(self) -> None:
+        prev, self.prev = self.prev, {}
+        for s, h in prev.items():
+            signal.signal(s, h)
+        if prev and self.held:
+            signal.raise_signal(self.held[0])
 
 
 def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer, on_output, probe, fast,

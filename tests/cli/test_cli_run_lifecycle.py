@@ -137,25 +137,41 @@ def test_ctrl_c_during_start_up(tmp_path):
     assert not (out / "summary.json").exists()
 
 
-def test_ctrl_c_held_while_the_log_is_created_is_recorded(tmp_path, monkeypatch):
+@pytest.mark.parametrize("to_thread", [False, True])
+def test_ctrl_c_held_while_the_log_is_created_is_recorded(tmp_path, monkeypatch, to_thread):
     """A Ctrl-C that arrives while the log and its META come into being is held until META is
     on disk, then delivered where the log records it: the log says the run was interrupted
-    (once the held signal was delivered outside that guard and the log said nothing)."""
+    (once the held signal was delivered outside that guard and the log said nothing). The
+    kernel gives a process-directed signal to any thread that does not block it (a library's
+    worker, a test session's leftovers); ``to_thread`` sends it to such a thread: a hold by
+    signal mask let it through at once there (a full test session failed that way)."""
+    import threading
+
     from gyrostar.hil import config as hc
     from gyrostar.hil.runner import run_flatsat
 
+    stop = threading.Event()
+    other = threading.Thread(target=stop.wait, daemon=True)
+    other.start()
     flush = lf.LogWriter.flush
 
     def flush_then_ctrl_c(self):
         flush(self)
         if not getattr(self, "_interrupted", False):
             self._interrupted = True
-            os.kill(os.getpid(), signal.SIGINT)     # blocked here: pending until the guard lifts
+            if to_thread:
+                signal.pthread_kill(other.ident, signal.SIGINT)
+            else:
+                os.kill(os.getpid(), signal.SIGINT)     # held here until the guard lifts
+            time.sleep(0.05)        # the receiving thread has run the C handler by now
 
     monkeypatch.setattr(lf.LogWriter, "flush", flush_then_ctrl_c)
-    with pytest.raises(KeyboardInterrupt):
-        run_flatsat(hc.load_flatsat(), hc.load_scenario("demo"), duration=1.0, seed=1, folder=tmp_path / "run",
-                    plots=False, status=False, fast=True)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            run_flatsat(hc.load_flatsat(), hc.load_scenario("demo"), duration=1.0, seed=1,
+                        folder=tmp_path / "run", plots=False, status=False, fast=True)
+    finally:
+        stop.set()
     recs = _records(tmp_path / "run" / "flatsat.gslog")
     assert recs[0][0] == "meta"
     assert any(k == "event" and json.loads(p).get("aborted") == "interrupted" for k, p in recs)
