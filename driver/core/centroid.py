@@ -31,6 +31,8 @@ import math
 import numpy as np
 from numba import njit
 
+from .small_matrix import inv3_sym
+
 
 @njit(cache=True)
 def window_background(values, n_sigma_clip):
@@ -323,27 +325,6 @@ def iwcog_variance(spans, values, bg, u, v, offsets, sigma_w, sigma_bg, e_per_dn
     return fu / (du_sum * du_sum), fv / (dv_sum * dv_sum)
 
 
-@njit(cache=True)
-def _inv3_sym(a):
-    """Inverse of a symmetric positive-definite 3×3 matrix by cofactors (NaN if singular)."""
-    c00 = a[1, 1] * a[2, 2] - a[1, 2] * a[1, 2]
-    c01 = a[0, 2] * a[1, 2] - a[0, 1] * a[2, 2]
-    c02 = a[0, 1] * a[1, 2] - a[0, 2] * a[1, 1]
-    det = a[0, 0] * c00 + a[0, 1] * c01 + a[0, 2] * c02
-    out = np.empty((3, 3))
-    if not det > 0.0:
-        out[:, :] = np.nan
-        return out
-    inv = 1.0 / det
-    out[0, 0] = c00 * inv
-    out[0, 1] = out[1, 0] = c01 * inv
-    out[0, 2] = out[2, 0] = c02 * inv
-    out[1, 1] = (a[0, 0] * a[2, 2] - a[0, 2] * a[0, 2]) * inv
-    out[1, 2] = out[2, 1] = (a[0, 1] * a[0, 2] - a[0, 0] * a[1, 2]) * inv
-    out[2, 2] = (a[0, 0] * a[1, 1] - a[0, 1] * a[0, 1]) * inv
-    return out
-
-
 @njit(cache=True, inline="always")
 def _erf_pdf(z, inv_s, k_pdf):
     """(erf(z/(√2σ)), k_pdf·exp(−z²/2σ²)) with one exponential for both (``inv_s`` = 1/(√2σ)):
@@ -483,7 +464,7 @@ def smear_fit(spans, values, bg, u0, v0, offsets, sigma_psf, noise_var, e_per_dn
         a[1, 0] = a[0, 1]
         a[2, 0] = a[0, 2]
         a[2, 1] = a[1, 2]
-        cov = _inv3_sym(a)
+        cov = inv3_sym(a)
         if cov[0, 0] != cov[0, 0]:  # singular: no information on the position
             return np.nan, np.nan, 0.0, np.inf, np.inf, it
         step = cov @ g

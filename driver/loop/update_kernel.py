@@ -17,6 +17,7 @@ from numba import njit
 
 from ..attitude import quat_conj, quat_mult, quat_normalize, quat_propagate, quat_to_dcm, rotvec_to_quat
 from ..core.mekf import mekf_update
+from ..core.small_matrix import inv3_sym
 
 
 @njit(cache=True)
@@ -51,29 +52,6 @@ def _rt_p_r(rot, P):
 
 
 @njit(cache=True)
-def _inv3(a):
-    """Inverse of a 3×3 matrix by cofactors; ok False when it is singular."""
-    c00 = a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1]
-    c01 = a[1, 2] * a[2, 0] - a[1, 0] * a[2, 2]
-    c02 = a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]
-    det = a[0, 0] * c00 + a[0, 1] * c01 + a[0, 2] * c02
-    out = np.empty((3, 3))
-    if det == 0.0 or det != det:
-        return out, False
-    k = 1.0 / det
-    out[0, 0] = c00 * k
-    out[1, 0] = c01 * k
-    out[2, 0] = c02 * k
-    out[0, 1] = (a[0, 2] * a[2, 1] - a[0, 1] * a[2, 2]) * k
-    out[1, 1] = (a[0, 0] * a[2, 2] - a[0, 2] * a[2, 0]) * k
-    out[2, 1] = (a[0, 1] * a[2, 0] - a[0, 0] * a[2, 1]) * k
-    out[0, 2] = (a[0, 1] * a[1, 2] - a[0, 2] * a[1, 1]) * k
-    out[1, 2] = (a[0, 2] * a[1, 0] - a[0, 0] * a[1, 2]) * k
-    out[2, 2] = (a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]) * k
-    return out, True
-
-
-@njit(cache=True)
 def _smooth_previous(mid, smoothed, t_mid, q_prior, p_prior, q_post, p_post, gap_s):
     """One-lag Rauch–Tung–Striebel of the previous mid-exposure product ``mid`` with this
     frame (see ``AttitudeFilter.update``); writes ``smoothed``. Frames more than ``gap_s``
@@ -89,8 +67,8 @@ def _smooth_previous(mid, smoothed, t_mid, q_prior, p_prior, q_post, p_post, gap
     d = quat_mult(q_post, quat_conj(q_prior))
     sgn = 1.0 if d[3] >= 0 else -1.0
     delta = np.array([2.0 * d[0] * sgn, 2.0 * d[1] * sgn, 2.0 * d[2] * sgn])
-    inv, ok = _inv3(p_prior)
-    if not ok:
+    inv = inv3_sym(p_prior)      # a covariance: symmetric, positive
+    if inv[0, 0] != inv[0, 0]:
         return
     c = p_k @ np.ascontiguousarray(r.T) @ inv
     smoothed[0] = mid[0]
