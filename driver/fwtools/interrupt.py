@@ -44,12 +44,27 @@ _HELD = {signal.SIGINT, signal.SIGTERM}
 def signals_held():
     """Hold SIGINT and SIGTERM back while the block runs (delivered when it ends): wrap the
     start of a child so that a signal cannot arrive before the handle to stop it exists. The
-    child inherits the mask: give it :func:`release_held_signals` as ``preexec_fn``."""
+    child inherits the mask: give it :func:`release_held_signals` as ``preexec_fn``.
+
+    The mask holds only this thread's share: the kernel gives a process-directed signal to any
+    thread that does not block it, and Python then runs the handler in the main thread at once.
+    So on the main thread Python-level handlers record the signals meanwhile, and the ones
+    found before are put back and a held signal raised through them when the block ends."""
+    held: list[int] = []
+    prev = {}
+    if threading.current_thread() is threading.main_thread():
+        for s in _HELD:
+            h = signal.signal(s, lambda signum, frame: held.append(signum))
+            prev[s] = signal.SIG_DFL if h is None else h
     old = signal.pthread_sigmask(signal.SIG_BLOCK, _HELD)
     try:
         yield
     finally:
         signal.pthread_sigmask(signal.SIG_SETMASK, old)
+        for s, h in prev.items():
+            signal.signal(s, h)
+        if held:
+            signal.raise_signal(held[0])
 
 
 def release_held_signals() -> None:
