@@ -164,9 +164,17 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
                         fast, keep_arrays, calib=calib, timemap=timemap)
     except BaseException as exc:
         if writer:
+            # a Ctrl-C inside native code (numba compiling, a C extension) can surface as another
+            # exception: the log says it was an interruption, as the CLI does, and what surfaced
+            what = f"{type(exc).__name__}: {exc}"[:500]
+            if isinstance(exc, KeyboardInterrupt):
+                ev = {"aborted": "interrupted"}
+            elif interrupt.seen():
+                ev = {"aborted": "interrupted", "surfaced_as": what}
+            else:
+                ev = {"aborted": what}
             try:
-                writer.event({"aborted": "interrupted" if isinstance(exc, KeyboardInterrupt) else
-                              f"{type(exc).__name__}: {exc}"[:500]})
+                writer.event(ev)
             except ValueError:      # already closed: the failure came after the run's end
                 pass
         raise

@@ -214,3 +214,51 @@ def test_sigterm_mid_run_ends_like_ctrl_c(tmp_path):
     rep = gyrostar(["replay", out / "flatsat.gslog", "--check", "--json"])
     assert rep.returncode == 0, rep.stderr
     assert json.loads(rep.stdout)["verdict"] == "bit-exact"
+
+
+def test_ctrl_c_that_surfaces_as_another_exception_is_logged_as_an_interruption(tmp_path, monkeypatch):
+    """A Ctrl-C inside numba's compiler surfaced as ``RuntimeError: no compiled object yet for
+    <Library 'label_rest'>`` (a cold-cache start-up interrupted at 8 s): the CLI said
+    "interrupted" (exit 130), the log said RuntimeError. The log now says it was interrupted
+    and what surfaced."""
+    from gyrostar.cli import interrupt
+    from gyrostar.hil import config as hc
+    from gyrostar.hil import runner
+
+    def session_interrupted_in_native_code(*args, **kwargs):
+        try:
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(1.0)                      # the handler raises here
+        except KeyboardInterrupt:
+            raise RuntimeError("no compiled object yet for <Library 'label_rest'>") from None
+
+    monkeypatch.setattr(runner, "_session", session_interrupted_in_native_code)
+    try:
+        with interrupt.watch():
+            with pytest.raises(RuntimeError):
+                runner.run_flatsat(hc.load_flatsat(), hc.load_scenario("demo"), duration=1.0, seed=1,
+                                   folder=tmp_path / "run", plots=False, status=False, fast=True)
+            assert interrupt.seen()
+    finally:
+        with interrupt.watch():     # entering a watch forgets the signal: later tests start clean
+            pass
+    ev = [json.loads(p) for k, p in _records(tmp_path / "run" / "flatsat.gslog") if k == "event"]
+    assert ev[-1]["aborted"] == "interrupted"
+    assert ev[-1]["surfaced_as"].startswith("RuntimeError: no compiled object yet")
+
+
+def test_a_failure_without_a_signal_is_logged_as_itself(tmp_path, monkeypatch):
+    """Under the CLI's signal watch (as every ``gyrostar run`` is), no signal: the failure itself."""
+    from gyrostar.cli import interrupt
+    from gyrostar.hil import config as hc
+    from gyrostar.hil import runner
+
+    def session_fails(*args, **kwargs):
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(runner, "_session", session_fails)
+    with interrupt.watch(), pytest.raises(RuntimeError):
+        runner.run_flatsat(hc.load_flatsat(), hc.load_scenario("demo"), duration=1.0, seed=1,
+                           folder=tmp_path / "run", plots=False, status=False, fast=True)
+    ev = [json.loads(p) for k, p in _records(tmp_path / "run" / "flatsat.gslog") if k == "event"]
+    assert ev[-1] == {"aborted": "RuntimeError: disk full"}
