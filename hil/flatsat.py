@@ -66,10 +66,8 @@ def scenario_profile(scen: hc.Scenario):
             if t.ndim == 1 and len(t):
                 # the usual query (an exposure, an integration step) lies in one segment: the
                 # same arithmetic on scalars of that segment
-                ia = min(bisect.bisect_right(self._t1_list, t[0]), self._last)
-                ib = min(bisect.bisect_right(self._t1_list, t[-1]), self._last)
-                if ia == ib and ia == min(bisect.bisect_right(self._t1_list, float(t.min())), self._last) \
-                        and ia == min(bisect.bisect_right(self._t1_list, float(t.max())), self._last):
+                ia = min(bisect.bisect_right(self._t1_list, float(t.min())), self._last)
+                if ia == min(bisect.bisect_right(self._t1_list, float(t.max())), self._last):
                     span = self._span[ia]
                     f = np.clip((t - self.t0[ia]) / span, 0.0, 1.0)[:, None]
                     return (1.0 - f) * self.w0[ia] + f * self.w1[ia]

@@ -21,8 +21,6 @@ from __future__ import annotations
 
 import json
 import logging
-import signal
-import threading
 import time
 from datetime import UTC, datetime
 from pathlib import Path
@@ -139,8 +137,7 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
             "started_utc": datetime.now(UTC).isoformat(), "calibration": calib.meta(), "time": timemap.meta()}
     # the log file and its META record come into being together: a Ctrl-C in between is held
     # until META is on disk, so a log never exists without saying what run it was
-    held = _HeldSignals()
-    unblock = held.release
+    held = interrupt.SignalHold()
 
     try:
         folder.mkdir(parents=True, exist_ok=True)
@@ -149,17 +146,17 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
             writer.meta(meta)
             writer.flush()      # on disk before anything can fail: a failed run's log still says what it was
     except FileExistsError as exc:
-        unblock()
+        held.release()
         raise ConfigError(f"{folder} already holds a log (flatsat.gslog): choose another run folder") from exc
     except OSError as exc:
-        unblock()
+        held.release()
         raise ConfigError(f"run folder {folder}: {exc.strerror or exc}") from exc
     except BaseException:
-        unblock()
+        held.release()
         raise
     try:
         # a Ctrl-C held while the log came into being is delivered here, where the log records it
-        unblock()
+        held.release()
         return _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer, on_output, probe,
                         fast, keep_arrays, calib=calib, timemap=timemap)
     except BaseException as exc:
@@ -181,33 +178,6 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
     finally:
         if writer:
             writer.close()
-
-
-class _HeldSignals:
-    """SIGINT and SIGTERM held while it is in force: Python-level handlers record them, and
-    :meth:`release` puts the handlers found before back and raises a held signal through them.
-    (A signal mask would not do: the kernel gives a process-directed signal to any thread that
-    does not block it, and a handler-free thread — a library's worker — then trips Python's
-    handler in the main thread at once, inside the region that was to hold it.) In force only
-    on the main thread, where Python runs signal handlers."""
-
-    def __init__(self):
-        self.held: list[int] = []
-        self.prev: dict = {}
-        if threading.current_thread() is threading.main_thread():
-            for s in (signal.SIGINT, signal.SIGTERM):
-                old = signal.signal(s, self._hold)
-                self.prev[s] = signal.SIG_DFL if old is None else old
-
-    def _hold(self, signum, frame):
-        self.held.append(signum)
-
-    def release(self) -> None:
-        prev, self.prev = self.prev, {}
-        for s, h in prev.items():
-            signal.signal(s, h)
-        if prev and self.held:
-            signal.raise_signal(self.held[0])
 
 
 def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer, on_output, probe, fast,

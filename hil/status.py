@@ -34,12 +34,9 @@ class StatusLine:
 
     def update(self, rec, truth=None, step_us: float | None = None, overruns: int = 0,
                duration_s: float | None = None, force: bool = False, t0: float = 0.0) -> None:
-        if not self.enabled or rec is None:
+        if not self.enabled or rec is None or not (force or self.due()):
             return
-        now = time.monotonic()
-        if not force and now - self._last < self.period_s:
-            return
-        self._last = now
+        self._last = time.monotonic()
         self._live.update(self.render(rec, truth, step_us, overruns, duration_s, t0), refresh=True)
 
     @staticmethod

@@ -78,6 +78,35 @@ def watch():
         sys.unraisablehook = old_hook
 
 
+class SignalHold:
+    """SIGINT and SIGTERM held from construction to :meth:`release`: Python-level handlers
+    record them, and ``release`` puts the handlers found before back and raises a held signal
+    through them (so it lands where the caller releases, e.g. inside a ``try`` that records it).
+    A signal mask alone would not do: the kernel gives a process-directed signal to any thread
+    that does not block it, and Python then runs the handler in the main thread at once, inside
+    the region that was to hold it. Main thread only (where Python runs handlers); elsewhere a
+    no-op."""
+
+    def __init__(self):
+        self.held: list[int] = []
+        self.prev: dict = {}
+        if threading.current_thread() is threading.main_thread():
+            for s in (signal.SIGINT, signal.SIGTERM):
+                old = signal.signal(s, self._hold)
+                self.prev[s] = signal.SIG_DFL if old is None else old
+
+    def _hold(self, signum, frame):
+        self.held.append(signum)
+
+    def release(self) -> None:
+        """Previous handlers back; a held signal raised now (once; later calls do nothing)."""
+        prev, self.prev = self.prev, {}
+        for s, h in prev.items():
+            signal.signal(s, h)
+        if prev and self.held:
+            signal.raise_signal(self.held[0])
+
+
 @contextmanager
 def sigint_blocked():
     """Hold SIGINT back (delivered when the block ends): wrap a fork so the child can set

@@ -14,6 +14,8 @@ import subprocess
 import threading
 from contextlib import contextmanager
 
+from ..cli.interrupt import SignalHold
+
 
 class Terminated(KeyboardInterrupt):
     """SIGTERM arrived."""
@@ -48,23 +50,15 @@ def signals_held():
 
     The mask holds only this thread's share: the kernel gives a process-directed signal to any
     thread that does not block it, and Python then runs the handler in the main thread at once.
-    So on the main thread Python-level handlers record the signals meanwhile, and the ones
-    found before are put back and a held signal raised through them when the block ends."""
-    held: list[int] = []
-    prev = {}
-    if threading.current_thread() is threading.main_thread():
-        for s in _HELD:
-            h = signal.signal(s, lambda signum, frame: held.append(signum))
-            prev[s] = signal.SIG_DFL if h is None else h
+    So on the main thread a :class:`gyrostar.cli.interrupt.SignalHold` records them meanwhile
+    and raises a held one when the block ends."""
+    hold = SignalHold()
     old = signal.pthread_sigmask(signal.SIG_BLOCK, _HELD)
     try:
         yield
     finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
-        for s, h in prev.items():
-            signal.signal(s, h)
-        if held:
-            signal.raise_signal(held[0])
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)     # a signal pending on us: to the hold now
+        hold.release()
 
 
 def release_held_signals() -> None:
