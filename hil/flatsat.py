@@ -112,14 +112,14 @@ class Truth:
 
     def q_at(self, t_host: float, who: str = "") -> np.ndarray:
         """Attitude at one host time, integrated on from this caller's previous query."""
-        from ..mocks.trajectory import integrate
+        from ..mocks.trajectory import integrate_to
 
         ts = max(float(t_host) - self.t_origin, 0.0)
         with self._lock:
             t0, q0 = self._cache.get(who, (0.0, self.q0))
             if ts < t0:
                 t0, q0 = 0.0, self.q0
-            q = integrate(q0, self.profile, np.array([t0, ts]))[-1] if ts > t0 else q0
+            q = integrate_to(q0, self.profile, t0, ts) if ts > t0 else q0
             self._cache[who] = (ts, q)
         return q
 

@@ -402,10 +402,8 @@ class StreamPort(HeadPort):
             return
         spans, post = got
         order = {w.window_id: w.pixels for w in fr.windows}
-        ids = []
-        for wid in spans[:, 0]:
-            if not ids or ids[-1] != wid:
-                ids.append(int(wid))
+        wid = spans[:, 0]
+        ids = wid[np.flatnonzero(np.diff(wid, prepend=wid[:1] - 1))].tolist()   # run starts, in order
         if any(w not in order for w in ids):
             self.frames_unmatched += 1
             self.unmatched_why["windows differ"] += 1

@@ -165,6 +165,22 @@ def integrate(q0: np.ndarray, profile: RateProfile, times: np.ndarray, max_step_
     return qs[idx]
 
 
+def integrate_to(q0: np.ndarray, profile: RateProfile, t0: float, t1: float, max_step_s: float = 1e-3) -> np.ndarray:
+    """The attitude (4,) at ``t1`` (s) from a unit ``q0`` at ``t0`` < ``t1``: the last row of
+    ``integrate(q0, profile, [t0, t1])``, to the bit, with the grid of one interval built
+    directly (a truth query per rendered frame: the general grid's bookkeeping cost more
+    than the integration)."""
+    gap = t1 - t0
+    n = max(1, math.ceil(gap / max_step_s))
+    grid = np.empty(n + 1)
+    grid[0] = t0
+    grid[1:] = t0 + gap * np.arange(1, n + 1) / n
+    h = grid[1:] - grid[:-1]
+    left = grid[:-1]
+    w = profile.rate(np.concatenate([left + _G1 * h, left + _G2 * h]))
+    return _cf4_steps(np.asarray(q0, dtype=np.float64), np.ascontiguousarray(w[:n]), np.ascontiguousarray(w[n:]), h)[n]
+
+
 @dataclasses.dataclass(frozen=True)
 class Trajectory:
     """Truth samples: times (s), attitudes (n, 4) ICRS→body, body rates (n, 3) rad/s."""

@@ -222,7 +222,9 @@ class CoupledLoop:
         self.gyro.start()
 
     def close(self) -> None:
-        """Stop the measuring thread (the devices belong to the caller)."""
+        """Hand the last outputs to the keeping sinks; stop the measuring thread (the devices
+        and the sinks belong to the caller)."""
+        self.outputs.flush()
         self.image.close()
 
     # ------------------------------------------------------------------ the step

@@ -1,7 +1,8 @@
 """Output sinks: where the loop's 400 Hz output records go.
 
 Each sink has ``put(records, t_ns)`` (an array of :data:`~gyrostar.loop.record.OUTPUT_DTYPE`
-produced in one loop step) and ``close()``. They never block the loop for long: the UDP
+produced in one loop step, or a block of consecutive steps for a sink whose ``block`` is
+True) and ``close()``. They never block the loop for long: the UDP
 sink drops datagrams the kernel refuses (counted), the recorder buffers in user space.
 """
 
@@ -36,12 +37,15 @@ class CallbackSink:
 
 
 class ArraySink:
-    """Keep every record in one preallocated array (grown by doubling when full).
+    """Keep every record in one preallocated array (grown by doubling when full); takes
+    them in blocks (:class:`gyrostar.loop.outputs.OutputStage`).
 
     ``put`` copies the step's records as raw bytes into the next rows (about 1 µs for one
     record, where ``records.copy()`` into a list costs 5 µs); the array's pages are touched
     when it is made, not in a step. :attr:`records` is the run so far.
     """
+
+    block = True
 
     def __init__(self, capacity: int = 1 << 16):
         self.n = 0
@@ -76,7 +80,10 @@ class ArraySink:
 
 
 class RecorderSink:
-    """Append each step's records to a log as one OUTPUT record."""
+    """Append records to a log, one OUTPUT record per block the output stage hands over
+    (its ``t_ns``: the block's last sample time)."""
+
+    block = True
 
     def __init__(self, writer: lf.LogWriter):
         self.writer = writer

@@ -35,6 +35,7 @@ SYNC = 0xA5
 SYNC_BYTE = bytes([SYNC])
 HEADER = struct.Struct("<BBHIq")
 CRC = struct.Struct("<I")
+_F8_RECORD = struct.Struct("<BBHIqd")     # HEADER + one f8 payload
 MAX_PAYLOAD = 64 * 1024 * 1024
 
 # record kinds
@@ -88,19 +89,30 @@ class LogWriter:
     def append(self, kind: int, payload: bytes | bytearray | memoryview, channel: int = 0,
                t_ns: int = 0) -> None:
         """Add one record; it reaches the kernel at the next flush."""
-        payload = bytes(payload)
+        if type(payload) is not bytes:
+            payload = bytes(payload)
         if len(payload) > MAX_PAYLOAD:
             raise ValueError(f"log record of {len(payload)} bytes exceeds {MAX_PAYLOAD}")
         head = HEADER.pack(SYNC, kind, channel, len(payload), int(t_ns))
-        crc = crc32c.crc32c(payload, crc32c.crc32c(head))
+        self._add(head, payload, crc32c.crc32c(payload, crc32c.crc32c(head)))
+
+    def append_f8(self, kind: int, value: float, channel: int, t_ns: int) -> None:
+        """Add one record whose payload is one f8 (a clock reading): the same bytes as
+        ``append(kind, struct.pack("<d", value), channel, t_ns)``, packed and checked in one go."""
+        rec = _F8_RECORD.pack(SYNC, kind, channel, 8, t_ns, value)
+        self._add(rec, b"", crc32c.crc32c(rec))
+
+    def _add(self, head: bytes, payload: bytes, crc: int) -> None:
         with self._lock:
             if self._fd < 0:
                 raise ValueError(f"log {self.path} is closed")
-            self._buf += head
-            self._buf += payload
-            self._buf += CRC.pack(crc)
+            buf = self._buf
+            buf += head
+            if payload:
+                buf += payload
+            buf += CRC.pack(crc)
             self.records += 1
-            due = len(self._buf) >= self.flush_bytes or time.monotonic() - self._last_flush >= self.flush_s
+            due = len(buf) >= self.flush_bytes or time.monotonic() - self._last_flush >= self.flush_s
         if not due:
             return
         if not self.background:

@@ -47,7 +47,6 @@ def _t_ns(clock) -> int:
 
 
 # --------------------------------------------------------------------------- clock
-_F8 = struct.Struct("<d")
 
 
 class RecordingClock:
@@ -62,7 +61,7 @@ class RecordingClock:
     def now(self) -> float:
         t = float(self._clock.now())
         self.last = t
-        self._w.append(lf.CLOCK, _F8.pack(t), self._ch, int(round(t * 1e9)) if t == t else 0)
+        self._w.append_f8(lf.CLOCK, t, self._ch, int(round(t * 1e9)) if t == t else 0)
         return t
 
     def sleep(self, dt: float) -> None:

@@ -140,3 +140,45 @@ def test_flatsat_config_and_scenarios_validate(tmp_path):
         hc.load_flatsat(bad)
     with pytest.raises(ConfigError, match="unknown scenario"):
         hc.load_scenario("nope")
+
+
+def test_output_stage_hands_blocks_to_keeping_sinks_and_batches_to_the_rest():
+    from gyrostar.clock import SimulatedClock
+    from gyrostar.loop.outputs import OutputStage
+
+    class Now:
+        def __init__(self):
+            self.got = []
+
+        def put(self, recs, t_ns):
+            self.got.append((recs.copy(), t_ns))
+
+    class Keep(Now):
+        block = True
+
+    now, keep, arr = Now(), Keep(), sinks.ArraySink(capacity=4)
+    stage = OutputStage([now, keep, arr], SimulatedClock(0.0), capacity=16, block_rows=5)
+    rng = np.random.default_rng(7)
+    sizes = [1, 1, 2, 3, 1, 2, 14, 16, 1, 1]      # 14 does not fit behind the 3 pending
+    t, seq = 0.0, 0
+    for n in sizes:
+        out = stage.batch(n)
+        assert len(out) == n
+        out["seq"] = np.arange(seq, seq + n)
+        out["q"] = rng.normal(size=(n, 4))
+        seq += n
+        t += 0.0025 * n
+        stage.emit(out, 0.0, t)
+        assert stage.last["seq"] == seq - 1
+        assert [len(r) for r, _ in now.got][-1] == n          # waiting sinks: every batch at once
+    assert sum(len(r) for r, _ in keep.got) < seq             # the tail is still pending
+    stage.flush()
+    sent = np.concatenate([r for r, _ in now.got])
+    kept = np.concatenate([r for r, _ in keep.got])
+    assert kept.tobytes() == sent.tobytes() == arr.records.tobytes()
+    assert (kept["seq"] == np.arange(seq)).all()
+    # a block closes at block_rows or more, early before a batch that would not fit, and at the flush
+    assert [len(r) for r, _ in keep.got] == [7, 3, 14, 16, 2]
+    assert keep.got[-1][1] == int(t * 1e9)                    # stamped with its last sample's time
+    stage.flush()                                             # nothing pending: nothing sent
+    assert len(keep.got) == 5
