@@ -16,8 +16,9 @@ import time
 
 import numpy as np
 
+from .scheduler import SPIN_S  # sleep until this close to the deadline, then spin (as the loop's scheduler)
+
 LATE_S = 0.001      # a wake-up later than this is recorded (s)
-SPIN_S = 0.0002     # sleep until this close to the deadline, then spin (as the loop's scheduler)
 
 
 def _probe(conn, seconds: float, period_s: float, priority: int) -> None:
