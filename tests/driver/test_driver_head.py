@@ -36,6 +36,7 @@ class EmulatorLeg:
         from gyrostar.mocks.head_emulator import ConstantRateScene, HeadEmulator
 
         self.em = HeadEmulator(sky, ConstantRateScene(Q0), mcu_offset_us=987_654_321, drift_ppm=0.0, noise=False)
+        self.em.warm_up(Q0)     # compiled before the first CAPTURE's 1 s reply timeout starts (cold numba cache)
         self._images = {}
         self.image = self.expected(LIMITS["exposure_default_us"])
         self.path = self.em.start()
@@ -477,3 +478,61 @@ def test_new_client_ignores_late_replies_meant_for_an_earlier_one(leg):
     # without first_seq the first sequence number is random, not 1
     firsts = {HeadClient(link, first_seq=None)._seq for _ in range(8)}
     assert len(firsts) > 1
+
+
+def _random_span_set(rng):
+    """A window set near the firmware's limits: mostly valid, with one kind of fault at a
+    random place (off the sensor, empty, out of order, too many windows, a window or the
+    frame over its pixel budget)."""
+    n_win = int(rng.integers(1, 4) if rng.random() < 0.3 else rng.integers(1, 70))
+    rows = int(rng.integers(1, 24))
+    width = int(rng.integers(1, 130 if n_win < 4 else 60))
+    spans = [[w, 10 + r, 8 * w, 8 * w + width] for w in range(n_win) for r in range(rows)]
+    i = int(rng.integers(0, len(spans)))
+    fault = rng.integers(0, 6)
+    if fault == 1:
+        spans[i][1 + int(rng.integers(0, 2)) * 2] = 5000            # row or col_stop off the sensor
+    elif fault == 2:
+        spans[i][3] = max(spans[i][2] - int(rng.integers(0, 2)), 0)   # empty
+    elif fault == 3 and i:
+        spans[i][0], spans[i][1] = spans[i - 1][0], spans[i - 1][1]   # same row twice: order
+    elif fault == 4 and i:
+        spans[i - 1], spans[i] = spans[i], spans[i - 1]
+    return np.array(spans[:LIMITS["max_spans"]], np.int32)
+
+
+def test_window_set_verdicts_match_the_firmware_on_random_sets(sky):
+    """The emulator's window-set checks (whole-array) give the firmware's verdict — the same
+    error and the same first offending span, or the same counts — on 300 random sets."""
+    if not _firmware_built():
+        pytest.skip("firmware host program not built (make -C firmware host)")
+    legs = [EmulatorLeg(sky), FirmwareLeg(sky)]
+    links = [SerialLink(leg.path) for leg in legs]
+    try:
+        heads = [HeadClient(link, timeout=1.0, retries=1) for link in links]
+        for h in heads:
+            h.reset()
+        rng = np.random.default_rng(11)
+        kinds = set()
+        full = [[0, r, 0, 128] for r in range(16)]                       # max_window_pixels exactly
+        edges = [full, full + [[0, 16, 0, 1]],
+                 [[w, r, 0, 128] for w in range(4) for r in range(16)],   # the pixel budget exactly
+                 [[w, r, 0, 128] for w in range(4) for r in range(16)] + [[4, 0, 0, 1]],
+                 [[w, 0, 0, 1] for w in range(64)]]                      # max_windows exactly
+        for spans in [np.array(e, np.int32) for e in edges] + [_random_span_set(rng) for _ in range(300)]:
+            verdicts = []
+            for h in heads:
+                try:
+                    r = h.set_windows(spans)
+                    verdicts.append(("ok", r["n_windows"], r["n_spans"], r["n_pixels"]))
+                except perr.FirmwareError as exc:
+                    verdicts.append((type(exc).__name__, exc.detail))
+            assert verdicts[0] == verdicts[1], spans.tolist()
+            kinds.add(verdicts[0][0])
+        assert {"ok", "SpanOutsideError", "SpanEmptyError", "SpanOrderError", "WindowCountError",
+                "WindowTooLargeError", "PixelBudgetError"} <= kinds
+    finally:
+        for link in links:
+            link.close()
+        for leg in legs:
+            leg.close()
