@@ -60,7 +60,6 @@ from gyrostar.protocol.payloads import (
     encode_windows_tail,
     pixel_bytes,
 )
-from numba import njit
 
 FW_VERSION = (0, 9, 0)
 PORT_ID_EMULATOR = 2
@@ -72,51 +71,6 @@ class _Reject(Exception):
         super().__init__(ERROR_TEXT[code])
         self.code = code
         self.detail = int(detail)
-
-
-_SPAN_ERRORS = (ErrorCode.SPAN_OUTSIDE, ErrorCode.SPAN_EMPTY, ErrorCode.SPAN_ORDER, ErrorCode.WINDOW_COUNT,
-                ErrorCode.WINDOW_TOO_LARGE, ErrorCode.PIXEL_BUDGET)
-
-
-@njit(cache=True)
-def _check_spans(spans, height, width, max_windows, max_window_pixels, pixel_budget):
-    """The firmware's window-set checks, span by span in its order: off the sensor, empty,
-    out of order (window id, then row), too many windows, a window over its pixels, the frame
-    over its budget. Returns (k, i, first, offset): k = 0 and the first span of each window
-    (m,) and the pixel offset of each window's start plus the total (m + 1,) for a valid
-    set, else k = 1 + the index of the failed check in :data:`_SPAN_ERRORS` and the span i."""
-    n = spans.shape[0]
-    first = np.empty(n, np.int64)
-    offset = np.empty(n + 1, np.int64)
-    m = 0
-    total = 0
-    in_win = 0
-    p_wid = -1
-    p_row = -1
-    for i in range(n):
-        wid, row, c0, c1 = spans[i, 0], spans[i, 1], spans[i, 2], spans[i, 3]
-        if row >= height or c1 > width:
-            return 1, i, first[:0], offset[:0]
-        if c0 >= c1:
-            return 2, i, first[:0], offset[:0]
-        if i and (wid < p_wid or (wid == p_wid and row <= p_row)):
-            return 3, i, first[:0], offset[:0]
-        if not i or wid != p_wid:
-            if m + 1 > max_windows:
-                return 4, i, first[:0], offset[:0]
-            first[m] = i
-            offset[m] = total
-            m += 1
-            in_win = 0
-        p_wid, p_row = wid, row
-        in_win += c1 - c0
-        total += c1 - c0
-        if in_win > max_window_pixels:
-            return 5, i, first[:0], offset[:0]
-        if total > pixel_budget:
-            return 6, i, first[:0], offset[:0]
-    offset[m] = total
-    return 0, 0, first[:m], offset[:m + 1]
 
 
 class ConstantRateScene:
@@ -145,9 +99,6 @@ class HeadEmulator:
         from gyrostar.clock import MONOTONIC
 
         self.clock = MONOTONIC if clock is None else clock   # host time: exposures take their time on it
-        # the window-set check compiled (cold cache) or loaded now, not inside the first SET_WINDOWS
-        # while a client waits for its reply
-        _check_spans(np.zeros((0, 4), np.int64), 1, 1, 1, 1, 1)
         self.sky = sky
         self.scene = scene
         self.width = sky.camera.width_px
@@ -358,16 +309,34 @@ class HeadEmulator:
                             frame=applies)
 
     def _validate_spans(self, spans: np.ndarray) -> tuple:
-        """(spans, window ids, pixel slices per window, pixels) of a valid set, else _Reject
-        naming the first offending span (the firmware's checks, :func:`_check_spans`)."""
-        k, detail, first, offset = _check_spans(np.asarray(spans, dtype=np.int64), self.height, self.width,
-                                                LIMITS["max_windows"], LIMITS["max_window_pixels"],
-                                                LIMITS["pixel_budget"])
-        if k:
-            raise _Reject(_SPAN_ERRORS[k - 1], detail)
-        bounds = offset.tolist()
-        return (spans, spans[first, 0].tolist() if len(first) else [],
-                [slice(b, e) for b, e in zip(bounds[:-1], bounds[1:])], bounds[-1] if bounds else 0)
+        """(spans, window ids, pixel slices per window, pixels) of a valid set, else _Reject."""
+        ids, slices, total, in_win, start = [], [], 0, 0, 0
+        p_wid = p_row = -1          # the previous span's window and row (ids and rows are ≥ 0)
+        for i, (wid, row, c0, c1) in enumerate(spans.tolist()):
+            if row >= self.height or c1 > self.width:
+                raise _Reject(ErrorCode.SPAN_OUTSIDE, i)
+            if c0 >= c1:
+                raise _Reject(ErrorCode.SPAN_EMPTY, i)
+            if i and (wid < p_wid or (wid == p_wid and row <= p_row)):
+                raise _Reject(ErrorCode.SPAN_ORDER, i)
+            new_window = not i or wid != p_wid
+            p_wid, p_row = wid, row
+            if new_window:
+                if len(ids) + 1 > LIMITS["max_windows"]:
+                    raise _Reject(ErrorCode.WINDOW_COUNT, i)
+                if ids:
+                    slices.append(slice(start, total))
+                ids.append(wid)
+                start, in_win = total, 0
+            in_win += c1 - c0
+            total += c1 - c0
+            if in_win > LIMITS["max_window_pixels"]:
+                raise _Reject(ErrorCode.WINDOW_TOO_LARGE, i)
+            if total > LIMITS["pixel_budget"]:
+                raise _Reject(ErrorCode.PIXEL_BUDGET, i)
+        if ids:
+            slices.append(slice(start, total))
+        return spans, ids, slices, total
 
     def _capture(self) -> bytes:
         t0_host = self.clock.now()
