@@ -110,10 +110,9 @@ def synthetic_runs(runs: int, seed: int, folder: Path) -> dict:
 
 
 def flatsat_runs(runs: int, seed: int, folder: Path) -> dict:
+    from ...loop.outputs import BLOCK_ROWS
     from ...recording.logfile import LogWriter
     from ..replay import load_log, replay
-
-    from ...loop.outputs import BLOCK_ROWS
 
     flush_s = LogWriter.__init__.__defaults__[1]
     block_s = BLOCK_ROWS / 400.0          # the built-in flatsat's gyro at 400 Hz
