@@ -138,7 +138,7 @@ def test_ctrl_c_during_start_up(tmp_path):
 
 
 @pytest.mark.parametrize("to_thread", [False, True])
-def test_ctrl_c_held_while_the_log_is_created_is_recorded(tmp_path, monkeypatch, to_thread):
+def test_ctrl_c_held_while_the_log_is_created_is_recorded(tmp_path, monkeypatch, to_thread, ctrl_c_raises):
     """A Ctrl-C that arrives while the log and its META come into being is held until META is
     on disk, then delivered where the log records it: the log says the run was interrupted
     (once the held signal was delivered outside that guard and the log said nothing). The

@@ -13,7 +13,7 @@ from gyrostar.fwtools.interrupt import signals_held
 
 
 @pytest.mark.parametrize("to_thread", [False, True])
-def test_ctrl_c_inside_the_block_is_delivered_after_it(to_thread):
+def test_ctrl_c_inside_the_block_is_delivered_after_it(to_thread, ctrl_c_raises):
     stop = threading.Event()
     other = threading.Thread(target=stop.wait, daemon=True)
     other.start()
