@@ -150,8 +150,10 @@ def run(quick: bool) -> dict:
     in_run_wall_us = res["host_us_per_gyro_sample_wall"]  # wall: with the turns other threads took in it
     dev = res.get("device_emulation_cpu_percent")
     dev_note = f" (of which {dev:.1f} % inside the emulated gyro)" if dev is not None else ""
+    proc = res.get("process_cpu_percent")
+    proc_note = f", the process (loop, head worker, link reader, log writer) {proc:.1f} %" if proc is not None else ""
     note = (f"{duration:.0f} s real time: p99 sample→output {p99_us:.0f} µs, "
-            f"loop CPU {res['cpu_percent']:.1f} %{dev_note}, "
+            f"loop CPU {res['cpu_percent']:.1f} %{dev_note}{proc_note}, "
             f"overruns {res['overruns']}, frames {res['frames']}, samples lost {res['samples_lost']}, "
             f"host load {load[0]:.1f}; host real-time wake-ups > 1 ms late: {hw['late_over_1ms']} "
             f"(max {hw['max_late_ms']:.1f} ms), overrun events during them {hw['overrun_events_during_host_stalls']}"
@@ -159,7 +161,7 @@ def run(quick: bool) -> dict:
     out = {
         "latency_p99": {"us": p99_us, "baseline_us": py_us, "ratio": py_us / p99_us, "note": note,
                         "cpu_percent": res["cpu_percent"], "device_emulation_cpu_percent": dev,
-                        "overruns": res["overruns"], "frames": res["frames"],
+                        "process_cpu_percent": proc, "overruns": res["overruns"], "frames": res["frames"],
                         "gyro_samples": res["gyro_samples"], "samples_lost": res["samples_lost"],
                         "step_wall_p99_ms": res["step_wall_p99_ms"], "mode_seconds": res["mode_seconds"],
                         "attitude_error_arcsec_1sigma": res["attitude_error_arcsec_1sigma"],
