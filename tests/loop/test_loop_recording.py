@@ -161,3 +161,20 @@ def test_replay_detects_divergence(tmp_path):
         replay.read(0x02, 4)
     with pytest.raises(taps.ReplayExhausted):
         replay.read(0x02, 6)
+
+
+def test_clock_record_packed_in_one_go_is_the_same_bytes(tmp_path):
+    """``append_f8`` (a clock reading) writes exactly the record ``append`` writes for the
+    same f8 payload: header, payload and CRC."""
+    import struct
+
+    a, b = lf.LogWriter(tmp_path / "a.gslog"), lf.LogWriter(tmp_path / "b.gslog")
+    for ch, t in ((0, 1.25), (2, 28722.873475111184), (5, -3.5e-9), (0, float("nan")), (1, 0.0)):
+        t_ns = int(round(t * 1e9)) if t == t else 0
+        a.append(lf.CLOCK, struct.pack("<d", t), ch, t_ns)
+        b.append_f8(lf.CLOCK, t, ch, t_ns)
+    a.close()
+    b.close()
+    assert (tmp_path / "a.gslog").read_bytes() == (tmp_path / "b.gslog").read_bytes()
+    recs = list(lf.read_records(tmp_path / "b.gslog", lf.ReadReport()))
+    assert [r.channel for r in recs] == [0, 2, 5, 0, 1] and all(r.kind == lf.CLOCK for r in recs)

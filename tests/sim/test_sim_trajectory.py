@@ -93,3 +93,27 @@ def test_segment_rates_midpoints():
     assert r[:, 0] == pytest.approx(0.5 + (np.arange(4) + 0.5) * 0.0025)
     with pytest.raises(ConfigError):
         prof.segment_rates(0.0, 0.01, 0)
+
+
+def test_integrate_to_is_the_last_row_of_integrate_to_the_bit():
+    """The one-interval integrator (the per-frame truth attitude) builds the same grid as
+    ``integrate`` and returns its last row bit for bit, on ramps, jitter and piecewise
+    profiles, for intervals shorter than, equal to and many times the 1 ms step."""
+    rng = np.random.default_rng(4)
+    q0 = np.array([0.1, -0.3, 0.2, 0.92])
+    q0 /= np.linalg.norm(q0)
+    profiles = [tj.Ramp((0.01, 0.02, 0.0), (0.05, -0.01, 0.02), 1.0, 3.0),
+                tj.Jitter(tj.Constant((0.0, 0.01, 0.0)), (1e-3, 2e-3, 1e-3), (3.0, 5.0, 7.0)),
+                tj.Piecewise((0.0, 0.7, 1.9), ((0.0, 0.0, 0.02), (0.01, 0.0, 0.0), (0.0, -0.03, 0.0)))]
+    n = 0
+    for p in profiles:
+        for _ in range(400):
+            t0 = rng.uniform(0.0, 4.0)
+            gap = rng.choice([rng.uniform(1e-6, 1e-3), 1e-3, 0.0025, 0.01, rng.uniform(0.0, 0.3)])
+            if gap <= 0:
+                continue
+            a = tj.integrate(q0, p, np.array([t0, t0 + gap]))[-1]
+            b = tj.integrate_to(q0, p, t0, t0 + gap)
+            assert a.tobytes() == b.tobytes(), (p, t0, gap)
+            n += 1
+    assert n > 1100
