@@ -157,12 +157,17 @@ def integrate(q0: np.ndarray, profile: RateProfile, times: np.ndarray, max_step_
     seg = np.repeat(np.arange(len(gaps)), nsub)              # the gap of each sub-step
     j = np.arange(1, int(ends[-1]) + 1 if len(ends) else 1) - np.repeat(ends - nsub, nsub)
     grid = np.concatenate([times[:1], times[:-1][seg] + gaps[seg] * j / nsub[seg]])
+    return _steps_on_grid(q0, profile, grid)[np.concatenate([[0], ends])]
+
+
+def _steps_on_grid(q0: np.ndarray, profile: RateProfile, grid: np.ndarray) -> np.ndarray:
+    """Attitudes (len(grid), 4) at every point of an increasing time grid from ``q0`` at
+    grid[0]: one commutator-free Magnus step per interval, the rates at both Gauss nodes
+    in one profile call."""
     h = np.diff(grid)
     n = len(h)
-    w = profile.rate(np.concatenate([grid[:-1] + _G1 * h, grid[:-1] + _G2 * h]))   # both Gauss nodes, one call
-    qs = _cf4_steps(q0, np.ascontiguousarray(w[:n]), np.ascontiguousarray(w[n:]), h)
-    idx = np.concatenate([[0], ends])
-    return qs[idx]
+    w = profile.rate(np.concatenate([grid[:-1] + _G1 * h, grid[:-1] + _G2 * h]))
+    return _cf4_steps(q0, np.ascontiguousarray(w[:n]), np.ascontiguousarray(w[n:]), h)
 
 
 def integrate_to(q0: np.ndarray, profile: RateProfile, t0: float, t1: float, max_step_s: float = 1e-3) -> np.ndarray:
@@ -175,10 +180,7 @@ def integrate_to(q0: np.ndarray, profile: RateProfile, t0: float, t1: float, max
     grid = np.empty(n + 1)
     grid[0] = t0
     grid[1:] = t0 + gap * np.arange(1, n + 1) / n
-    h = grid[1:] - grid[:-1]
-    left = grid[:-1]
-    w = profile.rate(np.concatenate([left + _G1 * h, left + _G2 * h]))
-    return _cf4_steps(np.asarray(q0, dtype=np.float64), np.ascontiguousarray(w[:n]), np.ascontiguousarray(w[n:]), h)[n]
+    return _steps_on_grid(np.asarray(q0, dtype=np.float64), profile, grid)[n]
 
 
 @dataclasses.dataclass(frozen=True)

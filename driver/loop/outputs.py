@@ -22,9 +22,8 @@ BLOCK_ROWS = 20        # records per hand-over to the keeping sinks (50 ms at 40
 
 class OutputStage:
     def __init__(self, sinks, lat_clock, capacity: int = 256, block_rows: int = BLOCK_ROWS):
-        self.sinks = list(sinks)
-        self.now_sinks = [s for s in self.sinks if not getattr(s, "block", False)]
-        self.block_sinks = [s for s in self.sinks if getattr(s, "block", False)]
+        self.now_sinks = [s for s in sinks if not getattr(s, "block", False)]
+        self.block_sinks = [s for s in sinks if getattr(s, "block", False)]
         self.lat_clock = lat_clock
         self.buf = R.empty(capacity)
         self.block_rows = max(1, min(int(block_rows), capacity))

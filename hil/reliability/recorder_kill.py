@@ -112,10 +112,11 @@ def synthetic_runs(runs: int, seed: int, folder: Path) -> dict:
 def flatsat_runs(runs: int, seed: int, folder: Path) -> dict:
     from ...loop.outputs import BLOCK_ROWS
     from ...recording.logfile import LogWriter
+    from .. import config as hc
     from ..replay import load_log, replay
 
     flush_s = LogWriter.__init__.__defaults__[1]
-    block_s = BLOCK_ROWS / 400.0          # the built-in flatsat's gyro at 400 Hz
+    block_s = BLOCK_ROWS / hc.load_flatsat().gyro.odr_hz     # the built-in flatsat's runs below
     rng = random.Random(seed + 77)
     results = []
     for k in range(runs):
