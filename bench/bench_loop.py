@@ -6,9 +6,11 @@ model) on the host monotonic clock for 300 s (``--quick``: 20 s), with a host wa
 probe beside it (:mod:`gyrostar.loop.wakeup_probe`) that tells overruns the host caused
 from the loop's own. Baseline of the
 latency figure, measured in the same run: the same per-sample path (MEKF predict + star
-projection) executed as plain Python (the numba functions' ``py_func``). The 400 Hz path's
-figure comes with this host's floor for it (``host_floor_us``: one compiled call and one
-output record per sample, the thread asleep 2.5 ms in between).
+projection) executed as plain Python (the numba functions' ``py_func``). The gyro path's
+figure comes with this host's floor for it at the run's step schedule (``host_floor_us``:
+one compiled call per wake-up and one output record per sample, the thread asleep between
+wake-ups as many gyro periods as the run's mean samples per step; with the default FIFO
+watermark of 4 the loop steps every 4 samples or at once when a frame is measured).
 """
 
 from __future__ import annotations
@@ -125,11 +127,12 @@ def _gyro_path_us(n_steps=4000) -> tuple[float, float, float]:
     return res[0], res[1], cpu / n_paced * 1e6
 
 
-def _host_wake_floor_us(n: int = 1000) -> float:
-    """CPU µs this host charges for the least a 400 Hz path can do per sample once the thread
-    has slept 2.5 ms: one compiled call (a quaternion normalised) and one output record
-    written into the next row of a preallocated buffer — a floor for
-    ``host_us_per_gyro_sample`` on this host, whatever the code."""
+def _host_wake_floor_us(n: int = 1000, samples_per_wake: float = 1.0, period_s: float = 0.0025) -> float:
+    """CPU µs per sample this host charges for the least a gyro path can do once its thread
+    has slept: per wake-up (every ``samples_per_wake`` gyro periods of ``period_s``, the
+    run's own mean) one compiled call (a quaternion normalised) and, per sample, one output
+    record written into the next row of a preallocated buffer — a floor for
+    ``host_us_per_gyro_sample`` on this host at the run's step schedule, whatever the code."""
     from gyrostar.attitude import quat_normalize
     from gyrostar.loop import record as R
 
@@ -138,13 +141,22 @@ def _host_wake_floor_us(n: int = 1000) -> float:
     rows = R.empty(256)
     quat_normalize(q)
     cpu = 0.0
-    for k in range(n):
-        time.sleep(0.0025)
+    carry = 0.0
+    samples = 0
+    i = 0
+    for _ in range(n):
+        carry += samples_per_wake
+        m = max(1, int(carry))
+        carry -= m
+        time.sleep(period_s * m)
         c0 = time.thread_time()
         rec["q"][0] = quat_normalize(q)
-        rows[k % 256] = rec[0]
+        for _ in range(m):
+            rows[i % 256] = rec[0]
+            i += 1
         cpu += time.thread_time() - c0
-    return cpu / n * 1e6
+        samples += m
+    return cpu / samples * 1e6
 
 
 def run(quick: bool) -> dict:
@@ -170,14 +182,21 @@ def run(quick: bool) -> dict:
     p99_us = res["latency_p99_ms"] * 1e3
     startup = {} if quick else measure_startup()
     stage_us, per_sample_us, paced_us = _gyro_path_us()
-    floor_us = _host_wake_floor_us()
+    sps = res.get("samples_per_step") or 1.0
+    floor_us = _host_wake_floor_us(samples_per_wake=sps, period_s=1.0 / cfg.gyro.odr_hz)
+    floor_1_us = _host_wake_floor_us()
     in_run_us = res["host_us_per_gyro_sample"]            # CPU of the loop thread in the path
     in_run_wall_us = res["host_us_per_gyro_sample_wall"]  # wall: with the turns other threads took in it
     dev = res.get("device_emulation_cpu_percent")
     dev_note = f" (of which {dev:.1f} % inside the emulated gyro)" if dev is not None else ""
     proc = res.get("process_cpu_percent")
     proc_note = f", the process (loop, head worker, link reader, log writer) {proc:.1f} %" if proc is not None else ""
-    note = (f"{duration:.0f} s real time: p99 sample→output {p99_us:.0f} µs, "
+    sched = (f"{res['loop_steps']} loop steps, {sps:.2f} gyro samples per step (FIFO watermark "
+             f"{cfg.gyro.fifo_watermark}: a step every {cfg.gyro.fifo_watermark} samples or at a frame), sample age "
+             f"at its step p50/p99 {res.get('sample_age_at_step_ms_p50', float('nan')):.1f}/"
+             f"{res.get('sample_age_at_step_ms_p99', float('nan')):.1f} ms, exposure → output p50 "
+             f"{res.get('exposure_to_output_ms_p50', float('nan')):.1f} ms")
+    note = (f"{duration:.0f} s real time: p99 sample→output {p99_us:.0f} µs, {sched}, "
             f"loop CPU {res['cpu_percent']:.1f} %{dev_note}{proc_note}, "
             f"overruns {res['overruns']}, frames {res['frames']}, samples lost {res['samples_lost']}, "
             f"host load {load[0]:.1f}; host real-time wake-ups > 1 ms late: {hw['late_over_1ms']} "
@@ -190,17 +209,25 @@ def run(quick: bool) -> dict:
                         "gyro_samples": res["gyro_samples"], "samples_lost": res["samples_lost"],
                         "step_wall_p99_ms": res["step_wall_p99_ms"], "mode_seconds": res["mode_seconds"],
                         "attitude_error_arcsec_1sigma": res["attitude_error_arcsec_1sigma"],
+                        "floor_arcsec": res.get("floor_arcsec"),
+                        "loop_steps": res["loop_steps"], "samples_per_step": sps,
+                        "fifo_watermark": cfg.gyro.fifo_watermark,
+                        "sample_age_at_step_ms_p50": res.get("sample_age_at_step_ms_p50"),
+                        "sample_age_at_step_ms_p99": res.get("sample_age_at_step_ms_p99"),
+                        "exposure_to_output_ms_p50": res.get("exposure_to_output_ms_p50"),
                         "load_average": load, "host_wakeups": hw},
         "host_us_per_gyro_sample": {
             "us": in_run_us, "baseline_us": per_sample_us, "ratio": per_sample_us / in_run_us,
             "wall_us": in_run_wall_us, "isolated_us": stage_us, "isolated_ratio": per_sample_us / stage_us,
-            "isolated_paced_us": paced_us, "host_floor_us": floor_us,
+            "isolated_paced_us": paced_us, "host_floor_us": floor_us, "host_floor_us_one_sample_per_wake": floor_1_us,
+            "samples_per_step": sps,
             "cpu_percent": res["cpu_percent"], "device_emulation_cpu_percent": dev,
-            "note": (f"400 Hz path after the FIFO read (batch kernel, output stage, sinks), one sample per FIFO "
-                     f"batch: {in_run_us:.1f} µs CPU ({in_run_wall_us:.1f} µs wall, with other threads' turns) in the "
+            "note": (f"gyro path after the FIFO read (batch kernel, output stage, sinks), {sps:.2f} samples per "
+                     f"step: {in_run_us:.1f} µs CPU ({in_run_wall_us:.1f} µs wall, with other threads' turns) in the "
                      f"{duration:.0f} s real-time run, {stage_us:.1f} µs isolated back to back, {paced_us:.1f} µs "
                      f"isolated once per 2.5 ms on an idle host (cold caches), {floor_us:.1f} µs this host's "
-                     f"floor (one compiled call and one record written per sample after a 2.5 ms sleep); "
+                     f"floor at the run's schedule (one compiled call per wake-up and one record written per "
+                     f"sample, asleep between; {floor_1_us:.1f} µs waking for every sample); "
                      f"baseline: the per-sample Python path it replaced, {per_sample_us:.1f} µs isolated; loop CPU "
                      f"{res['cpu_percent']:.1f} % of a core{dev_note}; host load {load[0]:.1f}")},
         "per_sample_predict": {"us": numba_us, "baseline_us": py_us, "ratio": py_us / numba_us,

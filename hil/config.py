@@ -76,7 +76,7 @@ class GyroConfig:
     spi_hz: int = 5_000_000
     range_dps: int = 500
     odr_hz: int = 400
-    fifo_watermark: int = 1
+    fifo_watermark: int = 4
 
     def validate(self):
         """Every value the chosen part accepts, from its driver's own tables."""

@@ -50,7 +50,8 @@ MEANING = {
     "gyro.spi_hz": "SPI clock, Hz",
     "gyro.range_dps": "full scale, °/s",
     "gyro.odr_hz": "output data rate, Hz",
-    "gyro.fifo_watermark": "FIFO frames per watermark interrupt",
+    "gyro.fifo_watermark": ("FIFO frames per watermark interrupt: the loop steps at most this many gyro periods "
+                            "apart (and at once when a frame is measured)"),
     "sim.preset": "simulator camera/optics/detector preset",
     "sim.catalog": "star catalog of the simulated sky",
     "sim.mag_limit": "faintest star rendered (V)",

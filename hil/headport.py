@@ -192,6 +192,10 @@ class HeadPort:
         """The job in flight has finished (its result waits for :meth:`poll`)."""
         return self._done.is_set() and (self._ready_at is None or self.inline.now() >= self._ready_at)
 
+    def ready(self) -> bool:
+        """A result waits for :meth:`poll` (the loop's runner steps for it). Logs nothing."""
+        return self._job is not None and self._replay_polls is None and self.job_done
+
     def submit_windows(self, spans: np.ndarray) -> None:
         self._submit("windows", spans)
 

@@ -252,6 +252,8 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
             writer.event({"scenario_t0": fs.truth.t_origin if fs.truth is not None else fs.clock_now()})
         loop.start()
         fs.start_faults(t_start_of(fs))
+        # the runners tick every gyro period and step when the loop says a step is due (a FIFO
+        # watermark of samples, or a frame measured): CoupledLoop.step_due
         period = 1.0 / loop.gyro.odr_hz
         try:
             # a Ctrl-C lands between steps: the log never holds a step's inputs without its outputs
@@ -329,6 +331,9 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
     if floor.get("floor_inputs"):
         res_top["floor_inputs"] = floor["floor_inputs"]
     res_top["step_wall_p99_ms"] = float(np.percentile(step_wall, 99)) * 1e3 if step_wall else None
+    # steps the loop took (a tick every gyro period, a step when due: CoupledLoop.step_due)
+    res_top["loop_steps"] = len(step_wall)
+    res_top["samples_per_step"] = counters["gyro_samples"] / len(step_wall) if step_wall else None
     res_top["process_cpu_percent"] = 100.0 * cpu_proc / wall if wall > 0 else None
     res_top["wall_s"] = wall
     res_top["realtime"] = realtime
@@ -408,8 +413,8 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
 
 
 def _run_realtime(fs, loop, gate, sched, duration: float, step_wall: list, line, probe, boundary) -> float:
-    """Real time: one loop step every gyro period on the monotonic clock. Returns the loop's
-    CPU seconds."""
+    """Real time: a tick every gyro period on the monotonic clock, a loop step at each tick the
+    loop says is due (:meth:`CoupledLoop.step_due`). Returns the loop's CPU seconds."""
     cpu = 0.0
     if probe is not None:
         probe.start(duration)
@@ -420,7 +425,7 @@ def _run_realtime(fs, loop, gate, sched, duration: float, step_wall: list, line,
         t = fs.clock_now() - t_start
         if t >= duration:
             break
-        if fs.loop_stalled(t):       # injected "loop does not read the FIFO" fault
+        if fs.loop_stalled(t) or not loop.step_due(t + t_start):   # injected "loop does not read the FIFO" fault
             sched.done()
             gate.loop_exit(sched.deadline)
             continue
@@ -442,7 +447,8 @@ def _run_realtime(fs, loop, gate, sched, duration: float, step_wall: list, line,
 
 
 def _run_lockstep(fs, loop, duration: float, period: float, step_wall: list, line, boundary) -> float:
-    """Fast mode: step the loop every gyro period of simulated time. The head port's jobs (and
+    """Fast mode: tick every gyro period of simulated time, step when the loop says a step is
+    due (:meth:`CoupledLoop.step_due`). The head port's jobs (and
     a streaming port's turns) run at once on their own time line (:meth:`Lockstep.run_job`); a worker
     thread (other head ports) runs between steps at the simulated times its replies (or
     timeouts) are due. Returns the loop's CPU seconds on this thread (its steps and the
@@ -474,7 +480,7 @@ def _run_lockstep(fs, loop, duration: float, period: float, step_wall: list, lin
         t = t_next - t_start
         t_next += period
         fs.apply_faults(t)
-        if fs.loop_stalled(t):        # injected "loop does not read the FIFO" fault
+        if fs.loop_stalled(t) or not loop.step_due(t + t_start):    # injected "loop does not read the FIFO" fault
             continue
         w0 = time.perf_counter()
         boundary.inside = True
@@ -538,7 +544,9 @@ def human_summary(r: dict) -> str:
         lb = r.get("link_budget") or {}
         lines.append(f"  head stream: {r['frame_rate_hz']:.1f} frames/s, link {lb.get('preset', '?')} "
                      f"{100 * (r.get('link_utilisation') or 0):.0f} % used, exposure → output p50 "
-                     f"{f(r.get('exposure_to_output_ms_p50'), '.1f')} ms; stars cut for the link in "
+                     f"{f(r.get('exposure_to_output_ms_p50'), '.1f')} ms, sample age at its step p50/p99 "
+                     f"{f(r.get('sample_age_at_step_ms_p50'), '.1f')}/{f(r.get('sample_age_at_step_ms_p99'), '.1f')} "
+                     f"ms; stars cut for the link in "
                      f"{lb.get('frames_stars_cut', 0)} frames, rate changes {len(lb.get('rate_changes', []))}")
     if r.get("acquisition_image"):
         spots = r["acquisition_image"] == "spots"

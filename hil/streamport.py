@@ -74,17 +74,20 @@ class StreamReplay:
 def _pack_result(res: ImageResult) -> bytes:
     values = b"" if res.values is None else np.ascontiguousarray(res.values, np.uint16).tobytes()
     meta = (res.kind, res.t_start, res.t_end, res.t_mid, getattr(res, "frame", 0), getattr(res, "set_frame", 0),
-            res.error, res.measured if res.kind == "frame" else None)
+            res.error, res.measured if res.kind == "frame" else None, getattr(res, "t_rx", None))
     blob = pickle.dumps(meta, protocol=4)
     return b"\x01" + struct.pack("<I", len(blob)) + blob + values
 
 
 def _unpack_result(payload: bytes) -> ImageResult:
     (n,) = struct.unpack_from("<I", payload, 1)
-    kind, t0, t1, tm, frame, set_frame, error, measured = pickle.loads(payload[5:5 + n])
+    meta = pickle.loads(payload[5:5 + n])
+    kind, t0, t1, tm, frame, set_frame, error, measured = meta[:8]
     values = np.frombuffer(payload[5 + n:], np.uint16).copy() if kind == "windows" and error is None else None
     res = ImageResult(kind, t0, t1, tm, values=values, error=error, measured=measured)
     res.frame, res.set_frame = frame, set_frame
+    if len(meta) > 8 and meta[8] is not None:      # the frame's arrival (logs before 2026-11-26 lack it)
+        res.t_rx = meta[8]
     return res
 
 
@@ -207,6 +210,20 @@ class StreamPort(HeadPort):
             self._job = (kind, arg)
             return
         super()._submit(kind, arg)
+
+    def ready(self) -> bool:
+        """A result waits for :meth:`poll`: a streamed frame measured (fast mode: one that has
+        arrived by now — the stream turn that reads it runs here) or a full frame / reconnect
+        finished. Logs nothing; a replay has no runner to ask."""
+        if self.replay is not None:
+            return False
+        if self.inline is not None:
+            if self.on and self._job is None:
+                self._inline_turn()            # the frames that arrived by now
+            if self._job is not None and self.job_done and not self._results:
+                return True
+            return bool(self._results) and getattr(self._results[0], "t_rx", -float("inf")) <= self.inline.now()
+        return bool(self._results) or (self._job is not None and self._done.is_set())
 
     def poll(self) -> ImageResult | None:
         if self.replay is not None:

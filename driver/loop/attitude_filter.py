@@ -72,11 +72,16 @@ class AttitudeFilter:
         t = self.ts[0]
         return None if t != t else float(t)
 
-    def predict(self, smp, flags_first: int, flags_base: int, mode: int, refs, ids, cam, uv_last, out) -> int:
-        """Predict every sample of a FIFO batch and write its output record (one numba call);
-        returns the count of stuck-axis samples."""
-        return predict_batch(smp.t, smp.rate, smp.flags, smp.n, *self._state, flags_first, flags_base, mode, refs,
-                             ids, cam, uv_last, self.mid, self.smoothed, out)
+    def predict(self, smp, flags_first: int, flags_base: int, mode: int, refs, ids, cam, uv_last, out,
+                lo: int = 0, hi: int | None = None) -> int:
+        """Predict samples ``lo:hi`` (default: all) of a FIFO batch and write their output
+        records (one numba call); returns the count of stuck-axis samples."""
+        hi = smp.n if hi is None else hi
+        if lo == 0:
+            return predict_batch(smp.t, smp.rate, smp.flags, hi, *self._state, flags_first, flags_base, mode, refs,
+                                 ids, cam, uv_last, self.mid, self.smoothed, out)
+        return predict_batch(smp.t[lo:], smp.rate[lo:], smp.flags[lo:], hi - lo, *self._state, flags_first,
+                             flags_base, mode, refs, ids, cam, uv_last, self.mid, self.smoothed, out)
 
     def q_at(self, t: float) -> np.ndarray:
         """Attitude estimate at host time ``t`` (s): the newest sample at or before it,

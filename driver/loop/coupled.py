@@ -136,6 +136,11 @@ class CoupledLoop:
         self.clock = clock
         self.lat_clock = clock if lat_clock is None else lat_clock
         self.t_step_prev: float | None = None
+        self._t_read = 0.0             # latency-clock time of this step's FIFO read
+        self.age = np.zeros(1 << 16)   # ring: step start − sample stamp of each output (s, loop clock)
+        self.n_age = 0
+        self._split = 0                # streaming: samples of this step already predicted
+        self._t_due: float | None = None   # runner time of the last step_due() that said yes
         self.overruns = 0
         self.gyro = gyro
         self.head = head
@@ -228,6 +233,35 @@ class CoupledLoop:
         self.image.close()
 
     # ------------------------------------------------------------------ the step
+    @property
+    def step_period_s(self) -> float:
+        """Longest time between steps (s): one FIFO watermark of gyro samples."""
+        return max(1, getattr(self.gyro, "watermark", 1)) / self.gyro.odr_hz
+
+    def step_due(self, now: float) -> bool:
+        """Whether a runner that ticks every gyro period should step at ``now`` (its clock, s).
+
+        A step is due when a FIFO watermark of samples has come in since the last due step
+        (:attr:`step_period_s`), when the head port has something for the loop (a streamed
+        frame measured, a job finished: its update is applied at once, so exposure → output
+        does not wait for the watermark), when an applied update has no output yet (its frame
+        arrived after the newest sample of the last step) or a request-mode readout waits to
+        be applied, when a request-mode frame is due,
+        or before the first step. A True answer counts as that step's start. With a watermark of 1 every
+        tick is a step. Reads no clock, logs nothing: a replay steps through the logged
+        steps whatever the ticks between them were.
+        """
+        last = self._t_due
+        tick = 1.0 / self.gyro.odr_hz if self.gyro.odr_hz else 0.0025
+        ready = getattr(self.head, "ready", None)
+        due = (last is None or now - last >= self.step_period_s - 0.5 * tick
+               or bool(self._mids) or self.image.busy
+               or (not self.streaming and self.head_down_since is None and now >= self.next_frame_t)
+               or (ready is not None and ready()))
+        if due:
+            self._t_due = now
+        return due
+
     def step(self) -> int:
         """One loop step; returns the number of outputs emitted.
 
@@ -236,16 +270,20 @@ class CoupledLoop:
         """
         t_step = self.clock.now()
         if self.t_step_prev is not None and self.gyro.odr_hz > 0 \
-                and t_step - self.t_step_prev > 1.5 / self.gyro.odr_hz:
+                and t_step - self.t_step_prev > 1.5 * self.step_period_s:
             self.overruns += 1
             self.flags_pending |= R.FLAG_OVERRUN
         self.t_step_prev = t_step
         if self.streaming:
-            # frames the stream port already measured update the filter before this step's
-            # samples; the next windows are planned after the outputs (off the exposure →
-            # output path) and from the newest sample
+            # the FIFO batch, with the updates of the frames the stream port has measured put
+            # in before the first sample stamped after each frame's arrival (every output
+            # holds the frames that had arrived by its sample's time, however many samples
+            # a step takes); the next windows are planned after the outputs (off the
+            # exposure → output path) and from the newest sample
+            n = self._read_gyro()
+            self._split = 0
             self._guarded(self._stream_take, t_step)
-            n_out = self._gyro_phase()
+            n_out = self._predict_emit(self._split, n)
             self._guarded(self._stream_command, t_step)
             return n_out
         done = self.image.result()       # the readout handed over last step: apply it before this
@@ -285,6 +323,10 @@ class CoupledLoop:
             self.tracks.uv[self._slots] = self._uv
 
     def _gyro_phase(self) -> int:
+        return self._predict_emit(0, self._read_gyro())
+
+    def _read_gyro(self) -> int:
+        """Read the gyro's FIFO into :attr:`samples`; returns the sample count."""
         smp = self.samples
         smp.clear()
         try:
@@ -294,14 +336,38 @@ class CoupledLoop:
             self.c.gyro_errors += 1
             self.flags_pending |= R.FLAG_GYRO_GAP
             log.debug("gyro read failed: %s", exc)
-        t_read = self.lat_clock.now()
+        self._t_read = self.lat_clock.now()
         self.c.gyro_register_faults += smp.register_faults
-        n = smp.n
-        if n == 0:
-            return 0
-        if smp.gap_frames:
+        if smp.n and smp.gap_frames:
             self.c.samples_lost += int(smp.gap_frames)
             self.c.gyro_gaps += int(smp.gaps)
+        return smp.n
+
+    def _predict_through(self, t_arrival: float) -> None:
+        """Streaming: predict and emit this step's samples stamped up to ``t_arrival`` (host
+        s, a frame's arrival) before its update goes in."""
+        smp = self.samples
+        k = int(np.searchsorted(smp.t[:smp.n], t_arrival, side="right"))
+        if k > self._split:
+            self._predict_emit(self._split, k)
+            self._split = k
+
+    def _note_ages(self, lo: int, hi: int) -> None:
+        """Keep how old samples ``lo:hi`` were when their step began (s, the loop's clock): the
+        wait in the FIFO that a watermark above 1 adds to every output but the newest."""
+        ring = self.age
+        i = self.n_age % len(ring)
+        m = min(hi - lo, len(ring) - i)
+        ring[i:i + m] = self.t_step_prev - self.samples.t[lo:lo + m]
+        self.n_age += m
+
+    def _predict_emit(self, lo: int, hi: int) -> int:
+        """Predict samples ``lo:hi`` of :attr:`samples` (one compiled call) and emit their outputs."""
+        smp = self.samples
+        n = hi - lo
+        if n <= 0:
+            return 0
+        t_read = self._t_read
         w0 = time.perf_counter()
         c0 = time.thread_time()
         f = self.filter
@@ -317,12 +383,15 @@ class CoupledLoop:
         else:
             refs, ids, uv = _NO_REFS, _NO_IDS, _NO_UV
         out = self.outputs.batch(n)
-        self.c.gyro_stuck += f.predict(smp, self.flags_pending, base, self.state.mode, refs, ids, self.cam, uv, out)
+        self.c.gyro_stuck += f.predict(smp, self.flags_pending, base, self.state.mode, refs, ids, self.cam, uv, out,
+                                       lo, hi)
         self.flags_pending = 0
         self._uv_dirty = len(uv) > 0     # copied to the tracks when an image stage next looks at them
         self.c.gyro_samples += n
-        self.c.gyro_saturated += int(smp.saturated)
-        self.outputs.emit(out, t_read, float(smp.t[n - 1]))
+        if lo == 0:
+            self.c.gyro_saturated += int(smp.saturated)
+        self.outputs.emit(out, t_read, float(smp.t[hi - 1]))
+        self._note_ages(lo, hi)
         self.c.outputs += n
         if self._mids:                   # streamed frames whose update these outputs are the first to hold
             # on the loop's clock, the frames' own timeline (the latency clock is the same clock
@@ -431,6 +500,7 @@ class CoupledLoop:
             if pend is None or res.measured is None:
                 self.c.frames_unmatched += 1
                 continue
+            self._predict_through(getattr(res, "t_rx", -math.inf))
             # read with an earlier frame's windows (its own set came late): the stars have moved
             # since; past half a pixel a window may clip its star and bias the centroid
             late = res.frame - res.set_frame if res.set_frame else 0
@@ -476,8 +546,15 @@ class CoupledLoop:
             self._command_windows(now, frame, t_exp)
 
     def stream_summary(self) -> dict:
-        """Frame rate, exposure → output latency and the link budget's actions (streaming)."""
+        """Frame rate, exposure → output latency, how old a sample is at the step that emits
+        it (``sample_age_at_step_ms``: the FIFO wait of the watermark) and the link budget's
+        actions (streaming)."""
         out: dict = {}
+        n = min(self.n_age, len(self.age))
+        if n:
+            age = np.maximum(self.age[:n], 0.0) * 1e3
+            out["sample_age_at_step_ms_p50"] = float(np.median(age))
+            out["sample_age_at_step_ms_p99"] = float(np.percentile(age, 99))
         n = min(self.n_e2o, len(self.e2o))
         if n:
             lat = self.e2o[:n] * 1e3

@@ -158,7 +158,7 @@ def run_campaign(events, duration: float, seed: int = 1, keep_hz: float = 400.0,
                 next_rss += rss_every_s
                 if progress is not None:
                     progress(t, loop)
-            if not faults.stalled(t):
+            if not faults.stalled(t) and loop.step_due(t + t_start):
                 try:
                     loop.step()
                 except Exception as exc:  # noqa: BLE001 - the campaign counts what escapes the loop
