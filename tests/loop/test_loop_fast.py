@@ -68,7 +68,7 @@ def test_client_over_the_simulated_link_and_link_loss():
         client.ping(b"x")
 
 
-def _fast_run(tmp_path, name, seconds=3.0, head_mode=None):
+def _fast_run(tmp_path, name, seconds=3.0, head_mode=None, watermark=None):
     import dataclasses
 
     from gyrostar.hil import config as hc
@@ -77,6 +77,8 @@ def _fast_run(tmp_path, name, seconds=3.0, head_mode=None):
     cfg = hc.load_flatsat()
     if head_mode is not None:
         cfg = dataclasses.replace(cfg, head=dataclasses.replace(cfg.head, mode=head_mode))
+    if watermark is not None:
+        cfg = dataclasses.replace(cfg, gyro=dataclasses.replace(cfg.gyro, fifo_watermark=watermark))
     scen = hc.load_scenario("demo")
     folder = tmp_path / name
     folder.mkdir()
@@ -175,3 +177,42 @@ def test_fast_mode_streams_at_the_frame_rate_with_the_link_s_timing(tmp_path):
     expect_ms = 5.0 + (st["down_bytes_per_frame"] / link.bytes_per_s + link.latency_s) * 1e3
     assert abs(st["arrival_ms_p50"] - expect_ms) < 0.5, (st["arrival_ms_p50"], expect_ms)
     assert st["arrival_ms_p50"] <= res["exposure_to_output_ms_p50"] <= st["arrival_ms_p50"] + 2.5
+
+
+@pytest.mark.parametrize("watermark", [1, 4])
+def test_outputs_hold_the_frames_that_arrived_by_their_sample_time(tmp_path, monkeypatch, watermark):
+    """However many samples a step takes (FIFO watermark 1: a step per gyro period; 4: a step
+    every 4 samples or at once when a frame is measured), a frame's update is in every output
+    stamped after the frame's arrival and in none stamped before it: the first output
+    holding it is the first sample after the arrival. The step count follows the watermark."""
+    from gyrostar.hil.streamport import StreamPort
+
+    arrivals = {}
+    poll = StreamPort.poll
+
+    def spy(self):
+        res = poll(self)
+        if res is not None and res.kind == "windows" and res.error is None:
+            arrivals[float(res.t_mid)] = float(res.t_rx)
+        return res
+
+    monkeypatch.setattr(StreamPort, "poll", spy)
+    res, out = _fast_run(tmp_path, f"wm{watermark}", seconds=3.0, watermark=watermark)
+    assert res["samples_lost"] == 0 and res["frames"] > 250
+    held = out["t_mid"]
+    checked = 0
+    for t_mid, t_rx in arrivals.items():
+        idx = np.flatnonzero(held == t_mid)
+        if len(idx) == 0:
+            continue                      # not applied (too few stars passed the gate)
+        first = idx[0]
+        assert out["t"][first] > t_rx
+        assert first == 0 or out["t"][first - 1] <= t_rx
+        checked += 1
+    assert checked > 250
+    if watermark == 1:
+        assert res["loop_steps"] == len(out)
+    else:
+        # a step every 4 samples or at a frame: about one step per frame, never fewer
+        assert res["frames"] <= res["loop_steps"] < 0.5 * len(out)
+        assert res["sample_age_at_step_ms_p99"] <= 4 * 2.5 + 1e-6
