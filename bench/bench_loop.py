@@ -211,6 +211,7 @@ def run(quick: bool) -> dict:
                         "attitude_error_arcsec_1sigma": res["attitude_error_arcsec_1sigma"],
                         "floor_arcsec": res.get("floor_arcsec"),
                         "loop_steps": res["loop_steps"], "samples_per_step": sps,
+                        "counters": {k: (len(v) if k == "mode_changes" else v) for k, v in res["counters"].items()},
                         "fifo_watermark": cfg.gyro.fifo_watermark,
                         "sample_age_at_step_ms_p50": res.get("sample_age_at_step_ms_p50"),
                         "sample_age_at_step_ms_p99": res.get("sample_age_at_step_ms_p99"),

@@ -75,7 +75,8 @@ class AttitudeFilter:
     def predict(self, smp, flags_first: int, flags_base: int, mode: int, refs, ids, cam, uv_last, out,
                 lo: int = 0, hi: int | None = None) -> int:
         """Predict samples ``lo:hi`` (default: all) of a FIFO batch and write their output
-        records (one numba call); returns the count of stuck-axis samples."""
+        records into ``out`` (its first ``hi − lo`` rows; one numba call); returns the count
+        of stuck-axis samples."""
         hi = smp.n if hi is None else hi
         if lo == 0:
             return predict_batch(smp.t, smp.rate, smp.flags, hi, *self._state, flags_first, flags_base, mode, refs,

@@ -137,6 +137,7 @@ class CoupledLoop:
         self.lat_clock = clock if lat_clock is None else lat_clock
         self.t_step_prev: float | None = None
         self._t_read = 0.0             # latency-clock time of this step's FIFO read
+        self._out = None               # this step's output rows (OutputStage.batch), one emit per step
         self.age = np.zeros(1 << 16)   # ring: step start − sample stamp of each output (s, loop clock)
         self.n_age = 0
         self._split = 0                # streaming: samples of this step already predicted
@@ -283,7 +284,8 @@ class CoupledLoop:
             n = self._read_gyro()
             self._split = 0
             self._guarded(self._stream_take, t_step)
-            n_out = self._predict_emit(self._split, n)
+            self._predict(self._split, n)
+            n_out = self._emit(n)
             self._guarded(self._stream_command, t_step)
             return n_out
         done = self.image.result()       # the readout handed over last step: apply it before this
@@ -323,7 +325,9 @@ class CoupledLoop:
             self.tracks.uv[self._slots] = self._uv
 
     def _gyro_phase(self) -> int:
-        return self._predict_emit(0, self._read_gyro())
+        n = self._read_gyro()
+        self._predict(0, n)
+        return self._emit(n)
 
     def _read_gyro(self) -> int:
         """Read the gyro's FIFO into :attr:`samples`; returns the sample count."""
@@ -341,6 +345,8 @@ class CoupledLoop:
         if smp.n and smp.gap_frames:
             self.c.samples_lost += int(smp.gap_frames)
             self.c.gyro_gaps += int(smp.gaps)
+        if smp.n:
+            self._out = self.outputs.batch(smp.n)     # this step's output rows, written by _predict
         return smp.n
 
     def _predict_through(self, t_arrival: float) -> None:
@@ -349,7 +355,7 @@ class CoupledLoop:
         smp = self.samples
         k = int(np.searchsorted(smp.t[:smp.n], t_arrival, side="right"))
         if k > self._split:
-            self._predict_emit(self._split, k)
+            self._predict(self._split, k)
             self._split = k
 
     def _note_ages(self, lo: int, hi: int) -> None:
@@ -361,15 +367,14 @@ class CoupledLoop:
         ring[i:i + m] = self.t_step_prev - self.samples.t[lo:lo + m]
         self.n_age += m
 
-    def _predict_emit(self, lo: int, hi: int) -> int:
-        """Predict samples ``lo:hi`` of :attr:`samples` (one compiled call) and emit their outputs."""
-        smp = self.samples
-        n = hi - lo
-        if n <= 0:
-            return 0
-        t_read = self._t_read
+    def _predict(self, lo: int, hi: int) -> None:
+        """Predict samples ``lo:hi`` of :attr:`samples` into rows ``lo:hi`` of this step's
+        output batch (one compiled call)."""
+        if hi <= lo:
+            return
         w0 = time.perf_counter()
         c0 = time.thread_time()
+        smp = self.samples
         f = self.filter
         base = self.last_image_flags
         if f.valid and self.state.mode != R.MODE_ACQUIRE:
@@ -382,16 +387,24 @@ class CoupledLoop:
             refs, ids, uv = self._kernel_stars()
         else:
             refs, ids, uv = _NO_REFS, _NO_IDS, _NO_UV
-        out = self.outputs.batch(n)
-        self.c.gyro_stuck += f.predict(smp, self.flags_pending, base, self.state.mode, refs, ids, self.cam, uv, out,
-                                       lo, hi)
+        self.c.gyro_stuck += f.predict(smp, self.flags_pending, base, self.state.mode, refs, ids, self.cam, uv,
+                                       self._out[lo:hi], lo, hi)
         self.flags_pending = 0
         self._uv_dirty = len(uv) > 0     # copied to the tracks when an image stage next looks at them
+        self.gyro_path_cpu_s += time.thread_time() - c0
+        self.gyro_path_s += time.perf_counter() - w0
+
+    def _emit(self, n: int) -> int:
+        """Emit this step's ``n`` outputs (predicted by :meth:`_predict`) at once."""
+        if n <= 0:
+            return 0
+        w0 = time.perf_counter()
+        c0 = time.thread_time()
+        smp = self.samples
         self.c.gyro_samples += n
-        if lo == 0:
-            self.c.gyro_saturated += int(smp.saturated)
-        self.outputs.emit(out, t_read, float(smp.t[hi - 1]))
-        self._note_ages(lo, hi)
+        self.c.gyro_saturated += int(smp.saturated)
+        self.outputs.emit(self._out, self._t_read, float(smp.t[n - 1]))
+        self._note_ages(0, n)
         self.c.outputs += n
         if self._mids:                   # streamed frames whose update these outputs are the first to hold
             # on the loop's clock, the frames' own timeline (the latency clock is the same clock
