@@ -38,9 +38,9 @@ class GyroTap:
         self.t: list[np.ndarray] = []
         self.rate: list[np.ndarray] = []
 
-    def read(self, out, event_time=None):
+    def read(self, out, event_time=None, event_clock=None):
         n0 = out.n
-        n = self.gyro.read(out, event_time)
+        n = self.gyro.read(out, event_time, event_clock)
         if n:
             self.t.append(out.t[n0:n0 + n].copy())
             self.rate.append(out.rate[n0:n0 + n].copy())

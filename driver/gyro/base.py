@@ -1,7 +1,7 @@
 """The gyro-device interface and the FIFO reading every FIFO gyro shares.
 
 :class:`GyroDevice` is what the loop sees: ``probe()``, ``configure()``, ``self_test()``,
-``start()``, ``read(out, event_time=None)`` appending samples to a
+``start()``, ``read(out, event_time=None, event_clock=None)`` appending samples to a
 :class:`~gyrostar.gyro.samples.GyroSamples`, plus ``odr_hz`` and ``range_dps``.
 
 :class:`FifoGyro` implements ``read`` once for parts whose FIFO holds 6-byte XYZ int16
@@ -69,8 +69,9 @@ class GyroDevice(ABC):
         """Start the FIFO (stream mode); sample indices count from here."""
 
     @abstractmethod
-    def read(self, out: GyroSamples, event_time: float | None = None) -> int:
-        """Append every frame waiting in the FIFO (as many as fit) to ``out``; returns the count."""
+    def read(self, out: GyroSamples, event_time: float | None = None, event_clock=None) -> int:
+        """Append every frame waiting in the FIFO (as many as fit) to ``out``; returns the count.
+        ``event_time`` or ``event_clock``: the watermark interrupt edge (:meth:`FifoGyro.read`)."""
 
 
 class FifoGyro(GyroDevice):
@@ -199,20 +200,29 @@ class FifoGyro(GyroDevice):
         except DeviceError as exc:
             log.debug("%s: register check postponed: %s", self.describe(), exc)
 
-    def read(self, out: GyroSamples, event_time: float | None = None) -> int:
+    def read(self, out: GyroSamples, event_time: float | None = None, event_clock=None) -> int:
         """Append waiting frames to ``out``.
 
         ``event_time``: host time (s) of the most recent FIFO-watermark interrupt edge, if the
         caller timestamps the interrupt line; it anchors frame ``next + watermark − 1``.
-        Without it the poll time bounds the newest frame's time.
+        Without it the poll time bounds the newest frame's time. ``event_clock``, instead: the
+        interrupt line's clock (``now()``: that edge's time, None or NaN before any), read
+        here once per call right after the FIFO level — an edge that fires between the two
+        belongs to the frames this read takes, and read before the level it would be taken
+        for the next fill's (its frames stamped a whole fill early).
         """
         if self._k_next is None:
             raise DeviceError(f"{self.describe()}: start() before read()")
-        if self._reconfigure_pending:
-            self._reconfigure()
-        tb = self.timebase
-        t_poll = self.clock.now()
-        count, lossy = self._fifo_level()
+        try:
+            if self._reconfigure_pending:
+                self._reconfigure()
+            tb = self.timebase
+            t_poll = self.clock.now()
+            count, lossy = self._fifo_level()
+        finally:
+            if event_clock is not None:       # once per call, whatever happened (a replay reads it back)
+                edge = event_clock.now()
+                event_time = edge if edge is not None and edge == edge else None
         if count > self.fifo_capacity:
             raise DeviceError(f"{self.describe()}: implausible FIFO level {count} "
                               f"(capacity {self.fifo_capacity}); bus data corrupt?")

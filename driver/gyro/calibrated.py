@@ -67,9 +67,9 @@ class CalibratedGyro(GyroDevice):
     def start(self) -> None:
         self.raw.start()
 
-    def read(self, out, event_time: float | None = None) -> int:
+    def read(self, out, event_time: float | None = None, event_clock=None) -> int:
         n0 = out.n
-        n = self.raw.read(out, event_time)
+        n = self.raw.read(out, event_time, event_clock)
         if n:
             correct_samples(out.t, out.rate, n0, n0 + n, self.m, self.b, self.dt)
         return n

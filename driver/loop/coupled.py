@@ -137,7 +137,7 @@ class CoupledLoop:
         self.lat_clock = clock if lat_clock is None else lat_clock
         self.t_step_prev: float | None = None
         self._t_read = 0.0             # latency-clock time of this step's FIFO read
-        self._out = None               # this step's output rows (OutputStage.batch), one emit per step
+        self._out = None               # this step's output rows (OutputStage.batch), emitted in order
         self.age = np.zeros(1 << 16)   # ring: step start − sample stamp of each output (s, loop clock)
         self.n_age = 0
         self._split = 0                # streaming: samples of this step already predicted
@@ -285,9 +285,9 @@ class CoupledLoop:
             self._split = 0
             self._guarded(self._stream_take, t_step)
             self._predict(self._split, n)
-            n_out = self._emit(n)
+            self._emit(self._split, n)
             self._guarded(self._stream_command, t_step)
-            return n_out
+            return n
         done = self.image.result()       # the readout handed over last step: apply it before this
         if done is not None:             # step's samples, so their outputs are the first to carry it
             self._process_windows(*done, t_step)
@@ -327,15 +327,15 @@ class CoupledLoop:
     def _gyro_phase(self) -> int:
         n = self._read_gyro()
         self._predict(0, n)
-        return self._emit(n)
+        return self._emit(0, n)
 
     def _read_gyro(self) -> int:
         """Read the gyro's FIFO into :attr:`samples`; returns the sample count."""
         smp = self.samples
         smp.clear()
         try:
-            edge = self.irq.now() if self.irq is not None else None
-            self.gyro.read(smp, event_time=edge if edge is not None and edge == edge else None)
+            # the watermark edge's time is read by the driver after the FIFO level
+            self.gyro.read(smp, event_clock=self.irq)
         except DeviceError as exc:
             self.c.gyro_errors += 1
             self.flags_pending |= R.FLAG_GYRO_GAP
@@ -351,11 +351,12 @@ class CoupledLoop:
 
     def _predict_through(self, t_arrival: float) -> None:
         """Streaming: predict and emit this step's samples stamped up to ``t_arrival`` (host
-        s, a frame's arrival) before its update goes in."""
+        s, a frame's arrival) before its update goes in (their outputs leave at once)."""
         smp = self.samples
         k = int(np.searchsorted(smp.t[:smp.n], t_arrival, side="right"))
         if k > self._split:
             self._predict(self._split, k)
+            self._emit(self._split, k)          # out before the update: they need nothing from it
             self._split = k
 
     def _note_ages(self, lo: int, hi: int) -> None:
@@ -394,17 +395,19 @@ class CoupledLoop:
         self.gyro_path_cpu_s += time.thread_time() - c0
         self.gyro_path_s += time.perf_counter() - w0
 
-    def _emit(self, n: int) -> int:
-        """Emit this step's ``n`` outputs (predicted by :meth:`_predict`) at once."""
+    def _emit(self, lo: int, hi: int) -> int:
+        """Emit outputs ``lo:hi`` of this step (predicted by :meth:`_predict`; parts in order)."""
+        n = hi - lo
         if n <= 0:
             return 0
         w0 = time.perf_counter()
         c0 = time.thread_time()
         smp = self.samples
         self.c.gyro_samples += n
-        self.c.gyro_saturated += int(smp.saturated)
-        self.outputs.emit(self._out, self._t_read, float(smp.t[n - 1]))
-        self._note_ages(0, n)
+        if lo == 0:
+            self.c.gyro_saturated += int(smp.saturated)
+        self.outputs.emit(self._out[lo:hi], self._t_read, float(smp.t[hi - 1]))
+        self._note_ages(lo, hi)
         self.c.outputs += n
         if self._mids:                   # streamed frames whose update these outputs are the first to hold
             # on the loop's clock, the frames' own timeline (the latency clock is the same clock

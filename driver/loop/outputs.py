@@ -8,8 +8,8 @@ space packets) in one call.
 
 Sinks that keep records rather than react to them (``block = True``: the run log's
 recorder, an in-memory keeper) get them in blocks of :attr:`OutputStage.block_rows`
-consecutive records (50 ms at 400 Hz), and the rest at :meth:`OutputStage.flush` (the
-loop's close): one hand-over per block instead of one per gyro sample, so the 400 Hz
+consecutive records (50 ms at 400 Hz; handed over at the next batch), and the rest at
+:meth:`OutputStage.flush` (the loop's close): one hand-over per block instead of one per gyro sample, so the 400 Hz
 path touches their code and memory once every 20 samples.
 """
 
@@ -40,8 +40,11 @@ class OutputStage:
         return self.buf[self._last] if self._last >= 0 else None
 
     def batch(self, n: int):
-        """The next ``n`` free records of the buffer, for the kernel to write (n ≤ capacity)."""
-        if self._end + n > len(self.buf):
+        """The next ``n`` free records of the buffer, for the kernel to write (n ≤ capacity);
+        they may be emitted in parts, in order (:meth:`emit`). A block of ``block_rows`` or
+        more emitted records goes to the keeping sinks here, before the new rows, so the rows
+        of a batch never move while it is emitted."""
+        if self._end >= self.block_rows or self._end + n > len(self.buf):
             self.flush()
         return self.buf[self._end:self._end + n]
 
@@ -62,8 +65,6 @@ class OutputStage:
         self._last = i + n - 1
         self._t_ns = t_ns
         self.count += n
-        if self._end >= self.block_rows:
-            self.flush()
 
     def flush(self) -> None:
         """Hand the records emitted since the last block to the keeping sinks."""

@@ -23,7 +23,7 @@ class _ListGyro:
         self.t, self.rate = t, rate
         self.k = 0
 
-    def read(self, out, event_time=None):
+    def read(self, out, event_time=None, event_clock=None):
         n = min(2, len(self.t) - self.k)
         out.t[out.n:out.n + n] = self.t[self.k:self.k + n]
         out.rate[out.n:out.n + n] = self.rate[self.k:self.k + n]

@@ -455,3 +455,61 @@ def test_register_table_entries():
     assert table["GYRO_RANGE"].holds(0x02) and not table["GYRO_RANGE"].holds(0x00)
     assert table["GYRO_BANDWIDTH"].holds(0x83)      # bit 7 reads back 1
     assert not table["FIFO_CONFIG_1"].holds(0x00) and table["FIFO_CONFIG_1"].holds(0x80)
+
+
+class _SlowBus:
+    """A bus whose every transfer takes ``dt`` s of the clock (an I2C part's wire time)."""
+
+    def __init__(self, bus, clock, dt):
+        self._bus, self._clock, self._dt = bus, clock, dt
+
+    def __getattr__(self, name):
+        f = getattr(self._bus, name)
+        if not callable(f):
+            return f
+
+        def timed(*a, **k):
+            self._clock.advance(self._dt)
+            return f(*a, **k)
+
+        return timed
+
+
+class _EdgeLine:
+    """The FIFO-watermark interrupt line: ``now()`` is the latest edge's time (NaN before one)."""
+
+    def __init__(self, model):
+        self.model = model
+
+    def now(self):
+        t = self.model.watermark_time()
+        return float("nan") if t is None else t
+
+
+def test_watermark_edge_that_fires_while_the_level_is_read_anchors_this_read():
+    """Reads at irregular times (a loop that steps when a frame is measured) with a watermark
+    of 4 and 0.3 ms per bus transfer: now and then the 4th frame is sampled while the FIFO
+    level is being read. The driver reads the interrupt line's time after the level
+    (``event_clock``), so that edge anchors this read's frames; read before the level, it
+    would be taken for the next fill's and stamp those frames a whole fill early."""
+    clock = SimulatedClock(50.0)
+    source = ProfileRates(seed=7)
+    model = Bmi088GyroModel(clock, source, odr_error_ppm=1500.0)
+    regs = I2CRegisters(I2CBus(_SlowBus(model.smbus(), clock, 3e-4), name="i2c-slow"), 0x68, autoincrement=0)
+    gyro = Bmi088Gyro(regs, clock=clock)
+    gyro.configure(400, 500, 4)
+    gyro.start()
+    out = GyroSamples(4000)
+    line = _EdgeLine(model)
+    rng = np.random.default_rng(11)
+    races = 0
+    t_end = clock.now() + 5.0
+    while clock.now() < t_end:
+        clock.advance(rng.uniform(0.002, 0.011))
+        before = line.now()
+        n = gyro.read(out, event_clock=line)
+        races += n >= 4 and line.now() != before     # the edge came while the level was read
+    assert races >= 10
+    t = out.view()[0]
+    assert np.all(np.diff(t) > 0)
+    check_against_truth(model, out, source, 500 / 32768 * DPS, t_tol=2e-6)
