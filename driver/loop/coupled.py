@@ -243,14 +243,14 @@ class CoupledLoop:
         """Whether a runner that ticks every gyro period should step at ``now`` (its clock, s).
 
         A step is due when a FIFO watermark of samples has come in since the last due step
-        (:attr:`step_period_s`), when the head port has something for the loop (a streamed
+        (:attr:`step_period_s`); when the head port has something for the loop (a streamed
         frame measured, a job finished: its update is applied at once, so exposure → output
-        does not wait for the watermark), when an applied update has no output yet (its frame
+        does not wait for the watermark); when an applied update has no output yet (its frame
         arrived after the newest sample of the last step) or a request-mode readout waits to
-        be applied, when a request-mode frame is due,
-        or before the first step. A True answer counts as that step's start. With a watermark of 1 every
-        tick is a step. Reads no clock, logs nothing: a replay steps through the logged
-        steps whatever the ticks between them were.
+        be applied; when a request-mode frame is due; and before the first step. A True
+        answer counts as that step's start. With a watermark of 1 every tick is a step.
+        Reads no clock, logs nothing: a replay steps through the logged steps whatever the
+        ticks between them were.
         """
         last = self._t_due
         tick = 1.0 / self.gyro.odr_hz if self.gyro.odr_hz else 0.0025
@@ -366,7 +366,9 @@ class CoupledLoop:
         i = self.n_age % len(ring)
         m = min(hi - lo, len(ring) - i)
         ring[i:i + m] = self.t_step_prev - self.samples.t[lo:lo + m]
-        self.n_age += m
+        if m < hi - lo:                  # the ring wraps: the rest from its start
+            ring[:hi - lo - m] = self.t_step_prev - self.samples.t[lo + m:hi]
+        self.n_age += hi - lo
 
     def _predict(self, lo: int, hi: int) -> None:
         """Predict samples ``lo:hi`` of :attr:`samples` into rows ``lo:hi`` of this step's
