@@ -425,7 +425,8 @@ def _run_realtime(fs, loop, gate, sched, duration: float, step_wall: list, line,
         t = fs.clock_now() - t_start
         if t >= duration:
             break
-        if fs.loop_stalled(t) or not loop.step_due(t + t_start):   # injected "loop does not read the FIFO" fault
+        # an injected "loop does not read the FIFO" fault, or no step due at this tick
+        if fs.loop_stalled(t) or not loop.step_due(t + t_start):
             sched.done()
             gate.loop_exit(sched.deadline)
             continue
@@ -480,7 +481,8 @@ def _run_lockstep(fs, loop, duration: float, period: float, step_wall: list, lin
         t = t_next - t_start
         t_next += period
         fs.apply_faults(t)
-        if fs.loop_stalled(t) or not loop.step_due(t + t_start):    # injected "loop does not read the FIFO" fault
+        # an injected "loop does not read the FIFO" fault, or no step due at this tick
+        if fs.loop_stalled(t) or not loop.step_due(t + t_start):
             continue
         w0 = time.perf_counter()
         boundary.inside = True
