@@ -211,19 +211,23 @@ class StreamPort(HeadPort):
             return
         super()._submit(kind, arg)
 
+    def _waiting(self) -> str | None:
+        """What :meth:`poll` hands over now: ``"job"`` (a full frame or reconnect finished),
+        ``"frame"`` (a streamed frame measured; fast mode: one that has arrived by now — the
+        stream turn that reads it runs here) or None."""
+        if self.inline is not None and self.on and self._job is None:
+            self._inline_turn()                # the frames that arrived by now
+        if self._job is not None and self.job_done and not self._results:
+            return "job"
+        if self._results and (self.inline is None
+                              or getattr(self._results[0], "t_rx", -float("inf")) <= self.inline.now()):
+            return "frame"
+        return None
+
     def ready(self) -> bool:
-        """A result waits for :meth:`poll`: a streamed frame measured (fast mode: one that has
-        arrived by now — the stream turn that reads it runs here) or a full frame / reconnect
-        finished. Logs nothing; a replay has no runner to ask."""
-        if self.replay is not None:
-            return False
-        if self.inline is not None:
-            if self.on and self._job is None:
-                self._inline_turn()            # the frames that arrived by now
-            if self._job is not None and self.job_done and not self._results:
-                return True
-            return bool(self._results) and getattr(self._results[0], "t_rx", -float("inf")) <= self.inline.now()
-        return bool(self._results) or (self._job is not None and self._done.is_set())
+        """A result waits for :meth:`poll` (the loop's runner steps for it). Logs nothing; a
+        replay has no runner to ask."""
+        return self.replay is None and self._waiting() is not None
 
     def poll(self) -> ImageResult | None:
         if self.replay is not None:
@@ -239,19 +243,12 @@ class StreamPort(HeadPort):
                     res.measured = got[1](res.values)       # the loop's measurement, recomputed
             return res
         res = None
-        if self.inline is not None:
-            if self.on and self._job is None:
-                self._inline_turn()            # the frames that arrived by now
-            if self._job is not None and self.job_done and not self._results:
-                res = self._result
-                self._job = self._result = None
-                self._ready_at = None
-            elif self._results and getattr(self._results[0], "t_rx", -float("inf")) <= self.inline.now():
-                res = self._results.popleft()
-        elif self._job is not None and self._done.is_set() and not self._results:
+        what = self._waiting()
+        if what == "job":
             res = self._result
             self._job = self._result = None
-        elif self._results:
+            self._ready_at = None
+        elif what == "frame":
             res = self._results.popleft()
         self._log(CH_STREAM_POLL, b"\x00" if res is None else _pack_result(res))
         return res

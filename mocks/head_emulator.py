@@ -354,7 +354,7 @@ class HeadEmulator:
         t1 = self.mcu_us(t1_host)
         self.last_exposure_host = (t0_host, t1_host)  # truth for tests: exposure start/end, host s
         self.pixels = np.minimum(pixels, 0x3FF).astype(np.uint16)
-        self.sums = [int(self.pixels[s].sum()) for s in self.window_slices]
+        self.sums = _window_sums(self.pixels, self.window_slices)
         self.has_capture = True
         self.capture_no += 1
         return encode_reply(MsgType.CAPTURE, capture_no=self.capture_no, sensor_frame=self.sensor_frame,
@@ -446,7 +446,7 @@ class HeadEmulator:
         self.spans, self.window_ids, self.window_slices = self._validate_spans(spans)[:3]
         self.pixels = (np.concatenate([img[r, c0:c1] for _, r, c0, c1 in spans.tolist()]) if len(spans)
                        else np.zeros(0, np.uint16))
-        self.sums = [int(self.pixels[s].sum()) for s in self.window_slices]
+        self.sums = _window_sums(self.pixels, self.window_slices)
         self.has_capture = True
         self.capture_no += 1
         return encode_reply(MsgType.FIND_SPOTS, encode_spots(found["spots"]), capture_no=self.capture_no,

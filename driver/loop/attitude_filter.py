@@ -78,11 +78,9 @@ class AttitudeFilter:
         records into ``out`` (its first ``hi − lo`` rows; one numba call); returns the count
         of stuck-axis samples."""
         hi = smp.n if hi is None else hi
-        if lo == 0:
-            return predict_batch(smp.t, smp.rate, smp.flags, hi, *self._state, flags_first, flags_base, mode, refs,
-                                 ids, cam, uv_last, self.mid, self.smoothed, out)
-        return predict_batch(smp.t[lo:], smp.rate[lo:], smp.flags[lo:], hi - lo, *self._state, flags_first,
-                             flags_base, mode, refs, ids, cam, uv_last, self.mid, self.smoothed, out)
+        t, rate, flags = (smp.t, smp.rate, smp.flags) if lo == 0 else (smp.t[lo:], smp.rate[lo:], smp.flags[lo:])
+        return predict_batch(t, rate, flags, hi - lo, *self._state, flags_first, flags_base, mode, refs, ids, cam,
+                             uv_last, self.mid, self.smoothed, out)
 
     def q_at(self, t: float) -> np.ndarray:
         """Attitude estimate at host time ``t`` (s): the newest sample at or before it,

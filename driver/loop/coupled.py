@@ -123,6 +123,16 @@ class Counters:
     mode_changes: list = field(default_factory=list)
 
 
+def _ring_put(ring: np.ndarray, count: int, values: np.ndarray) -> int:
+    """Write ``values`` into ``ring`` after the ``count`` written so far (wrapping round);
+    returns the new count. The ring's first ``min(count, len(ring))`` entries are the kept ones."""
+    i = count % len(ring)
+    m = min(len(values), len(ring) - i)
+    ring[i:i + m] = values[:m]
+    ring[:len(values) - m] = values[m:]
+    return count + len(values)
+
+
 class CoupledLoop:
     """The loop. ``sinks`` get each step's output records (``put(records, t_ns)``)."""
 
@@ -362,13 +372,7 @@ class CoupledLoop:
     def _note_ages(self, lo: int, hi: int) -> None:
         """Keep how old samples ``lo:hi`` were when their step began (s, the loop's clock): the
         wait in the FIFO that a watermark above 1 adds to every output but the newest."""
-        ring = self.age
-        i = self.n_age % len(ring)
-        m = min(hi - lo, len(ring) - i)
-        ring[i:i + m] = self.t_step_prev - self.samples.t[lo:lo + m]
-        if m < hi - lo:                  # the ring wraps: the rest from its start
-            ring[:hi - lo - m] = self.t_step_prev - self.samples.t[lo + m:hi]
-        self.n_age += hi - lo
+        self.n_age = _ring_put(self.age, self.n_age, self.t_step_prev - self.samples.t[lo:hi])
 
     def _predict(self, lo: int, hi: int) -> None:
         """Predict samples ``lo:hi`` of :attr:`samples` into rows ``lo:hi`` of this step's
@@ -414,10 +418,7 @@ class CoupledLoop:
         if self._mids:                   # streamed frames whose update these outputs are the first to hold
             # on the loop's clock, the frames' own timeline (the latency clock is the same clock
             # in real time; on a simulated clock it measures host compute, which takes no time there)
-            t_out = self.clock.now()
-            for t_mid in self._mids:
-                self.e2o[self.n_e2o % len(self.e2o)] = t_out - t_mid
-                self.n_e2o += 1
+            self.n_e2o = _ring_put(self.e2o, self.n_e2o, self.clock.now() - np.asarray(self._mids))
             self._mids.clear()
         self.gyro_path_cpu_s += time.thread_time() - c0
         self.gyro_path_s += time.perf_counter() - w0
@@ -570,7 +571,7 @@ class CoupledLoop:
         out: dict = {}
         n = min(self.n_age, len(self.age))
         if n:
-            age = np.maximum(self.age[:n], 0.0) * 1e3
+            age = np.maximum(self.age[:n], 0.0) * 1e3      # the ring's order does not matter here
             out["sample_age_at_step_ms_p50"] = float(np.median(age))
             out["sample_age_at_step_ms_p99"] = float(np.percentile(age, 99))
         n = min(self.n_e2o, len(self.e2o))

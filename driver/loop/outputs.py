@@ -9,8 +9,8 @@ space packets) in one call.
 Sinks that keep records rather than react to them (``block = True``: the run log's
 recorder, an in-memory keeper) get them in blocks of :attr:`OutputStage.block_rows`
 consecutive records (50 ms at 400 Hz; handed over at the next batch), and the rest at
-:meth:`OutputStage.flush` (the loop's close): one hand-over per block instead of one per gyro sample, so the 400 Hz
-path touches their code and memory once every 20 samples.
+:meth:`OutputStage.flush` (the loop's close): one hand-over per block instead of one per
+gyro sample, so the 400 Hz path touches their code and memory once every 20 samples.
 """
 
 from __future__ import annotations
