@@ -14,7 +14,6 @@ Two halves, kept apart so that replay can reuse the second:
 
 from __future__ import annotations
 
-import bisect
 import dataclasses
 import logging
 import math
@@ -37,46 +36,18 @@ DEG = math.pi / 180.0
 # ---------------------------------------------------------------------------- truth
 def scenario_profile(scen: hc.Scenario):
     """The scenario's body-rate profile (a :class:`gyrostar.mocks.trajectory.RateProfile`)."""
-    from ..mocks.trajectory import RateProfile
+    from ..mocks.trajectory import LinearSegments
 
-    class SegmentProfile(RateProfile):
-        """Piecewise-linear body rate from the scenario's segments (rad/s)."""
-
-        def __init__(self, segments):
-            t = 0.0
-            self.t0, self.t1, self.w0, self.w1 = [], [], [], []
-            for s in segments:
-                self.t0.append(t)
-                t += s.seconds
-                self.t1.append(t)
-                w0 = np.asarray(s.rate_dps, float) * DEG
-                self.w0.append(w0)
-                self.w1.append(np.asarray(s.rate_end_dps, float) * DEG if s.rate_end_dps is not None else w0)
-            if not self.t0:
-                self.t0, self.t1, self.w0, self.w1 = [0.0], [math.inf], [np.zeros(3)], [np.zeros(3)]
-            self.t0, self.t1 = np.array(self.t0), np.array(self.t1)
-            self.w0, self.w1 = np.array(self.w0), np.array(self.w1)
-            self.duration_s = float(self.t1[-1])
-            self._t1_list = self.t1.tolist()
-            self._last = len(self.t0) - 1
-            self._span = np.where(np.isfinite(self.t1), self.t1 - self.t0, 1.0)
-
-        def rate(self, t):
-            t = np.atleast_1d(np.asarray(t, dtype=np.float64))
-            if t.ndim == 1 and len(t):
-                # the usual query (an exposure, an integration step) lies in one segment: the
-                # same arithmetic on scalars of that segment
-                ia = min(bisect.bisect_right(self._t1_list, float(t.min())), self._last)
-                if ia == min(bisect.bisect_right(self._t1_list, float(t.max())), self._last):
-                    span = self._span[ia]
-                    f = np.clip((t - self.t0[ia]) / span, 0.0, 1.0)[:, None]
-                    return (1.0 - f) * self.w0[ia] + f * self.w1[ia]
-            i = np.clip(np.searchsorted(self.t1, t, side="right"), 0, len(self.t0) - 1)
-            span = np.where(np.isfinite(self.t1[i]), self.t1[i] - self.t0[i], 1.0)
-            f = np.clip((t - self.t0[i]) / span, 0.0, 1.0)[:, None]
-            return (1.0 - f) * self.w0[i] + f * self.w1[i]
-
-    return SegmentProfile(scen.segments)
+    t, t0, t1, w0, w1 = 0.0, [], [], [], []
+    for seg in scen.segments:
+        t0.append(t)
+        t += seg.seconds
+        t1.append(t)
+        w0.append(np.asarray(seg.rate_dps, float) * DEG)
+        w1.append(np.asarray(seg.rate_end_dps, float) * DEG if seg.rate_end_dps is not None else w0[-1])
+    if not t0:
+        t0, t1, w0, w1 = [0.0], [math.inf], [np.zeros(3)], [np.zeros(3)]
+    return LinearSegments(t0, t1, w0, w1)
 
 
 class Truth:

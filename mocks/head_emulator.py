@@ -344,7 +344,7 @@ class HeadEmulator:
         q_start, omega = self.scene.at(t0_host)
         sky = self._sky_for(self.exposure_us)
         self.sensor_frame += 1
-        pixels, _ = sky.render_windows(self.spans, q_start, omega, frame=self.sensor_frame, noise=self.noise)
+        pixels = sky.window_pixels(self.spans, q_start, omega, frame=self.sensor_frame, noise=self.noise)
         self.rendered_pixels += len(pixels)
         # the exposure takes its time: the reply leaves after the exposure end
         remaining = t0_host + self.exposure_us * 1e-6 - self.clock.now()
@@ -541,8 +541,8 @@ class HeadEmulator:
             return np.zeros(0, np.uint16)
         q_start, omega = self.scene.at(s.t_start)
         self.sensor_frame += 1
-        pixels, _ = self._sky_for(s.exposure_us).render_windows(spans, q_start, omega, frame=self.sensor_frame,
-                                                                noise=self.noise)
+        pixels = self._sky_for(s.exposure_us).window_pixels(spans, q_start, omega, frame=self.sensor_frame,
+                                                             noise=self.noise)
         self.rendered_pixels += len(pixels)
         return np.minimum(pixels, 0x3FF).astype(np.uint16)
 
@@ -700,7 +700,7 @@ class HeadEmulator:
 
         sky = self._sky_for(self.exposure_us)
         img, _ = sky.render_frame(q0, np.zeros(3), frame=0)
-        sky.render_windows(np.array([[0, 10, 10, 16]], np.int32), q0, np.zeros(3), frame=0)
+        sky.window_pixels(np.array([[0, 10, 10, 16]], np.int32), q0, np.zeros(3), frame=0)
         find_spots(np.asarray(img)[:64, :64], 96, 8, 7)
         pack10(np.arange(8, dtype=np.uint16))
         integrate(np.asarray(q0, float), Constant((0.0, 0.0, 1e-3)), np.array([0.0, 0.02]), max_step_s=0.01)

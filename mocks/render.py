@@ -61,6 +61,13 @@ def star_paths(params, vecs_icrs, quats):
 
 
 @njit(cache=True, nogil=True)
+def star_paths_boxes(params, vecs_icrs, quats, sigma, width, height):
+    """``(star_paths(params, vecs_icrs, quats), star_boxes(…))`` in one call."""
+    paths = star_paths(params, vecs_icrs, quats)
+    return paths, star_boxes(paths, sigma, width, height)
+
+
+@njit(cache=True, nogil=True)
 def weighted_mean_paths(paths, wts):
     """Σ_k wts[k] · paths[:, k, :] (n, 2): a path's weighted time average."""
     n, m = paths.shape[0], paths.shape[1]
@@ -195,19 +202,31 @@ def clear_boxes(signal, boxes):
                 signal[r, c] = 0.0
 
 
+@njit(cache=True)
+def _span_fault(spans, width, height):
+    """0 when every span lies on the sensor with col_start < col_stop and the spans are sorted
+    by window id then row; 1 for a span off the sensor or empty, 2 for an order fault."""
+    for i in range(spans.shape[0]):
+        row, c0, c1 = spans[i, 1], spans[i, 2], spans[i, 3]
+        if row < 0 or row >= height or c0 < 0 or c1 > width or c1 <= c0:
+            return 1
+    for i in range(1, spans.shape[0]):
+        if spans[i, 0] < spans[i - 1, 0] or (spans[i, 0] == spans[i - 1, 0] and spans[i, 1] < spans[i - 1, 1]):
+            return 2
+    return 0
+
+
 def check_spans(spans: np.ndarray, width: int, height: int) -> np.ndarray:
     """Validate a span array (see module docstring); returns it as contiguous int32 (n, 4)."""
     from gyrostar.errors import ConfigError
 
     a = np.asarray(spans)
-    if a.ndim != 2 or a.shape[1] != 4 or not np.issubdtype(a.dtype, np.integer):
+    if a.ndim != 2 or a.shape[1] != 4 or a.dtype.kind not in "iu":
         raise ConfigError(f"spans must be an integer array of shape (n, 4), got {a.dtype} {a.shape}")
     a = np.ascontiguousarray(a, dtype=np.int32)
-    if a.shape[0] == 0:
-        return a
-    row, c0, c1 = a[:, 1], a[:, 2], a[:, 3]
-    if row.min() < 0 or row.max() >= height or c0.min() < 0 or c1.max() > width or np.any(c1 <= c0):
+    fault = _span_fault(a, width, height)
+    if fault == 1:
         raise ConfigError(f"spans must lie on the {width}x{height} sensor with col_start < col_stop")
-    if np.any(np.diff(a[:, 1].astype(np.int64) + a[:, 0].astype(np.int64) * (1 << 32)) < 0):
+    if fault == 2:
         raise ConfigError("spans must be sorted by window_id then row")
     return a

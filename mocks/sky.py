@@ -39,7 +39,9 @@ import math
 import numpy as np
 from gyrostar.attitude import quat_conj, quat_mult, quat_to_dcm
 from gyrostar.catalog import StarCatalog
+from gyrostar.core.windows import span_pixel_count
 from gyrostar.errors import ConfigError
+from numba import njit
 
 from . import pixel_noise, render
 from .sim_preset import SimPreset, load_preset
@@ -133,20 +135,10 @@ class Sky:
 
     def expose(self, q_start, omega=None, quats=None) -> Exposure:
         """Star paths and truth for one exposure (no pixels)."""
-        q_start = np.asarray(q_start, dtype=np.float64)
-        if q_start.shape != (4,) or not np.isfinite(q_start).all() or abs(np.linalg.norm(q_start) - 1) > 1e-6:
-            raise ConfigError("q_start must be a unit quaternion [x, y, z, w]")
+        q_start, rates2, n_sub, w_max = self._exposure_setup(q_start, omega, quats)
         t_exp = self.preset.detector.exposure_s
-        rates = _as_rates(q_start, omega, quats, t_exp)
-        w_max = float(np.max(np.linalg.norm(np.atleast_2d(rates), axis=1)))
-        f = self.camera.focal_length_px
-        half = math.hypot(self.camera.width_px, self.camera.height_px) / 2.0
-        # image speed bound: |ω|·(F + r²/F) px/s at radius r from the principal point
-        path_px = w_max * t_exp * (f + half * half / f)
-        n_sub = int(min(render.MAX_SUBSTEPS, max(1, math.ceil(path_px / render.MAX_STEP_PX))))
         # one exact attitude grid: 4·n_sub intervals; sub-step midpoints are every 4th from 2
         n_grid = 4 * n_sub
-        rates2 = np.ascontiguousarray(np.atleast_2d(rates), dtype=np.float64)
         qs = piecewise_attitudes(q_start, rates2, t_exp, np.arange(n_grid + 1) * (t_exp / n_grid))
         q_mid, q_fin = qs[2 * n_sub].copy(), qs[-1].copy()
         # stars near the field: within the field radius + the rotation of the exposure
@@ -162,20 +154,54 @@ class Sky:
         ids, vmag, electrons = self.catalog.ids[sel], self.catalog.vmag[sel], self.electrons[sel]
         k = len(self.false_spots)
         if k:
-            # glints do not move with the attitude: the same position at every sub-step
-            spot_paths = np.repeat(self.false_spots[:, None, :2], paths.shape[1], axis=1)
-            paths = np.ascontiguousarray(np.concatenate([paths, spot_paths]))
-            boxes = np.concatenate([boxes, render.star_boxes(np.ascontiguousarray(spot_paths),
-                                                             self.preset.optics.psf_sigma_px,
-                                                             self.camera.width_px, self.camera.height_px)])
+            paths, boxes, electrons = self._add_glints(paths, boxes, electrons)
             uv = np.concatenate([uv, self.false_spots[:, :2]])
             ids = np.concatenate([ids, -1 - np.arange(k, dtype=ids.dtype)])
             vmag = np.concatenate([vmag, self.false_spots[:, 2]])
-            electrons = np.concatenate([electrons, self._spot_electrons])
         w, h = self.camera.width_px, self.camera.height_px
         in_field = (uv[:, 0] >= -0.5) & (uv[:, 0] < w - 0.5) & (uv[:, 1] >= -0.5) & (uv[:, 1] < h - 0.5)
         truth = StarTruth(ids, vmag, uv, in_field, electrons, q_start.copy(), q_mid, q_fin, t_exp)
         return Exposure(paths, boxes, truth)
+
+    def _exposure_setup(self, q_start, omega, quats):
+        """``(q_start, rates (m, 3), n_sub, w_max)`` of one exposure: the validated start
+        attitude, its piecewise-constant rates (rad/s), the sub-step count that keeps
+        ≤ ``render.MAX_STEP_PX`` between path samples and the largest rate (rad/s)."""
+        q_start = np.asarray(q_start, dtype=np.float64)
+        if q_start.shape != (4,) or not _is_unit_quat(q_start):
+            raise ConfigError("q_start must be a unit quaternion [x, y, z, w]")
+        t_exp = self.preset.detector.exposure_s
+        rates = np.ascontiguousarray(np.atleast_2d(_as_rates(q_start, omega, quats, t_exp)), dtype=np.float64)
+        n_sub, w_max = _substeps(rates, t_exp, self.camera.focal_length_px,
+                                 math.hypot(self.camera.width_px, self.camera.height_px) / 2.0)
+        return q_start, rates, n_sub, w_max
+
+    def window_pixels(self, spans, q_start, omega=None, frame: int = 0, noise: bool = True) -> np.ndarray:
+        """Span pixels (uint16 (m,) ADU in span order) of one exposure: the pixels of
+        :meth:`render_windows`, to the bit, without its truth (the star paths are taken at
+        the sub-steps only; the emulated heads' per-frame path)."""
+        spans = render.check_spans(spans, self.camera.width_px, self.camera.height_px)
+        q_start, rates, n_sub, w_max = self._exposure_setup(q_start, omega, None)
+        t_exp = self.preset.detector.exposure_s
+        qs, bore = _substep_attitudes(q_start, rates, t_exp, n_sub)
+        sel = self._near(bore, self._field_radius + w_max * t_exp)
+        paths, boxes = render.star_paths_boxes(self.params, np.ascontiguousarray(self.catalog.vectors[sel]), qs,
+                                               self.preset.optics.psf_sigma_px, self.camera.width_px,
+                                               self.camera.height_px)
+        electrons = self.electrons[sel]
+        if len(self.false_spots):
+            paths, boxes, electrons = self._add_glints(paths, boxes, electrons)
+        return self._readout(paths, electrons, boxes, spans, frame, noise)
+
+    def _add_glints(self, paths, boxes, electrons):
+        """``(paths, boxes, electrons)`` with the stray-light glints after the stars: they do
+        not move with the attitude (the same position at every sub-step)."""
+        spot_paths = np.repeat(self.false_spots[:, None, :2], paths.shape[1], axis=1)
+        return (np.ascontiguousarray(np.concatenate([paths, spot_paths])),
+                np.concatenate([boxes, render.star_boxes(np.ascontiguousarray(spot_paths),
+                                                         self.preset.optics.psf_sigma_px,
+                                                         self.camera.width_px, self.camera.height_px)]),
+                np.concatenate([electrons, self._spot_electrons]))
 
     def _near(self, bore: np.ndarray, reach: float) -> np.ndarray:
         """Catalog indexes (ascending) within ``reach`` rad of ``bore``.
@@ -226,20 +252,56 @@ class Sky:
         """Span pixels: (uint16 (m,) ADU in span order, StarTruth)."""
         spans = render.check_spans(spans, self.camera.width_px, self.camera.height_px)
         exp = self.expose(q_start, omega, quats)
-        return self._readout(exp, spans, frame, noise), exp.truth
+        return self._readout(exp.paths, exp.truth.electrons, exp.boxes, spans, frame, noise), exp.truth
 
     def readout_windows(self, exp: Exposure, spans: np.ndarray, frame: int = 0, noise: bool = True) -> np.ndarray:
         """Span pixels (uint16, span order) of an already computed exposure; ``spans`` are validated."""
-        return self._readout(exp, render.check_spans(spans, self.camera.width_px, self.camera.height_px), frame, noise)
+        return self._readout(exp.paths, exp.truth.electrons, exp.boxes,
+                             render.check_spans(spans, self.camera.width_px, self.camera.height_px), frame, noise)
 
-    def _readout(self, exp: Exposure, spans: np.ndarray, frame: int, noise: bool) -> np.ndarray:
-        npx = int(np.sum(spans[:, 3].astype(np.int64) - spans[:, 2]))
-        sig = np.zeros(npx)
-        render.add_stars_spans(sig, spans, exp.paths, exp.truth.electrons, exp.boxes,
-                               self.preset.optics.psf_sigma_px)
+    def _readout(self, paths, electrons, boxes, spans: np.ndarray, frame: int, noise: bool) -> np.ndarray:
+        """ADU of the (validated) ``spans`` under stars on ``paths`` with ``electrons`` and ``boxes``."""
+        sig = np.zeros(span_pixel_count(spans))
+        render.add_stars_spans(sig, spans, paths, electrons, boxes, self.preset.optics.psf_sigma_px)
         gain, dark, lam_bg, exp_bg = self._noise_maps()
         return pixel_noise.digitise_spans(sig, spans, gain, dark, lam_bg, exp_bg, self.seed, int(frame), self.det,
                                           bool(noise), pixel_noise.normal_table())
+
+
+@njit(cache=True)
+def _is_unit_quat(q) -> bool:
+    n2 = 0.0
+    for i in range(4):
+        if not math.isfinite(q[i]):
+            return False
+        n2 += q[i] * q[i]
+    return abs(math.sqrt(n2) - 1.0) <= 1e-6
+
+
+@njit(cache=True)
+def _substeps(rates, t_exp, f, half):
+    """``(n_sub, w_max)``: path samples of an exposure of ``t_exp`` s under ``rates`` (m, 3)
+    rad/s — the image moves at most |ω|·(F + r²/F) px/s at radius r ≤ ``half`` px from the
+    principal point (focal length F px) — and the largest rate (rad/s)."""
+    w_max = 0.0
+    for i in range(rates.shape[0]):
+        w_max = max(w_max, math.sqrt(rates[i, 0] * rates[i, 0] + rates[i, 1] * rates[i, 1] + rates[i, 2] * rates[i, 2]))
+    path_px = w_max * t_exp * (f + half * half / f)
+    n_sub = int(min(render.MAX_SUBSTEPS, max(1, math.ceil(path_px / render.MAX_STEP_PX))))
+    return n_sub, w_max
+
+
+@njit(cache=True, nogil=True)
+def _substep_attitudes(q_start, rates, t_exp, n_sub):
+    """``(attitudes (n_sub, 4) at the sub-step midpoints, boresight (3,) at mid-exposure)``:
+    the points 2, 6, 10 … and 2·n_sub of :meth:`Sky.expose`'s grid of 4·n_sub intervals."""
+    step = t_exp / (4 * n_sub)
+    times = np.empty(n_sub + 1)
+    for k in range(n_sub):
+        times[k] = (4 * k + 2) * step
+    times[n_sub] = (2 * n_sub) * step
+    qs = piecewise_attitudes(q_start, rates, t_exp, times)
+    return qs[:n_sub].copy(), quat_to_dcm(qs[n_sub])[2].copy()
 
 
 def _simpson_mean(paths: np.ndarray) -> np.ndarray:

@@ -128,6 +128,71 @@ class Jitter(RateProfile):
             2.0 * np.pi * np.asarray(self.frequency_hz) * t + np.asarray(self.phase))
 
 
+class LinearSegments(RateProfile):
+    """Body rate linear within each segment: ``w0[i]`` at ``t0[i]`` to ``w1[i]`` at ``t1[i]``
+    (s, rad/s; segments back to back, ``t1[-1]`` may be inf); constant outside. The rate and
+    the one-interval integration (:func:`integrate_to`) are compiled: the flatsat's truth
+    asks for both once per rendered frame."""
+
+    def __init__(self, t0, t1, w0, w1):
+        self.t0 = np.ascontiguousarray(t0, dtype=np.float64)
+        self.t1 = np.ascontiguousarray(t1, dtype=np.float64)
+        self.w0 = np.ascontiguousarray(np.reshape(w0, (-1, 3)), dtype=np.float64)
+        self.w1 = np.ascontiguousarray(np.reshape(w1, (-1, 3)), dtype=np.float64)
+        n = len(self.t0)
+        if n == 0 or len(self.t1) != n or len(self.w0) != n or len(self.w1) != n or np.any(self.t1 <= self.t0) \
+                or np.any(self.t0[1:] != self.t1[:-1]):
+            raise ConfigError("linear segments need back-to-back increasing [t0, t1) and one start and end rate each")
+        self.duration_s = float(self.t1[-1])
+        self.span = np.where(np.isfinite(self.t1), self.t1 - self.t0, 1.0)
+
+    def rate(self, t):
+        t = np.asarray(t, dtype=np.float64)
+        out = _linear_segment_rates(np.ascontiguousarray(t.reshape(-1)), self.t0, self.t1, self.w0, self.w1,
+                                    self.span)
+        return out.reshape(t.shape + (3,)) if t.ndim else out
+
+    def attitude_after(self, q0: np.ndarray, t0: float, t1: float, max_step_s: float) -> np.ndarray:
+        """:func:`integrate_to` for this profile, in one compiled call (the same values)."""
+        return _linear_segments_integrate_to(np.asarray(q0, dtype=np.float64), float(t0), float(t1),
+                                             float(max_step_s), self.t0, self.t1, self.w0, self.w1, self.span)
+
+
+@njit(cache=True)
+def _linear_segment_rates(t, t0, t1, w0, w1, span):
+    """Rates (n, 3) of :class:`LinearSegments` at times ``t`` (n,): in segment i (the first
+    whose end is after t, else the last), ``(1 − f)·w0 + f·w1`` with f = (t − t0)/span clipped
+    to [0, 1]."""
+    n = t.shape[0]
+    last = t0.shape[0] - 1
+    out = np.empty((n, 3))
+    for k in range(n):
+        i = min(np.searchsorted(t1, t[k], side="right"), last)
+        f = min(max((t[k] - t0[i]) / span[i], 0.0), 1.0)
+        for a in range(3):
+            out[k, a] = (1.0 - f) * w0[i, a] + f * w1[i, a]
+    return out
+
+
+@njit(cache=True)
+def _linear_segments_integrate_to(q0, t_start, t_end, max_step_s, t0, t1, w0, w1, span):
+    """:func:`integrate_to` on :class:`LinearSegments` (the same grid and steps)."""
+    gap = t_end - t_start
+    n = max(1, math.ceil(gap / max_step_s))
+    grid = np.empty(n + 1)
+    grid[0] = t_start
+    for i in range(1, n + 1):
+        grid[i] = t_start + gap * i / n
+    h = np.empty(n)
+    nodes = np.empty(2 * n)
+    for i in range(n):
+        h[i] = grid[i + 1] - grid[i]
+        nodes[i] = grid[i] + _G1 * h[i]
+        nodes[n + i] = grid[i] + _G2 * h[i]
+    w = _linear_segment_rates(nodes, t0, t1, w0, w1, span)
+    return _cf4_steps(q0, np.ascontiguousarray(w[:n]), np.ascontiguousarray(w[n:]), h)[n].copy()
+
+
 @njit(cache=True)
 def _cf4_steps(q0, w1, w2, h):
     n = w1.shape[0]
@@ -175,6 +240,8 @@ def integrate_to(q0: np.ndarray, profile: RateProfile, t0: float, t1: float, max
     ``integrate(q0, profile, [t0, t1])``, to the bit, with the grid of one interval built
     directly (a truth query per rendered frame: the general grid's bookkeeping cost more
     than the integration)."""
+    if isinstance(profile, LinearSegments):
+        return profile.attitude_after(q0, t0, t1, max_step_s)
     gap = t1 - t0
     n = max(1, math.ceil(gap / max_step_s))
     grid = np.empty(n + 1)

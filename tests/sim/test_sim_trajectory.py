@@ -104,7 +104,10 @@ def test_integrate_to_is_the_last_row_of_integrate_to_the_bit():
     q0 /= np.linalg.norm(q0)
     profiles = [tj.Ramp((0.01, 0.02, 0.0), (0.05, -0.01, 0.02), 1.0, 3.0),
                 tj.Jitter(tj.Constant((0.0, 0.01, 0.0)), (1e-3, 2e-3, 1e-3), (3.0, 5.0, 7.0)),
-                tj.Piecewise((0.0, 0.7, 1.9), ((0.0, 0.0, 0.02), (0.01, 0.0, 0.0), (0.0, -0.03, 0.0)))]
+                tj.Piecewise((0.0, 0.7, 1.9), ((0.0, 0.0, 0.02), (0.01, 0.0, 0.0), (0.0, -0.03, 0.0))),
+                tj.LinearSegments([0.0, 0.8, 2.5], [0.8, 2.5, np.inf],
+                                  [(0.0, 0.01, 0.0), (0.02, 0.0, -0.01), (0.0, 0.0, 0.03)],
+                                  [(0.02, 0.0, -0.01), (0.0, 0.0, 0.03), (0.0, 0.0, 0.03)])]
     n = 0
     for p in profiles:
         for _ in range(400):
@@ -116,4 +119,17 @@ def test_integrate_to_is_the_last_row_of_integrate_to_the_bit():
             b = tj.integrate_to(q0, p, t0, t0 + gap)
             assert a.tobytes() == b.tobytes(), (p, t0, gap)
             n += 1
-    assert n > 1100
+    assert n > 1500
+
+
+def test_linear_segments_rates_by_hand():
+    """Linear within each segment, held after the last; a scalar time gives one row."""
+    p = tj.LinearSegments([0.0, 2.0], [2.0, np.inf], [(0.0, 0.0, 0.0), (1.0, 1.0, 1.0)],
+                          [(2.0, -4.0, 0.0), (1.0, 1.0, 1.0)])
+    got = p.rate(np.array([0.0, 0.5, 1.999, 2.0, 7.0, -1.0]))
+    want = np.array([[0.0, 0.0, 0.0], [0.5, -1.0, 0.0], [1.999, -3.998, 0.0], [1.0, 1.0, 1.0],
+                     [1.0, 1.0, 1.0], [0.0, 0.0, 0.0]])
+    assert np.allclose(got, want, rtol=0, atol=1e-15)
+    assert p.rate(1.0).shape == (1, 3)
+    with pytest.raises(ConfigError):
+        tj.LinearSegments([0.0, 1.5], [1.0, 2.0], [(0, 0, 0)] * 2, [(0, 0, 0)] * 2)     # a gap

@@ -43,6 +43,24 @@ def test_windows_identical_to_full_frame(sky, rate_dps, frame):
     assert np.array_equal(truth.uv, truth2.uv)
     # the windows hold star light (well above the background level)
     assert pix.max() > 200
+    # the emulators' pixels-only path reads the same pixels
+    assert np.array_equal(sky.window_pixels(spans, q, omega, frame=frame), ref)
+
+
+def test_window_pixels_with_glints_and_segment_rates_equal_the_full_frame():
+    """Piecewise-constant rates over 8 segments (the emulated head's input) and stray-light
+    glints: the pixels-only path reads the full frame's pixels exactly."""
+    glints = np.array([[300.0, 700.0, 3.0], [812.4, 95.6, 5.5]])
+    sky = Sky(load_catalog("hip2", 7.0), "xing2012", seed=3, false_spots=glints)
+    q = quat_from_boresight(math.radians(210.0), math.radians(35.0), -1.1)
+    omega = np.radians([[2.0 + 0.3 * k, -1.5, 0.7 * k] for k in range(8)])
+    img, truth = sky.render_frame(q, omega, frame=77)
+    uv = np.vstack([truth.uv[truth.in_field][:8], glints[:, :2]])
+    spans = _spans_around(uv, half=6)
+    ref = np.concatenate([img[r, a:b] for _, r, a, b in spans])
+    pix = sky.window_pixels(spans, q, omega, frame=77)
+    assert np.array_equal(pix, ref)
+    assert pix.max() > 500          # the glints' windows are lit
 
 
 def test_noise_depends_on_frame_and_seed(sky):
@@ -74,6 +92,8 @@ def test_bad_spans_rejected(sky):
                 np.zeros((2, 3), dtype=np.int32), [[0.5, 1, 2, 3]]):
         with pytest.raises(ConfigError):
             sky.render_windows(np.asarray(bad), q, np.zeros(3))
+        with pytest.raises(ConfigError):
+            sky.window_pixels(np.asarray(bad), q, np.zeros(3))
     with pytest.raises(ConfigError):
         sky.render_frame(np.array([0, 0, 0, 2.0]), np.zeros(3))
 
