@@ -36,6 +36,7 @@ import tty
 
 import numpy as np
 from cobs import cobs
+from numba import njit
 from gyrostar.protocol import MsgType
 from gyrostar.protocol.defs import (
     ERROR_TEXT,
@@ -310,33 +311,13 @@ class HeadEmulator:
 
     def _validate_spans(self, spans: np.ndarray) -> tuple:
         """(spans, window ids, pixel slices per window, pixels) of a valid set, else _Reject."""
-        ids, slices, total, in_win, start = [], [], 0, 0, 0
-        p_wid = p_row = -1          # the previous span's window and row (ids and rows are ≥ 0)
-        for i, (wid, row, c0, c1) in enumerate(spans.tolist()):
-            if row >= self.height or c1 > self.width:
-                raise _Reject(ErrorCode.SPAN_OUTSIDE, i)
-            if c0 >= c1:
-                raise _Reject(ErrorCode.SPAN_EMPTY, i)
-            if i and (wid < p_wid or (wid == p_wid and row <= p_row)):
-                raise _Reject(ErrorCode.SPAN_ORDER, i)
-            new_window = not i or wid != p_wid
-            p_wid, p_row = wid, row
-            if new_window:
-                if len(ids) + 1 > LIMITS["max_windows"]:
-                    raise _Reject(ErrorCode.WINDOW_COUNT, i)
-                if ids:
-                    slices.append(slice(start, total))
-                ids.append(wid)
-                start, in_win = total, 0
-            in_win += c1 - c0
-            total += c1 - c0
-            if in_win > LIMITS["max_window_pixels"]:
-                raise _Reject(ErrorCode.WINDOW_TOO_LARGE, i)
-            if total > LIMITS["pixel_budget"]:
-                raise _Reject(ErrorCode.PIXEL_BUDGET, i)
-        if ids:
-            slices.append(slice(start, total))
-        return spans, ids, slices, total
+        fault, at, ids, bounds, total = _scan_spans(np.ascontiguousarray(spans, dtype=np.int64), self.height,
+                                                    self.width, LIMITS["max_windows"],
+                                                    LIMITS["max_window_pixels"], LIMITS["pixel_budget"])
+        if fault:
+            raise _Reject(_SCAN_FAULTS[fault], int(at))
+        b = bounds.tolist()
+        return spans, ids.tolist(), [slice(b[j], b[j + 1]) for j in range(len(b) - 1)], int(total)
 
     def _capture(self) -> bytes:
         t0_host = self.clock.now()
@@ -751,6 +732,52 @@ class _Stream:
         emu.frame_no += 1
         self.frame = emu.frame_no
         self.t_start += self.period_us * 1e-6
+
+
+_SCAN_FAULTS = {1: ErrorCode.SPAN_OUTSIDE, 2: ErrorCode.SPAN_EMPTY, 3: ErrorCode.SPAN_ORDER,
+                4: ErrorCode.WINDOW_COUNT, 5: ErrorCode.WINDOW_TOO_LARGE, 6: ErrorCode.PIXEL_BUDGET}
+
+
+@njit(cache=True)
+def _scan_spans(spans, height, width, max_windows, max_window_pixels, pixel_budget):
+    """The firmware's window-set checks in span order: ``(fault, span index, window ids (k,),
+    window pixel bounds (k + 1,), pixels)``; fault 0 (valid) or a key of ``_SCAN_FAULTS``
+    for the first span that breaks a rule (off the sensor, empty, out of order, one window
+    too many, a window or the set over its pixel budget)."""
+    n = spans.shape[0]
+    ids = np.empty(n, np.int64)
+    bounds = np.zeros(n + 1, np.int64)
+    k = 0
+    total = 0
+    in_win = 0
+    p_wid = -1
+    p_row = -1
+    for i in range(n):
+        wid, row, c0, c1 = spans[i, 0], spans[i, 1], spans[i, 2], spans[i, 3]
+        if row >= height or c1 > width:
+            return 1, i, ids[:0], bounds[:1], 0
+        if c0 >= c1:
+            return 2, i, ids[:0], bounds[:1], 0
+        if i > 0 and (wid < p_wid or (wid == p_wid and row <= p_row)):
+            return 3, i, ids[:0], bounds[:1], 0
+        new_window = i == 0 or wid != p_wid
+        p_wid = wid
+        p_row = row
+        if new_window:
+            if k + 1 > max_windows:
+                return 4, i, ids[:0], bounds[:1], 0
+            ids[k] = wid
+            bounds[k] = total
+            k += 1
+            in_win = 0
+        in_win += c1 - c0
+        total += c1 - c0
+        if in_win > max_window_pixels:
+            return 5, i, ids[:0], bounds[:1], 0
+        if total > pixel_budget:
+            return 6, i, ids[:0], bounds[:1], 0
+    bounds[k] = total
+    return 0, -1, ids[:k].copy(), bounds[:k + 1].copy(), total
 
 
 def _window_sums(pixels: np.ndarray, slices: list) -> list:

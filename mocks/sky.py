@@ -109,6 +109,7 @@ class Sky:
         self.seed = int(seed) & 0x7FFFFFFFFFFFFFFF
         self.electrons = np.asarray(self.preset.star_electrons(catalog.vmag), dtype=np.float64)
         self._fpn = None
+        self._span_maps = None   # the four maps interleaved for the span digitiser, built on first use
         self._sig_pool: list[np.ndarray] = []
         self._cand = None  # (boresight, radius, catalog indexes) of the last wide selection
         f = self.camera.focal_length_px
@@ -263,8 +264,9 @@ class Sky:
         """ADU of the (validated) ``spans`` under stars on ``paths`` with ``electrons`` and ``boxes``."""
         sig = np.zeros(span_pixel_count(spans))
         render.add_stars_spans(sig, spans, paths, electrons, boxes, self.preset.optics.psf_sigma_px)
-        gain, dark, lam_bg, exp_bg = self._noise_maps()
-        return pixel_noise.digitise_spans(sig, spans, gain, dark, lam_bg, exp_bg, self.seed, int(frame), self.det,
+        if self._span_maps is None:
+            self._span_maps = pixel_noise.span_maps(*self._noise_maps())
+        return pixel_noise.digitise_spans(sig, spans, self._span_maps, self.seed, int(frame), self.det,
                                           bool(noise), pixel_noise.normal_table())
 
 
