@@ -36,7 +36,6 @@ import tty
 
 import numpy as np
 from cobs import cobs
-from numba import njit
 from gyrostar.protocol import MsgType
 from gyrostar.protocol.defs import (
     ERROR_TEXT,
@@ -61,6 +60,7 @@ from gyrostar.protocol.payloads import (
     encode_windows_tail,
     pixel_bytes,
 )
+from numba import njit
 
 FW_VERSION = (0, 9, 0)
 PORT_ID_EMULATOR = 2
