@@ -57,6 +57,7 @@ from gyrostar.protocol.payloads import (
     encode_pixels,
     encode_reply,
     encode_spots,
+    encode_windows_arrays,
     encode_windows_tail,
     pixel_bytes,
 )
@@ -538,26 +539,28 @@ class HeadEmulator:
     def _encode_stream_frame(self, s, active, set_frame: int, pixels: np.ndarray) -> list[bytes]:
         """The FRAME messages (one or more parts) of frame ``s.frame`` read with ``active``."""
         _, ids, slices = active[:3]
-        sums = _window_sums(pixels, slices)
-        wins = [WindowPixels(wid, sm, pixels[sl]) for wid, sm, sl in zip(ids, sums, slices)]
+        px, bounds = _window_pixels(pixels, slices)
+        sums = np.add.reduceat(px.astype(np.int64), bounds[:-1]) if len(ids) else np.zeros(0, np.int64)
+        counts = np.diff(bounds).tolist()
         t0_us, t1_us = self.mcu_us(s.t_start), self.mcu_us(s.t_start + s.exposure_us * 1e-6)
         out, start = [], 0
         fixed = struct.calcsize("<" + REPLY_LAYOUT[MsgType.FRAME][0])
         while True:
-            size, part = fixed, []
-            for w in wins[start:]:
-                need = _WIN_HEADER + pixel_bytes(len(w.pixels), s.fmt)
+            size, stop = fixed, start
+            while stop < len(ids):
+                need = _WIN_HEADER + pixel_bytes(counts[stop], s.fmt)
                 if size + need > MAX_PAYLOAD:
                     break
-                part.append(w)
                 size += need
+                stop += 1
             head = encode_reply(MsgType.FRAME, frame=s.frame, set_frame=set_frame, t_start_us=t0_us,
                                 t_end_us=t1_us, exposure_us=s.exposure_us, late_sets=s.late_sets, dropped=s.dropped,
-                                backpressure=s.backpressure, n_pixels=len(pixels), start=start, count=len(part),
-                                total=len(wins), pixel_format=s.fmt)
-            out.append(encode_frame(MsgType.FRAME | REPLY_FLAG, s.seq, head + encode_windows_tail(part, s.fmt)))
-            start += len(part)
-            if start >= len(wins):
+                                backpressure=s.backpressure, n_pixels=len(pixels), start=start, count=stop - start,
+                                total=len(ids), pixel_format=s.fmt)
+            tail = encode_windows_arrays(ids[start:stop], sums[start:stop], px, bounds[start:stop + 1], s.fmt)
+            out.append(encode_frame(MsgType.FRAME | REPLY_FLAG, s.seq, head + tail))
+            start = stop
+            if start >= len(ids):
                 return out
 
     def _read_stream_frame(self, s, t_end: float) -> list[bytes]:
@@ -780,14 +783,24 @@ def _scan_spans(spans, height, width, max_windows, max_window_pixels, pixel_budg
     return 0, -1, ids[:k].copy(), bounds[:k + 1].copy(), total
 
 
-def _window_sums(pixels: np.ndarray, slices: list) -> list:
-    """Pixel sum (int) of each window's slice of ``pixels`` (consecutive, in order): one
-    reduction for the frame instead of one per window."""
+def _window_pixels(pixels: np.ndarray, slices: list) -> tuple[np.ndarray, np.ndarray]:
+    """``(pixels, bounds (k + 1,))``: the windows' slices of ``pixels`` back to back, window j at
+    ``bounds[j]:bounds[j + 1]`` (the frame's own array when its slices tile it in order)."""
     if not slices:
-        return []
+        return pixels[:0], np.zeros(1, np.int64)
     starts = [sl.start for sl in slices]
-    tiled = starts[0] == 0 and slices[-1].stop == len(pixels) and all(
-        a.stop == b.start and a.stop > a.start for a, b in zip(slices, slices[1:])) and slices[-1].stop > starts[-1]
-    if not tiled:
-        return [int(pixels[sl].sum()) for sl in slices]
-    return np.add.reduceat(pixels.astype(np.int64), starts).tolist()
+    if starts[0] == 0 and slices[-1].stop == len(pixels) and all(a.stop == b.start for a, b in zip(slices, slices[1:])):
+        return pixels, np.array(starts + [len(pixels)], np.int64)
+    parts = [pixels[sl] for sl in slices]
+    bounds = np.zeros(len(parts) + 1, np.int64)
+    np.cumsum([len(p) for p in parts], out=bounds[1:])
+    return np.concatenate(parts), bounds
+
+
+def _window_sums(pixels: np.ndarray, slices: list) -> list:
+    """Pixel sum (int) of each window's slice of ``pixels``: one reduction for the frame."""
+    px, bounds = _window_pixels(pixels, slices)
+    if len(bounds) < 2:
+        return []
+    return [int(px[bounds[j]:bounds[j + 1]].sum()) for j in range(len(bounds) - 1)] \
+        if np.any(np.diff(bounds) == 0) else np.add.reduceat(px.astype(np.int64), bounds[:-1]).tolist()

@@ -156,22 +156,72 @@ def decode_pixels(data: bytes, n: int, pixel_format: int) -> np.ndarray:
 
 
 def _decode_windows(fields: dict, tail: bytes) -> list[WindowPixels]:
-    out, off = [], 0
     fmt = fields["pixel_format"]
-    for _ in range(fields["count"]):
-        if off + _WIN_HEADER.size > len(tail):
-            raise PayloadError("window data ends inside a window header")
-        wid, n, total = _WIN_HEADER.unpack_from(tail, off)
-        off += _WIN_HEADER.size
-        nbytes = pixel_bytes(n, fmt)
-        if off + nbytes > len(tail):
-            raise PayloadError(f"window {wid}: {n} pixels need {nbytes} bytes, "
-                               f"{len(tail) - off} left")
-        out.append(WindowPixels(wid, total, decode_pixels(tail[off:off + nbytes], n, fmt)))
+    count = fields["count"]
+    if count and fmt not in (PixelFormat.U16, PixelFormat.PACKED10):
+        raise PayloadError(f"unknown pixel format {fmt} in reply")
+    status, wid, n, left, ids, sums, bounds, pixels = _windows_tail_decode(
+        np.frombuffer(tail, dtype=np.uint8), count, fmt == PixelFormat.PACKED10)
+    if status == _TAIL_IN_HEADER:
+        raise PayloadError("window data ends inside a window header")
+    if status == _TAIL_SHORT:
+        raise PayloadError(f"window {wid}: {n} pixels need {pixel_bytes(n, fmt)} bytes, {left} left")
+    if status == _TAIL_EXTRA:
+        raise PayloadError(f"window data has {left} bytes after its last window")
+    b = bounds.tolist()
+    return [WindowPixels(w, t, pixels[b[j]:b[j + 1]]) for j, (w, t) in enumerate(zip(ids.tolist(), sums.tolist()))]
+
+
+_TAIL_OK, _TAIL_IN_HEADER, _TAIL_SHORT, _TAIL_EXTRA = range(4)
+
+
+@njit(cache=True)
+def _windows_tail_decode(tail, count, packed):
+    """Windows of a WINDOW_DATA/FRAME tail (uint8): ``(status, window id, pixel count, bytes
+    left, ids (k,), sums (k,), pixel bounds (k + 1,), pixels uint16)``; status ``_TAIL_OK`` or
+    the first fault in wire order: a header cut short, a window's pixels cut short (its id,
+    count and the bytes left), bytes after the last window."""
+    ids = np.zeros(count, np.int64)
+    sums = np.zeros(count, np.int64)
+    bounds = np.zeros(count + 1, np.int64)
+    starts = np.zeros(count, np.int64)
+    off = 0
+    for j in range(count):
+        if off + 8 > tail.size:
+            return _TAIL_IN_HEADER, 0, 0, 0, ids, sums, bounds, np.zeros(0, np.uint16)
+        wid = np.int64(tail[off]) | (np.int64(tail[off + 1]) << 8)
+        n = np.int64(tail[off + 2]) | (np.int64(tail[off + 3]) << 8)
+        total = (np.int64(tail[off + 4]) | (np.int64(tail[off + 5]) << 8) | (np.int64(tail[off + 6]) << 16)
+                 | (np.int64(tail[off + 7]) << 24))
+        off += 8
+        nbytes = (10 * n + 7) // 8 if packed else 2 * n
+        if off + nbytes > tail.size:
+            return _TAIL_SHORT, wid, n, tail.size - off, ids, sums, bounds, np.zeros(0, np.uint16)
+        ids[j] = wid
+        sums[j] = total
+        starts[j] = off
+        bounds[j + 1] = bounds[j] + n
         off += nbytes
-    if off != len(tail):
-        raise PayloadError(f"window data has {len(tail) - off} bytes after its last window")
-    return out
+    if off != tail.size:
+        return _TAIL_EXTRA, 0, 0, tail.size - off, ids, sums, bounds, np.zeros(0, np.uint16)
+    pixels = np.empty(bounds[count], np.uint16)
+    for j in range(count):
+        o = starts[j]
+        n = bounds[j + 1] - bounds[j]
+        p = bounds[j]
+        if packed:
+            end = o + (10 * n + 7) // 8
+            for i in range(n):
+                bit = 10 * i
+                byte = o + (bit >> 3)
+                word = np.uint32(tail[byte])
+                if byte + 1 < end:
+                    word |= np.uint32(tail[byte + 1]) << 8
+                pixels[p + i] = (word >> (bit & 7)) & 0x3FF
+        else:
+            for i in range(n):
+                pixels[p + i] = np.uint16(tail[o + 2 * i]) | (np.uint16(tail[o + 2 * i + 1]) << 8)
+    return _TAIL_OK, 0, 0, 0, ids, sums, bounds, pixels
 
 
 def decode_reply(frame: Frame, expect: int | None = None) -> dict:
@@ -246,11 +296,82 @@ def encode_reply(msg_type: int, tail: bytes = b"", **fields) -> bytes:
 
 def encode_windows_tail(windows: list[WindowPixels], pixel_format: int) -> bytes:
     """WINDOW_DATA tail for a list of windows (for emulators and tests)."""
-    out = bytearray()
-    for w in windows:
-        out += _WIN_HEADER.pack(w.window_id, len(w.pixels), w.sum)
-        out += encode_pixels(w.pixels, pixel_format)
-    return bytes(out)
+    if not windows:
+        return b""
+    pixels = [np.asarray(w.pixels) for w in windows]
+    bounds = np.zeros(len(windows) + 1, np.int64)
+    np.cumsum([p.size for p in pixels], out=bounds[1:])
+    return encode_windows_arrays([w.window_id for w in windows], [w.sum for w in windows],
+                                 np.concatenate(pixels), bounds, pixel_format)
+
+
+def encode_windows_arrays(ids, sums, pixels, bounds, pixel_format: int) -> bytes:
+    """WINDOW_DATA/FRAME tail of windows j = 0..k−1: ids (k,), pixel sums (k,), their pixels
+    ``pixels[bounds[j]:bounds[j + 1]]`` (span order; ≤ 1023 for PACKED10)."""
+    if pixel_format not in (PixelFormat.U16, PixelFormat.PACKED10):
+        raise ProtocolUsageError(f"unknown pixel format {pixel_format}")
+    ids = np.asarray(ids, dtype=np.int64)
+    sums = np.asarray(sums, dtype=np.int64)
+    px = np.asarray(pixels)
+    if px.dtype != np.uint16 and px.size and (int(px.max()) > 0xFFFF or int(px.min()) < 0):
+        raise ProtocolUsageError("pixel value outside 0..65535")
+    out = _windows_tail_encode(ids, sums, np.ascontiguousarray(px, dtype=np.uint16).ravel(),
+                               np.asarray(bounds, dtype=np.int64), pixel_format == PixelFormat.PACKED10)
+    if out[-1] == _ENC_RANGE:
+        raise ProtocolUsageError("window id, pixel count or sum does not fit its field (u16, u16, u32)")
+    if out[-1] == _PACK10_BAD:
+        raise ProtocolUsageError("pixel value outside 0..1023 cannot be packed in 10 bits")
+    return out[:-1].tobytes()
+
+
+_ENC_RANGE = 0xFE   # the encoder's trailing status byte: a header field does not fit
+
+
+@njit(cache=True)
+def _windows_tail_encode(ids, sums, pixels, bounds, packed):
+    """Bytes of the windows' headers ``<HHI`` (id, pixel count, sum) and pixels (u16 LE, or
+    the 10-bit LSB-first stream of :func:`pack10` per window), then one status byte: 0,
+    ``_ENC_RANGE`` or ``_PACK10_BAD`` (the encoding stops there)."""
+    k = ids.shape[0]
+    size = 0
+    for j in range(k):
+        n = bounds[j + 1] - bounds[j]
+        size += 8 + ((10 * n + 7) // 8 if packed else 2 * n)
+    out = np.zeros(size + 1, np.uint8)
+    o = 0
+    for j in range(k):
+        n = bounds[j + 1] - bounds[j]
+        if ids[j] < 0 or ids[j] > 0xFFFF or n > 0xFFFF or sums[j] < 0 or sums[j] > 0xFFFFFFFF:
+            out[size] = _ENC_RANGE
+            return out
+        out[o] = ids[j] & 0xFF
+        out[o + 1] = (ids[j] >> 8) & 0xFF
+        out[o + 2] = n & 0xFF
+        out[o + 3] = (n >> 8) & 0xFF
+        for b in range(4):
+            out[o + 4 + b] = (sums[j] >> (8 * b)) & 0xFF
+        o += 8
+        p = bounds[j]
+        if packed:
+            nb = (10 * n + 7) // 8
+            for i in range(n):
+                v = pixels[p + i]
+                if v > 0x3FF:
+                    out[size] = _PACK10_BAD
+                    return out
+                bit = 10 * i
+                byte = o + (bit >> 3)
+                word = np.uint32(v) << (bit & 7)
+                out[byte] |= np.uint8(word & 0xFF)
+                if byte + 1 < o + nb:
+                    out[byte + 1] |= np.uint8((word >> 8) & 0xFF)
+            o += nb
+        else:
+            for i in range(n):
+                out[o + 2 * i] = pixels[p + i] & 0xFF
+                out[o + 2 * i + 1] = pixels[p + i] >> 8
+            o += 2 * n
+    return out
 
 
 def spans_pixel_count(spans) -> int:
