@@ -322,6 +322,10 @@ class Flatsat:
         if self.faults is not None:
             self.faults.apply(t)
 
+    def head_faults_due(self, t: float) -> bool:
+        """:meth:`apply_head_faults` at scenario time ``t`` (s) would switch a head fault or an eclipse."""
+        return self.faults is not None and self.faults.head_events_due(t)
+
     def apply_head_faults(self, t: float) -> None:
         """Fast mode: the head's faults and eclipses due at scenario time ``t`` (s), from a
         head job that runs ahead of the loop on its own time line."""
@@ -781,6 +785,14 @@ class FaultPlan:
         if getattr(self, "_thread", None) is not None:
             self._stop.set()
             self._thread.join(timeout=5.0)
+
+    def head_events_due(self, t: float) -> bool:
+        """:meth:`apply_head` at ``t`` would switch a head fault or an eclipse on or off."""
+        if t <= self._head_t:
+            return False
+        return self.eclipsed(t) != self.in_eclipse or any(
+            (f.at_s <= t < f.at_s + f.seconds) != (i in self.active)
+            for i, f in enumerate(self.faults) if f.kind in HEAD_FAULTS)
 
     def stalled(self, t: float) -> bool:
         return any(f.kind == "gyro-fifo-overrun" and f.at_s <= t < f.at_s + f.seconds for f in self.faults)

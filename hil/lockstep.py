@@ -59,6 +59,7 @@ class Lockstep:
         self._job_t: float | None = None
         self.inline_jobs = False       # the head port runs its jobs through run_job (no worker)
         self.on_time = None            # f(t): the head's faults due by simulated time t (inline jobs)
+        self.on_time_due = None        # f(t) -> bool: on_time(t) would apply one (None: assume so)
         self.job_cpu_s = 0.0           # CPU s the inline jobs took (the head's and its client's work)
 
     # -- StepGate interface (called by the head port) ----------------------------------
@@ -373,6 +374,15 @@ class SimLink:
             nxt = self._arrivals[0][0] if self._arrivals else float("inf")
             self.head.lockstep.wait_until(min(nxt, self.head.next_event(), deadline))
             now = self.clock.now()
+
+    def quiet_until(self) -> float:
+        """Simulated time before which :meth:`recv` can return nothing and raise nothing: the
+        next chunk's arrival or the head's next stream step (−inf while a packet waits or
+        the link is down)."""
+        if self._ready or self.lost is not None or self.closed:
+            return -float("inf")
+        nxt = self._arrivals[0][0] if self._arrivals else float("inf")
+        return min(nxt, self.head.next_event())
 
     def drain(self) -> int:
         self._pump(self.clock.now())

@@ -463,6 +463,7 @@ def _run_lockstep(fs, loop, duration: float, period: float, step_wall: list, lin
     # head's faults follow that time line; there is no worker to wake or settle
     inline = lk.inline_jobs
     lk.on_time = lambda t: fs.apply_head_faults(t - t_start)
+    lk.on_time_due = lambda t: fs.head_faults_due(t - t_start)
     t_next = clock.now() + period
     cpu0 = time.thread_time()      # this thread runs only the loop and the schedule: one reading
     shown = time.perf_counter()

@@ -215,7 +215,7 @@ class StreamPort(HeadPort):
         """What :meth:`poll` hands over now: ``"job"`` (a full frame or reconnect finished),
         ``"frame"`` (a streamed frame measured; fast mode: one that has arrived by now — the
         stream turn that reads it runs here) or None."""
-        if self.inline is not None and self.on and self._job is None:
+        if self.inline is not None and self.on and self._job is None and not self._turn_idle():
             self._inline_turn()                # the frames that arrived by now
         if self._job is not None and self.job_done and not self._results:
             return "job"
@@ -307,6 +307,24 @@ class StreamPort(HeadPort):
                 if gate is not None:
                     self._holding = False
                     gate.worker_exit()
+
+    def _turn_idle(self) -> bool:
+        """Fast mode: a stream turn now would do nothing — no set or period change to send,
+        no frame waiting, no byte arriving and no head stream step by the end of its read
+        (:data:`_READ_ARRIVED_S`), no time sync due, no head fault or eclipse that its wait
+        would switch (``Lockstep.on_time_due``) — so it is not run. Its only trace would be
+        the link tap's timeout record."""
+        lk = self.inline
+        if not self._sends.empty() or (self._want_period is not None and self._want_period != self.period_us):
+            return False
+        c = self.client
+        quiet = getattr(c.link, "quiet_until", None)
+        if quiet is None or c.frames_waiting:
+            return False
+        end = lk.now() + _READ_ARRIVED_S
+        if quiet() <= end or c.sync_due(end):
+            return False
+        return lk.on_time is None or (lk.on_time_due is not None and not lk.on_time_due(end))
 
     def _inline_turn(self) -> None:
         """Fast mode: one stream turn at once, on its own simulated time line."""

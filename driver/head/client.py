@@ -308,9 +308,18 @@ class HeadClient:
         self.sync_state.add(t1, f["mcu_rx_us"], f["mcu_tx_us"], t4)
         self._last_sync = self.clock.now()
 
+    def sync_due(self, t: float) -> bool:
+        """:meth:`maybe_sync` at client time ``t`` (s) would exchange TIME_SYNCs."""
+        return t - self._last_sync >= self.sync_every_s
+
     def maybe_sync(self, n: int = 2) -> None:
-        if self.clock.now() - self._last_sync >= self.sync_every_s:
+        if self.sync_due(self.clock.now()):
             self.sync(n)
+
+    @property
+    def frames_waiting(self) -> int:
+        """Complete streamed frames :meth:`next_frame` returns without reading the link."""
+        return len(self._frames)
 
     def capture(self, fetch: bool = True, pixel_format: int = PixelFormat.U16, dark: bool = False) -> Capture:
         """Expose (CAPTURE, or DARK), then fetch every window's pixels (WINDOW_DATA pages)."""

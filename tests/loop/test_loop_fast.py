@@ -68,6 +68,54 @@ def test_client_over_the_simulated_link_and_link_loss():
         client.ping(b"x")
 
 
+def test_quiet_until_is_the_next_arrival_and_recv_finds_nothing_before_it():
+    """A stream turn is skipped while the link is quiet: before ``quiet_until`` a read finds
+    nothing; at it the reply is there; a waiting packet or a lost link makes it −inf."""
+    clock, head = _head("usb-fs")
+    link = head.open_link()
+    assert link.quiet_until() == float("inf")            # nothing sent, no stream
+    link.send(encode_frame(MsgType.PING, 3, b"abc"))
+    t_arr = link.quiet_until()
+    assert clock.now() < t_arr < float("inf")
+    clock.set(t_arr - 1e-6)
+    assert link.recv(0.0) is None
+    clock.set(t_arr)
+    t_rx, _ = link.recv(0.0)
+    assert t_rx == t_arr and link.quiet_until() == float("inf")
+    head.disconnect()
+    assert link.quiet_until() == -float("inf")
+
+
+def test_head_events_due_says_when_apply_head_switches_something():
+    from gyrostar.hil import config as hc
+    from gyrostar.hil.flatsat import FaultPlan
+
+    scen = hc.load_scenario("disconnect")            # head-disconnect at 4 s for 2 s
+    scen.eclipse = [(7.0, 8.0)]
+    plan = FaultPlan(scen)
+    switched = []
+
+    class Head:                                       # what the plan switches on the head
+        def disconnect(self):
+            switched.append(("head-disconnect", True))
+
+        def start(self):
+            switched.append(("head-disconnect", False))
+
+        def eclipse(self, on):
+            switched.append(("eclipse", on))
+
+    plan.head_emulator = Head()
+    for t, due in [(3.999, False), (4.0, True), (5.0, False), (6.0, True), (6.5, False), (7.0, True),
+                   (7.5, False), (8.0, True), (9.0, False)]:
+        assert plan.head_events_due(t) is due, t
+        n = len(switched)
+        plan.apply_head(t)
+        assert (len(switched) > n) is due, t
+    assert switched == [("head-disconnect", True), ("head-disconnect", False), ("eclipse", True), ("eclipse", False)]
+    assert plan.head_events_due(8.5) is False           # at or before what was applied: never
+
+
 def _fast_run(tmp_path, name, seconds=3.0, head_mode=None, watermark=None):
     import dataclasses
 
