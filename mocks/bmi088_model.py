@@ -95,18 +95,28 @@ class Bmi088GyroModel(RegisterModelBase):
 
     def _restart_odr(self, now: float) -> None:
         self._t_next = now + self.period
+        # sample k is taken at t0 + T·(k − k0): one product from the (re)start, never a running
+        # sum, so a sample's time depends on its index only (however the reads batch the
+        # advances) and the samples computed ahead are the ones the next reads take
+        self._grid = (self._t_next, self._k_next, self.period)
+
+    def _sample_time(self, k):
+        """Model time (s) of sample(s) ``k`` (int or int64 array) on the current ODR grid."""
+        t0, k0, T = self._grid
+        return t0 + T * (k - k0)
 
     def _advance(self) -> None:
         now = self.clock.now()
         if now < self._t_next or self.regs[0x11] & 0xA0:  # no samples before due, or suspended
             return
         T = self.period
+        if T != self._grid[2]:
+            self._grid = (self._t_next, self._k_next, T)
         n_new = int(math.floor((now - self._t_next) / T + 1e-9)) + 1
         k0 = self._k_next
         self._k_next += n_new
-        t_first = self._t_next
-        self._t_next += n_new * T
-        self.t_last_sample = t_first + (n_new - 1) * T
+        self._t_next = self._sample_time(self._k_next)
+        self.t_last_sample = self._sample_time(self._k_next - 1)
         mode = int(self.regs[0x3E]) & 0xC0
         before = len(self.fifo_idx)
         if mode == 0x80:    # stream: the newest frames survive
@@ -121,24 +131,24 @@ class Bmi088GyroModel(RegisterModelBase):
         if keep == 0 or pos[-1] != n_new - 1:
             pos = np.append(pos, n_new - 1)
         idx = k0 + pos
-        raw = self._raw(idx, t_first + T * pos, T)
+        raw = self._raw(idx, self._sample_time(idx))
         self.latest_raw = raw[-1].copy()
         if mode in (0x40, 0x80) and before + n_new > FIFO_FRAMES:
             self.overrun = True
         if keep:
             wm = int(self.regs[0x3D]) & 0x7F
             if wm and before < wm <= before + n_new and self.regs[0x1E] & 0x80:
-                self.t_watermark = t_first + (wm - before - 1) * T
+                self.t_watermark = self._sample_time(k0 + wm - before - 1)
                 if self.truth_log:
                     self.watermark_edges.append(self.t_watermark)
             self.fifo_idx = np.concatenate([self.fifo_idx, idx[:keep]])[-FIFO_FRAMES:]
             self.fifo_raw = np.concatenate([self.fifo_raw, raw[:keep]])[-FIFO_FRAMES:]
 
-    def _raw(self, idx: np.ndarray, t: np.ndarray, T: float) -> np.ndarray:
+    def _raw(self, idx: np.ndarray, t: np.ndarray) -> np.ndarray:
         """FIFO bytes (n, 6) of samples ``idx`` taken at ``t``: from the block computed ahead when
         it holds exactly these samples at exactly these times, range and source state; else from
-        the source, with the next ``AHEAD`` samples at one period each (the times the following
-        one-sample advances will ask, to the bit) computed in the same call."""
+        the source, with the next ``AHEAD`` samples on the ODR grid (the times the following
+        advances will ask, to the bit, however many samples each takes) computed in the same call."""
         lsb = self.range_dps / 32768.0
         state_of = getattr(self.source, "state", None)
         state = state_of() if state_of is not None else None
@@ -152,7 +162,7 @@ class Bmi088GyroModel(RegisterModelBase):
         if state is None:
             return quantize(self.source(idx, t), lsb)
         k1 = int(idx[-1]) + 1
-        t_ahead = np.add.accumulate(np.concatenate([[self._t_next], np.full(AHEAD - 1, T)]))
+        t_ahead = self._sample_time(k1 + np.arange(AHEAD))
         raw = quantize(self.source(np.concatenate([idx, k1 + np.arange(AHEAD)]), np.concatenate([t, t_ahead])), lsb)
         self._ahead = (k1, t_ahead, raw[len(idx):], lsb, state)
         return raw[:len(idx)]
