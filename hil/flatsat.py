@@ -14,6 +14,7 @@ Two halves, kept apart so that replay can reuse the second:
 
 from __future__ import annotations
 
+import bisect
 import dataclasses
 import logging
 import math
@@ -764,6 +765,9 @@ class FaultPlan:
         self.active: set = set()
         self.in_eclipse = False
         self._head_t = -math.inf     # the head's faults are applied up to here (only forward)
+        # the times a head fault or an eclipse starts or ends, sorted (head_events_due)
+        edges = {x for f in self.faults if f.kind in HEAD_FAULTS for x in (f.at_s, f.at_s + f.seconds)}
+        self._head_edges = sorted(edges | {x for a, b in self.eclipse for x in (a, b)})
 
     def start(self, t0: float, clock) -> None:
         """Apply the faults from their own thread (device calls may block; the loop must not)."""
@@ -787,12 +791,13 @@ class FaultPlan:
             self._thread.join(timeout=5.0)
 
     def head_events_due(self, t: float) -> bool:
-        """:meth:`apply_head` at ``t`` would switch a head fault or an eclipse on or off."""
+        """:meth:`apply_head` at ``t`` might switch a head fault or an eclipse on or off: a
+        start or an end of one lies after the time applied last and at or before ``t``."""
         if t <= self._head_t:
             return False
-        return self.eclipsed(t) != self.in_eclipse or any(
-            (f.at_s <= t < f.at_s + f.seconds) != (i in self.active)
-            for i, f in enumerate(self.faults) if f.kind in HEAD_FAULTS)
+        edges = self._head_edges
+        i = bisect.bisect_right(edges, self._head_t)
+        return i < len(edges) and edges[i] <= t
 
     def stalled(self, t: float) -> bool:
         return any(f.kind == "gyro-fifo-overrun" and f.at_s <= t < f.at_s + f.seconds for f in self.faults)

@@ -314,15 +314,14 @@ class StreamPort(HeadPort):
         (:data:`_READ_ARRIVED_S`), no time sync due, no head fault or eclipse that its wait
         would switch (``Lockstep.on_time_due``) — so it is not run. Its only trace would be
         the link tap's timeout record."""
-        lk = self.inline
-        if not self._sends.empty() or (self._want_period is not None and self._want_period != self.period_us):
-            return False
         c = self.client
         quiet = getattr(c.link, "quiet_until", None)
-        if quiet is None or c.frames_waiting:
+        if quiet is None:
             return False
+        lk = self.inline
         end = lk.now() + _READ_ARRIVED_S
-        if quiet() <= end or c.sync_due(end):
+        if quiet() <= end or c.frames_waiting or not self._sends.empty() or c.sync_due(end) or (
+                self._want_period is not None and self._want_period != self.period_us):
             return False
         return lk.on_time is None or (lk.on_time_due is not None and not lk.on_time_due(end))
 
