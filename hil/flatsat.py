@@ -146,11 +146,11 @@ class ScenarioScene:
         self.truth = truth
         self.exposure_s = exposure_s
         self.n = n_rates
+        self._mid = (np.arange(n_rates) + 0.5) * exposure_s / n_rates    # segment midpoints from the start (s)
 
     def at(self, t_host: float):
         q = self.truth.q_at(t_host, "scene")
-        tm = t_host + (np.arange(self.n) + 0.5) * self.exposure_s / self.n
-        return q, self.truth.rates(tm)
+        return q, self.truth.rates(t_host + self._mid)
 
 
 # ---------------------------------------------------------------------------- driver

@@ -106,6 +106,7 @@ class StreamPort(HeadPort):
         self.period_us = int(round(1e6 / frame_hz))
         self._results: collections.deque = collections.deque()
         self._sends: queue.SimpleQueue = queue.SimpleQueue()
+        self._quiet_of = self._quiet = None          # (link, its quiet_until) for _turn_idle
         self._sets: dict[int, tuple] = {}          # named frame -> (spans, post)
         self._lock = threading.Lock()
         self.on = False                            # the head streams
@@ -315,7 +316,9 @@ class StreamPort(HeadPort):
         would switch (``Lockstep.on_time_due``) — so it is not run. Its only trace would be
         the link tap's timeout record."""
         c = self.client
-        quiet = getattr(c.link, "quiet_until", None)
+        if c.link is not self._quiet_of:             # the link's quiet_until, looked up once per link
+            self._quiet_of, self._quiet = c.link, getattr(c.link, "quiet_until", None)
+        quiet = self._quiet
         if quiet is None:
             return False
         lk = self.inline

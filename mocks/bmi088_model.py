@@ -63,7 +63,7 @@ class Bmi088GyroModel(RegisterModelBase):
         self.bist_fail = False
         self.lock = threading.RLock()
         self._k_next = 0  # global index of the next sample to be produced
-        self._ahead = None  # (first index, times, FIFO bytes, LSB, source state) computed ahead
+        self._ahead = None  # (first index, FIFO bytes, LSB, source state, ODR grid) computed ahead
         self._popped: list[np.ndarray] = []
         self._popped_raw: list[np.ndarray] = []
         self._power_on(clock.now() if t_power_on is None else t_power_on)
@@ -131,7 +131,7 @@ class Bmi088GyroModel(RegisterModelBase):
         if keep == 0 or pos[-1] != n_new - 1:
             pos = np.append(pos, n_new - 1)
         idx = k0 + pos
-        raw = self._raw(idx, self._sample_time(idx))
+        raw = self._raw(idx)
         self.latest_raw = raw[-1].copy()
         if mode in (0x40, 0x80) and before + n_new > FIFO_FRAMES:
             self.overrun = True
@@ -144,27 +144,27 @@ class Bmi088GyroModel(RegisterModelBase):
             self.fifo_idx = np.concatenate([self.fifo_idx, idx[:keep]])[-FIFO_FRAMES:]
             self.fifo_raw = np.concatenate([self.fifo_raw, raw[:keep]])[-FIFO_FRAMES:]
 
-    def _raw(self, idx: np.ndarray, t: np.ndarray) -> np.ndarray:
-        """FIFO bytes (n, 6) of samples ``idx`` taken at ``t``: from the block computed ahead when
-        it holds exactly these samples at exactly these times, range and source state; else from
-        the source, with the next ``AHEAD`` samples on the ODR grid (the times the following
-        advances will ask, to the bit, however many samples each takes) computed in the same call."""
+    def _raw(self, idx: np.ndarray) -> np.ndarray:
+        """FIFO bytes (n, 6) of samples ``idx`` (taken at their times on the ODR grid): from the
+        block computed ahead when it holds these samples on the same grid, range and source
+        state; else from the source, with the next ``AHEAD`` samples (the ones the following
+        advances will ask, however many samples each takes) computed in the same call."""
         lsb = self.range_dps / 32768.0
         state_of = getattr(self.source, "state", None)
         state = state_of() if state_of is not None else None
         a = self._ahead
-        if a is not None and a[3] == lsb and a[4] == state:
+        if a is not None and a[2] == lsb and a[3] == state and a[4] == self._grid:
             j0 = int(idx[0]) - a[0]
             j1 = int(idx[-1]) - a[0] + 1
-            if j0 >= 0 and j1 <= len(a[1]) and j1 - j0 == len(idx) and \
-                    (a[1][j0] == t[0] if j1 == j0 + 1 else np.array_equal(a[1][j0:j1], t)):
-                return a[2][j0:j1]     # (consecutive indices: the usual one-sample advance)
+            if j0 >= 0 and j1 <= len(a[1]) and j1 - j0 == len(idx):
+                return a[1][j0:j1]     # (consecutive indices on the same grid: the same times)
+        t = self._sample_time(idx)
         if state is None:
             return quantize(self.source(idx, t), lsb)
         k1 = int(idx[-1]) + 1
-        t_ahead = self._sample_time(k1 + np.arange(AHEAD))
-        raw = quantize(self.source(np.concatenate([idx, k1 + np.arange(AHEAD)]), np.concatenate([t, t_ahead])), lsb)
-        self._ahead = (k1, t_ahead, raw[len(idx):], lsb, state)
+        ahead = k1 + np.arange(AHEAD)
+        raw = quantize(self.source(np.concatenate([idx, ahead]), np.concatenate([t, self._sample_time(ahead)])), lsb)
+        self._ahead = (k1, raw[len(idx):], lsb, state, self._grid)
         return raw[:len(idx)]
 
     def _check_busy(self) -> None:

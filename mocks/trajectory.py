@@ -148,6 +148,8 @@ class LinearSegments(RateProfile):
 
     def rate(self, t):
         t = np.asarray(t, dtype=np.float64)
+        if t.ndim == 1 and t.flags.c_contiguous:
+            return _linear_segment_rates(t, self.t0, self.t1, self.w0, self.w1, self.span)
         out = _linear_segment_rates(np.ascontiguousarray(t.reshape(-1)), self.t0, self.t1, self.w0, self.w1,
                                     self.span)
         return out.reshape(t.shape + (3,)) if t.ndim else out
