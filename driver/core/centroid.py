@@ -416,6 +416,8 @@ def smear_fit(spans, values, bg, u0, v0, offsets, sigma_psf, noise_var, e_per_dn
     e_row = np.empty(nr + 1)
     p_row = np.empty(nr + 1)
     k_pdf = 1.0 / (sigma_psf * math.sqrt(2.0 * math.pi))
+    a = np.empty((3, 3))
+    g = np.empty(3)
     for it in range(1, n_iter + 1):
         for j in range(m):
             cu = u + grp[j, 0]
@@ -430,8 +432,8 @@ def smear_fit(spans, values, bg, u0, v0, offsets, sigma_psf, noise_var, e_per_dn
             for r in range(nr):
                 ey[j, r] = 0.5 * (e_row[r + 1] - e_row[r])
                 dy[j, r] = p_row[r] - p_row[r + 1]
-        a = np.zeros((3, 3))
-        g = np.zeros(3)
+        a[:, :] = 0.0
+        g[:] = 0.0
         k = 0
         for i in range(spans.shape[0]):
             rr = spans[i, 1] - r0
@@ -467,13 +469,13 @@ def smear_fit(spans, values, bg, u0, v0, offsets, sigma_psf, noise_var, e_per_dn
         cov = inv3_sym(a)
         if cov[0, 0] != cov[0, 0]:  # singular: no information on the position
             return np.nan, np.nan, 0.0, np.inf, np.inf, it
-        step = cov @ g
-        # keep steps sane at very low SNR (a spot cannot jump more than a pixel per iteration)
-        su = min(1.0, max(-1.0, step[0]))
-        sv = min(1.0, max(-1.0, step[1]))
+        # the Gauss–Newton step cov·g, written out (no BLAS call for a 3-vector); steps kept
+        # sane at very low SNR (a spot cannot jump more than a pixel per iteration)
+        su = min(1.0, max(-1.0, cov[0, 0] * g[0] + cov[0, 1] * g[1] + cov[0, 2] * g[2]))
+        sv = min(1.0, max(-1.0, cov[1, 0] * g[0] + cov[1, 1] * g[1] + cov[1, 2] * g[2]))
         u += su
         v += sv
-        flux += step[2]
+        flux += cov[2, 0] * g[0] + cov[2, 1] * g[1] + cov[2, 2] * g[2]
         var_u = cov[0, 0]
         var_v = cov[1, 1]
         if abs(su) + abs(sv) < tol:
