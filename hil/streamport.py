@@ -436,8 +436,7 @@ class StreamPort(HeadPort):
             return
         spans, post = got
         order = {w.window_id: w.pixels for w in fr.windows}
-        wid = spans[:, 0]
-        ids = wid[np.flatnonzero(np.diff(wid, prepend=wid[:1] - 1))].tolist()   # run starts, in order
+        ids = list(dict.fromkeys(spans[:, 0].tolist()))      # the set's window ids, in span order
         if any(w not in order for w in ids):
             self.frames_unmatched += 1
             self.unmatched_why["windows differ"] += 1

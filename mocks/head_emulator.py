@@ -541,7 +541,8 @@ class HeadEmulator:
         _, ids, slices = active[:3]
         px, bounds = _window_pixels(pixels, slices)
         sums = np.add.reduceat(px.astype(np.int64), bounds[:-1]) if len(ids) else np.zeros(0, np.int64)
-        counts = np.diff(bounds).tolist()
+        b = bounds.tolist()
+        counts = [b[j + 1] - b[j] for j in range(len(b) - 1)]
         t0_us, t1_us = self.mcu_us(s.t_start), self.mcu_us(s.t_start + s.exposure_us * 1e-6)
         out, start = [], 0
         fixed = struct.calcsize("<" + REPLY_LAYOUT[MsgType.FRAME][0])

@@ -185,10 +185,10 @@ class Sky:
         q_start, rates, n_sub, w_max = self._exposure_setup(q_start, omega, None)
         t_exp = self.preset.detector.exposure_s
         qs, bore = _substep_attitudes(q_start, rates, t_exp, n_sub)
-        sel = self._near(bore, self._field_radius + w_max * t_exp)
-        paths, boxes = render.star_paths_boxes(self.params, np.ascontiguousarray(self.catalog.vectors[sel]), qs,
-                                               self.preset.optics.psf_sigma_px, self.camera.width_px,
-                                               self.camera.height_px)
+        reach = self._field_radius + w_max * t_exp
+        sel, vecs = _within(*self._candidates(bore, reach), bore, math.cos(min(reach, math.pi)))
+        paths, boxes = render.star_paths_boxes(self.params, vecs, qs, self.preset.optics.psf_sigma_px,
+                                               self.camera.width_px, self.camera.height_px)
         electrons = self.electrons[sel]
         if len(self.false_spots):
             paths, boxes, electrons = self._add_glints(paths, boxes, electrons)
@@ -205,23 +205,25 @@ class Sky:
                 np.concatenate([electrons, self._spot_electrons]))
 
     def _near(self, bore: np.ndarray, reach: float) -> np.ndarray:
-        """Catalog indexes (ascending) within ``reach`` rad of ``bore``.
+        """Catalog indexes (ascending) within ``reach`` rad of ``bore``."""
+        c_idx, c_vec = self._candidates(bore, reach)
+        return c_idx[c_vec @ bore > math.cos(min(reach, math.pi))]
 
-        Keeps a candidate set for a cone 2° wider than asked; while later boresights stay
-        inside it (tracking), only the candidates are tested, not the whole catalog.
-        """
+    def _candidates(self, bore: np.ndarray, reach: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(catalog indexes (ascending), their vectors)`` of a cone 2° wider than ``reach``
+        about a boresight near ``bore``: kept while later boresights stay inside it
+        (tracking), so only they are tested, not the whole catalog."""
         cand = self._cand
         if cand is not None:
             c_bore, c_radius, c_idx, c_vec = cand
             off = math.acos(max(-1.0, min(1.0, float(c_bore @ bore))))
             if off + reach <= c_radius:
-                keep = c_vec @ bore > math.cos(min(reach, math.pi))
-                return c_idx[keep]
+                return c_idx, c_vec
         radius = min(reach + math.radians(2.0), math.pi)
         c_idx = np.flatnonzero(self.catalog.vectors @ bore > math.cos(radius))
         c_vec = np.ascontiguousarray(self.catalog.vectors[c_idx])     # the candidates' vectors, kept
         self._cand = (bore.copy(), radius, c_idx, c_vec)
-        return c_idx[c_vec @ bore > math.cos(min(reach, math.pi))]
+        return c_idx, c_vec
 
     def signal_frame(self, exp: Exposure) -> np.ndarray:
         """Mean photo-signal of the stars (e⁻) over the whole sensor, float64 (H, W)."""
@@ -291,6 +293,27 @@ def _substeps(rates, t_exp, f, half):
     path_px = w_max * t_exp * (f + half * half / f)
     n_sub = int(min(render.MAX_SUBSTEPS, max(1, math.ceil(path_px / render.MAX_STEP_PX))))
     return n_sub, w_max
+
+
+@njit(cache=True, nogil=True)
+def _within(c_idx, c_vec, bore, cos_reach):
+    """``(catalog indexes (ascending), unit vectors (k, 3))`` of the candidates ``c_idx`` with
+    vectors ``c_vec`` closer than the angle of ``cos_reach`` to ``bore``."""
+    keep = np.empty(c_idx.shape[0], np.bool_)
+    k = 0
+    for i in range(c_idx.shape[0]):
+        keep[i] = c_vec[i, 0] * bore[0] + c_vec[i, 1] * bore[1] + c_vec[i, 2] * bore[2] > cos_reach
+        if keep[i]:
+            k += 1
+    idx = np.empty(k, c_idx.dtype)
+    vecs = np.empty((k, 3))
+    j = 0
+    for i in range(c_idx.shape[0]):
+        if keep[i]:
+            idx[j] = c_idx[i]
+            vecs[j] = c_vec[i]
+            j += 1
+    return idx, vecs
 
 
 @njit(cache=True, nogil=True)
