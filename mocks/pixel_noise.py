@@ -220,15 +220,16 @@ def background_maps(gain_fp, dark, det):
 
 
 @njit(cache=True, nogil=True)
-def digitise_run(signal, gain_fp, dark, lam_bg, exp_bg, fkey, row, col0, det, noise, table, out,
+def digitise_run(signal, gain_fp, dark, lam_bg, exp_bg, keys, det, noise, table, out,
                  lam, u, p, f, cnt, hs):
-    """ADU of a run of pixels ``row, col0 .. col0 + len − 1`` (1-D views); see the module docstring.
+    """ADU of a run of pixels (1-D arrays of one length); see the module docstring.
 
-    Random bits per pixel: ``h = mix64(fkey ^ row << 20 ^ col)``; the low 32 bits drive the
-    Poisson inversion, the high 32 bits the read-noise normal. The inversion counts the
-    CDF terms below u for n ≤ 12 across the run with no branches (SIMD), then finishes
-    the pixels beyond by the scalar recurrence; λ ≥ 40 uses round(λ + √λ z).
-    Every pixel's result depends only on its own inputs, so any run gives the same values.
+    ``keys`` (uint64): each pixel's ``fkey ^ row << 20 ^ col`` (:func:`pixel_keys`); its
+    random bits are ``h = mix64(key)``: the low 32 bits drive the Poisson inversion, the
+    high 32 bits the read-noise normal. The inversion counts the CDF terms below u for
+    n ≤ 12 across the run with no branches (SIMD), then finishes the pixels beyond by the
+    scalar recurrence; λ ≥ 40 uses round(λ + √λ z). Every pixel's result depends only on
+    its own inputs, so any run (a row, a span, every span of a readout) gives the same values.
     ``lam, u, p, f, cnt`` (float64) and ``hs`` (uint64), each ≥ len, are scratch buffers.
     """
     m = signal.shape[0]
@@ -242,9 +243,8 @@ def digitise_run(signal, gain_fp, dark, lam_bg, exp_bg, fkey, row, col0, det, no
         else:
             lam[i] = (signal[i] + sky_e) * gain_fp[i] + dark[i]
     if noise:
-        rkey = fkey ^ (np.uint64(row) << np.uint64(20))
         for i in range(m):
-            h = mix64(rkey ^ np.uint64(col0 + i))
+            h = mix64(keys[i])
             hs[i] = h
             u[i] = (np.float64(h & _M32) + 0.5) * (1.0 / 4294967296.0)
         for i in range(m):
@@ -311,11 +311,21 @@ def digitise_frame(signal, gain_fp, dark, lam_bg, exp_bg, seed, frame, det, nois
     fkey = frame_key(seed, frame)
     lam, u, p, f, cnt = np.empty(w), np.empty(w), np.empty(w), np.empty(w), np.empty(w)
     hs = np.empty(w, dtype=np.uint64)
+    keys = np.empty(w, dtype=np.uint64)
     for r in range(h):
-        digitise_run(signal[r] if row_lit[r] else zero_row, gain_fp[r], dark[r], lam_bg[r], exp_bg[r], fkey, r, 0,
+        pixel_keys(fkey, r, 0, keys)
+        digitise_run(signal[r] if row_lit[r] else zero_row, gain_fp[r], dark[r], lam_bg[r], exp_bg[r], keys,
                      det, noise, table, out[r],
                      lam, u, p, f, cnt, hs)
     return out
+
+
+@njit(cache=True, inline="always")
+def pixel_keys(fkey, row, col0, keys):
+    """``keys[i] = fkey ^ row << 20 ^ (col0 + i)``: the noise keys of a run of pixels of one row."""
+    rkey = fkey ^ (np.uint64(row) << np.uint64(20))
+    for i in range(keys.shape[0]):
+        keys[i] = rkey ^ np.uint64(col0 + i)
 
 
 def span_maps(gain_fp, dark, lam_bg, exp_bg) -> np.ndarray:
@@ -328,29 +338,26 @@ def span_maps(gain_fp, dark, lam_bg, exp_bg) -> np.ndarray:
 @njit(cache=True, nogil=True)
 def digitise_spans(signal, spans, maps, seed, frame, det, noise, table):
     """Span pixels: mean photo-signal (m,) in span order → uint16 ADU (m,); ``maps`` from
-    :func:`span_maps` (the same values as the full-frame digitiser's four maps)."""
-    out = np.empty(signal.shape[0], dtype=np.uint16)
+    :func:`span_maps` (the same values as the full-frame digitiser's four maps). Every span's
+    inputs are gathered first, then one run digitises the whole readout."""
+    m = signal.shape[0]
+    out = np.empty(m, dtype=np.uint16)
     fkey = frame_key(seed, frame)
-    longest = 1
-    for i in range(spans.shape[0]):
-        longest = max(longest, spans[i, 3] - spans[i, 2])
-    lam, u, p, f = np.empty(longest), np.empty(longest), np.empty(longest), np.empty(longest)
-    cnt = np.empty(longest)
-    hs = np.empty(longest, dtype=np.uint64)
-    gain = np.empty(longest, np.float32)
-    dk = np.empty(longest, np.float32)
-    lb = np.empty(longest, np.float32)
-    eb = np.empty(longest, np.float32)
+    gain = np.empty(m, np.float32)
+    dk = np.empty(m, np.float32)
+    lb = np.empty(m, np.float32)
+    eb = np.empty(m, np.float32)
+    keys = np.empty(m, np.uint64)
     k = 0
     for i in range(spans.shape[0]):
         r, a, b = spans[i, 1], spans[i, 2], spans[i, 3]
-        n = b - a
-        for j in range(n):
-            gain[j] = maps[r, a + j, 0]
-            dk[j] = maps[r, a + j, 1]
-            lb[j] = maps[r, a + j, 2]
-            eb[j] = maps[r, a + j, 3]
-        digitise_run(signal[k:k + n], gain[:n], dk[:n], lb[:n], eb[:n], fkey, r, a, det, noise, table, out[k:k + n],
-                     lam, u, p, f, cnt, hs)
-        k += n
+        pixel_keys(fkey, r, a, keys[k:k + b - a])
+        for c in range(a, b):
+            gain[k] = maps[r, c, 0]
+            dk[k] = maps[r, c, 1]
+            lb[k] = maps[r, c, 2]
+            eb[k] = maps[r, c, 3]
+            k += 1
+    digitise_run(signal, gain, dk, lb, eb, keys, det, noise, table, out,
+                 np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m, np.uint64))
     return out
