@@ -46,7 +46,9 @@ class AttitudeFilter:
         self.ts = np.array([np.nan, 0.0, 0.0, 0.0])   # [t of the last sample, ω̂]
         self.hist_t = np.full(HIST, -np.inf)
         self.hist_q = np.zeros((HIST, 4))
-        self.ih = np.array([HIST - 1, 0], np.int64)   # [ring head, output seq]
+        # [ring head, output seq, writes out of time order]: while the last is 0 the ring's
+        # times increase from its oldest entry to its head, and searches walk back from the head
+        self.ih = np.array([HIST - 1, 0, 0], np.int64)
         # rate-proportional gyro error left after calibration (scale factor and misalignment,
         # 1σ per axis, rad per rad): a constant error, folded into the rate noise as a walk
         # whose variance matches its linear growth (σ_s |ω| t)² at t = rate_error_horizon_s
@@ -85,7 +87,7 @@ class AttitudeFilter:
     def q_at(self, t: float) -> np.ndarray:
         """Attitude estimate at host time ``t`` (s): the newest sample at or before it,
         propagated to ``t`` with the current rate (≤ one gyro period)."""
-        return q_at_history(self.q, self.ts, self.hist_t, self.hist_q, float(t))
+        return q_at_history(self.q, self.ts, self.hist_t, self.hist_q, self.ih, float(t))
 
     def update(self, t_mid: float, b_mid, refs, sigmas, accepted, min_used: int = 1) -> int:
         """Star directions measured at mid-exposure ``t_mid`` (body unit vectors (n, 3)),
@@ -114,9 +116,10 @@ class AttitudeFilter:
         The smoothed product (:attr:`smoothed`) is the previous frame's mid-exposure attitude
         smoothed with this frame (one-lag Rauch–Tung–Striebel on the attitude error; frames
         more than ``SMOOTH_GAP_S`` apart are not combined)."""
-        return int(update_at_mid(self.q, self.b, self.P, self.ts, self.hist_t, self.hist_q, self.prm, self.kappa,
-                                 self.mid, self.smoothed, float(t_mid), np.ascontiguousarray(b_mid, np.float64),
-                                 np.ascontiguousarray(refs, np.float64), np.ascontiguousarray(sigmas, np.float64),
+        return int(update_at_mid(self.q, self.b, self.P, self.ts, self.hist_t, self.hist_q, self.ih, self.prm,
+                                 self.kappa, self.mid, self.smoothed, float(t_mid),
+                                 np.ascontiguousarray(b_mid, np.float64), np.ascontiguousarray(refs, np.float64),
+                                 np.ascontiguousarray(sigmas, np.float64),
                                  accepted, int(min_used), GATE, QD_MARGIN, SMOOTH_GAP_S))
 
     def set_attitude(self, q_ident, t_mid: float, now: float, cov_rad2: np.ndarray) -> None:

@@ -836,10 +836,10 @@ def warmup() -> dict:
         (image_kernels.measure_windows, (spans, vals, np.array([0], np.int64), np.zeros((2, 2)),
                                          np.array([0], np.int64), np.array([2], np.int64), cam, 0.85, 4.0, 30.0,
                                          5.0, 10, 1e-3)),
-        (update_kernel.update_at_mid, (af.q, af.b, af.P, af.ts, af.hist_t, af.hist_q, af.prm, af.kappa, af.mid,
+        (update_kernel.update_at_mid, (af.q, af.b, af.P, af.ts, af.hist_t, af.hist_q, af.ih, af.prm, af.kappa, af.mid,
                                        af.smoothed, 0.0, ref, ref, np.array([1e-5, 1e-5]), np.zeros(2, np.uint8), 1,
                                        GATE, QD_MARGIN, SMOOTH_GAP_S)),
-        (update_kernel.q_at_history, (af.q, af.ts, af.hist_t, af.hist_q, 0.0)),
+        (update_kernel.q_at_history, (af.q, af.ts, af.hist_t, af.hist_q, af.ih, 0.0)),
     ]
     return warm(calls)
 

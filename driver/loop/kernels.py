@@ -36,7 +36,8 @@ def predict_batch(smp_t, smp_rate, smp_flags, n, q, b, P, ts, hist_t, hist_q, ih
 
     smp_t (s), smp_rate (rad/s, body), smp_flags (gyro sample flags): the batch, first ``n``.
     q, b, P: filter state, in place. ts (4,): [t of the last sample (s, nan: none), ω̂ (rad/s)]
-    in place. hist_t (H,), hist_q (H, 4): history ring; ih (2,) int64: [ring head, output seq]
+    in place. hist_t (H,), hist_q (H, 4): history ring; ih (3,) int64: [ring head, output seq,
+    writes out of time order (counted here)]
     in place. prm: [gyro period s, σ_v rad/s/√Hz, σ_u rad/s/√s, bias-converged variance
     (rad/s)², gyro group delay τ s, σ_s² T_s s (rate-proportional error: the rate noise
     density used is √(σ_v² + σ_s² T_s |ω̂|²))]. A sample stamped t measured the rate at t − τ: the
@@ -74,6 +75,8 @@ def predict_batch(smp_t, smp_rate, smp_flags, n, q, b, P, ts, hist_t, hist_q, ih
             wn2 = (w[0] - b[0]) ** 2 + (w[1] - b[1]) ** 2 + (w[2] - b[2]) ** 2
             sv = np.sqrt(sv * sv + prm[5] * wn2)
         mekf_predict_blocks(q, b, P, w, dt, sv, prm[2], E, T)
+        if t <= hist_t[ih[0]]:
+            ih[2] += 1          # the history is out of time order from here: searches scan all of it
         h = (ih[0] + 1) % H
         ih[0] = h
         hist_t[h] = t

@@ -21,20 +21,40 @@ from ..core.small_matrix import inv3_sym
 
 
 @njit(cache=True)
-def q_at_history(q, ts, hist_t, hist_q, t):
+def q_at_history(q, ts, hist_t, hist_q, ih, t):
     """Attitude at time ``t`` (s): the newest history entry at or before it, propagated to
-    ``t`` with the current rate ``ts[1:]`` (≤ one gyro period); ``q`` when there is none."""
+    ``t`` with the current rate ``ts[1:]`` (≤ one gyro period); ``q`` when there is none.
+    ``ih``: the ring's [head, …, writes out of time order] (:class:`AttitudeFilter`)."""
     if ts[0] != ts[0]:
         return q.copy()
+    best = _newest_at_or_before(hist_t, ih, t)
+    if best < 0:
+        return q.copy()
+    return quat_propagate(hist_q[best], ts[1:], t - hist_t[best])
+
+
+@njit(cache=True)
+def _newest_at_or_before(hist_t, ih, t):
+    """Index of the history entry with the latest time ≤ ``t`` (the first of equal ones in
+    ring order), −1 when none: walking back from the head while the ring is in time order
+    (it stops at the first such entry), else over the whole ring."""
+    H = hist_t.shape[0]
+    if ih[2] == 0:
+        h = ih[0]
+        for j in range(H):
+            i = (h - j) % H
+            if hist_t[i] == -np.inf:
+                return -1
+            if hist_t[i] <= t:
+                return i
+        return -1
     best = -1
     best_t = -np.inf
-    for i in range(hist_t.shape[0]):
+    for i in range(H):
         if hist_t[i] <= t and hist_t[i] > best_t:
             best = i
             best_t = hist_t[i]
-    if best < 0:
-        return q.copy()
-    return quat_propagate(hist_q[best], ts[1:], t - best_t)
+    return best
 
 
 @njit(cache=True)
@@ -80,13 +100,13 @@ def _smooth_previous(mid, smoothed, t_mid, q_prior, p_prior, q_post, p_post, gap
 
 
 @njit(cache=True)
-def update_at_mid(q, b, P, ts, hist_t, hist_q, prm, kappa, mid, smoothed, t_mid, b_mid, refs, sigmas, accepted,
+def update_at_mid(q, b, P, ts, hist_t, hist_q, ih, prm, kappa, mid, smoothed, t_mid, b_mid, refs, sigmas, accepted,
                   min_used, gate, qd_margin, gap_s):
     """Apply one image (body unit vectors ``b_mid`` (n, 3) measured at ``t_mid``, catalog
     vectors ``refs`` (n, 3), σ ``sigmas`` (n,) rad) now; ``accepted`` (n,) uint8 written.
     State q, b, P, history and ``mid``/``smoothed`` in place (layouts of ``AttitudeFilter``).
     Returns the count of stars used (0: not applied, fewer than ``min_used`` passed)."""
-    q_prior_mid = q_at_history(q, ts, hist_t, hist_q, t_mid)
+    q_prior_mid = q_at_history(q, ts, hist_t, hist_q, ih, t_mid)
     rq = quat_mult(q, quat_conj(q_prior_mid))                       # body(t_mid) → body(now)
     rot = quat_to_dcm(rq)
     bvecs = np.ascontiguousarray(b_mid @ np.ascontiguousarray(rot.T))
@@ -112,9 +132,17 @@ def update_at_mid(q, b, P, ts, hist_t, hist_q, prm, kappa, mid, smoothed, t_mid,
         # the correction carried into the history from t_mid on (each entry keeps its gyro
         # rotation to now): a later-arriving earlier frame must not apply it a second time
         corr = quat_mult(quat_conj(q_old), q)
-        for i in range(hist_t.shape[0]):
-            if hist_t[i] >= t_mid:
+        H = hist_t.shape[0]
+        if ih[2] == 0:                   # in time order: the entries from t_mid on are the newest
+            for j in range(H):
+                i = (ih[0] - j) % H
+                if not hist_t[i] >= t_mid:
+                    break
                 hist_q[i] = quat_normalize(quat_mult(hist_q[i], corr))
+        else:
+            for i in range(H):
+                if hist_t[i] >= t_mid:
+                    hist_q[i] = quat_normalize(quat_mult(hist_q[i], corr))
         q_mid = quat_mult(quat_conj(rq), q)
         p_mid = _rt_p_r(rot, P)
         _smooth_previous(mid, smoothed, t_mid, q_prior_mid, p_prior_mid, q_mid, p_mid, gap_s)
