@@ -679,16 +679,23 @@ class HeadEmulator:
         compiles (a compile takes seconds of CPU from the loop under test on a shared host)."""
         import numpy as np
 
-        from ..protocol.payloads import pack10
+        from ..protocol.payloads import encode_windows_arrays, pack10
         from .spot_finder import find_spots
-        from .trajectory import Constant, integrate
+        from .trajectory import Constant, LinearSegments, integrate, integrate_to
 
         sky = self._sky_for(self.exposure_us)
         img, _ = sky.render_frame(q0, np.zeros(3), frame=0)
-        sky.window_pixels(np.array([[0, 10, 10, 16]], np.int32), q0, np.zeros(3), frame=0)
+        spans = np.array([[0, 10, 10, 16]], np.int32)
+        sky.window_pixels(spans, q0, np.zeros(3), frame=0)
+        self._validate_spans(spans)
+        for fmt in (PixelFormat.U16, PixelFormat.PACKED10):
+            encode_windows_arrays([0], [6], np.ones(6, np.uint16), np.array([0, 6]), fmt)
         find_spots(np.asarray(img)[:64, :64], 96, 8, 7)
         pack10(np.arange(8, dtype=np.uint16))
         integrate(np.asarray(q0, float), Constant((0.0, 0.0, 1e-3)), np.array([0.0, 0.02]), max_step_s=0.01)
+        segments = LinearSegments([0.0], [np.inf], [(0.0, 0.0, 1e-3)], [(0.0, 0.0, 1e-3)])
+        integrate_to(np.asarray(q0, float), segments, 0.0, 0.02)
+        segments.rate(np.array([0.0, 0.01]))
 
     def __enter__(self):
         self.start()

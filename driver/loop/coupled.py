@@ -799,7 +799,7 @@ def warmup() -> dict:
     from ..core.mekf import mekf_init, mekf_update
     from ..core.motion import substeps_for
     from ..gyro.convert import convert_frames
-    from ..protocol.payloads import _unpack10_kernel
+    from ..protocol.payloads import _unpack10_kernel, windows_tail_decode
     from . import acquire, image_kernels, kernels, update_kernel
     from .warmup import warm
 
@@ -825,6 +825,7 @@ def warmup() -> dict:
         (quat_normalize, (q,)),
         (quat_to_dcm, (q,)),
         (_unpack10_kernel, (np.frombuffer(bytes(20), np.uint8), 16)),   # full-frame chunks (head worker)
+        (windows_tail_decode, (np.frombuffer(bytes(8), np.uint8), 1, False)),   # every streamed frame
         (substeps_for, (rates, 0.0025, 6666.0, 0.25)),
         (acquire.detect_spots, (img, 6.0, 40, 7)),
         (acquire.window_moments, (spans.astype(np.int64), vals, 1, 2.0, 1.0)),    # the head's spot list

@@ -160,7 +160,7 @@ def _decode_windows(fields: dict, tail: bytes) -> list[WindowPixels]:
     count = fields["count"]
     if count and fmt not in (PixelFormat.U16, PixelFormat.PACKED10):
         raise PayloadError(f"unknown pixel format {fmt} in reply")
-    status, wid, n, left, ids, sums, bounds, pixels = _windows_tail_decode(
+    status, wid, n, left, ids, sums, bounds, pixels = windows_tail_decode(
         np.frombuffer(tail, dtype=np.uint8), count, fmt == PixelFormat.PACKED10)
     if status == _TAIL_IN_HEADER:
         raise PayloadError("window data ends inside a window header")
@@ -176,7 +176,7 @@ _TAIL_OK, _TAIL_IN_HEADER, _TAIL_SHORT, _TAIL_EXTRA = range(4)
 
 
 @njit(cache=True)
-def _windows_tail_decode(tail, count, packed):
+def windows_tail_decode(tail, count, packed):
     """Windows of a WINDOW_DATA/FRAME tail (uint8): ``(status, window id, pixel count, bytes
     left, ids (k,), sums (k,), pixel bounds (k + 1,), pixels uint16)``; status ``_TAIL_OK`` or
     the first fault in wire order: a header cut short, a window's pixels cut short (its id,
