@@ -44,7 +44,7 @@ from . import record as R
 from .attitude_filter import GATE, QD_MARGIN, SMOOTH_GAP_S, AttitudeFilter, fix_covariance
 from .floor import FloorInputs
 from .image import ImagePipeline
-from .image_kernels import MEAS_MISS, MEAS_OK
+from .image_kernels import select_measured
 from .outputs import OutputStage
 from .tracks import MODEL, StarTracks
 
@@ -665,21 +665,17 @@ class CoupledLoop:
             self.lag_jitter = 0.9 * self.lag_jitter + 0.1 * abs(lag - self.exposure_lag)
             self.exposure_lag = 0.9 * self.exposure_lag + 0.1 * lag
         state, b_mid, sig = measured
-        if self.p.camera_sigma_px > 0:
-            sig = np.sqrt(sig * sig + (self.p.camera_sigma_px / self.f_px) ** 2)
         tr = self.tracks
-        wins = pend["wins"]
-        live = tr.active[wins] & (tr.nav[wins] == pend["nav"])   # dropped/replaced meanwhile: skip
-        tr.misses[wins[live & (state == MEAS_MISS)]] += 1
-        use = live & (state == MEAS_OK)
         w = self.filter.omega
-        if math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]) > self.p.max_track_rate:
-            use[:] = False          # spots smeared past what the centroid model holds: coast on the gyro
-        slots = wins[use]
+        # windows whose slot was dropped or refilled meanwhile are skipped; spots smeared past
+        # what the centroid model holds are not taken (coast on the gyro)
+        slots, b_use, r_use, s_use = select_measured(
+            pend["wins"], pend["nav"], state, b_mid, sig, tr.active, tr.nav, tr.misses, tr.ref,
+            (self.p.camera_sigma_px / self.f_px) ** 2 if self.p.camera_sigma_px > 0 else 0.0,
+            math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]) > self.p.max_track_rate)
         updated = 0
         if len(slots):
             acc = np.zeros(len(slots), np.uint8)
-            b_use, r_use, s_use = b_mid[use], tr.ref[slots], sig[use]
             ok = self._consistent(b_use, r_use, s_use)
             # the first image after a lost-in-space fix confirms it: only stars that checked
             # each other (:meth:`_consistent`) may, and at least 4 — the fix's wide prior lets a
@@ -722,18 +718,10 @@ class CoupledLoop:
         ``CONSISTENT_SIGMA`` × the median centroid σ (at least ``CONSISTENT_MIN_PX``): a window
         that caught another star, a hot pixel or a smeared neighbour is dropped before the
         χ² gates see it — right after an acquisition those gates are wide enough to take it."""
-        from ..starid.verify import verify_matches
+        from ..starid.verify import consistent
 
-        n = len(sig)
-        if n < 3:
-            return np.ones(n, np.bool_)
-        srt = np.sort(sig)       # the median (np.median's value, without its overhead)
-        med = float(srt[n // 2]) if n % 2 else float((srt[n // 2 - 1] + srt[n // 2]) / 2)
-        tol = max(CONSISTENT_SIGMA * med, CONSISTENT_MIN_PX / self.f_px)
-        _, match, n_ok, _ = verify_matches(np.ascontiguousarray(b_mid, np.float64),
-                                           np.ascontiguousarray(refs, np.float64), np.arange(n, dtype=np.int64),
-                                           tol)
-        return match >= 0 if n_ok else np.zeros(n, np.bool_)
+        return consistent(np.ascontiguousarray(b_mid, np.float64), np.ascontiguousarray(refs, np.float64),
+                          np.ascontiguousarray(sig, np.float64), CONSISTENT_SIGMA, CONSISTENT_MIN_PX / self.f_px)
 
     def _after_image(self, now: float, updated: int) -> None:
         self.few_run = self.few_run + 1 if updated < self.p.min_stars else 0
@@ -800,6 +788,7 @@ def warmup() -> dict:
     from ..core.motion import substeps_for
     from ..gyro.convert import convert_frames
     from ..protocol.payloads import _unpack10_kernel, windows_tail_decode
+    from ..starid.verify import consistent
     from . import acquire, image_kernels, kernels, update_kernel
     from .warmup import warm
 
@@ -841,6 +830,10 @@ def warmup() -> dict:
                                        af.smoothed, 0.0, ref, ref, np.array([1e-5, 1e-5]), np.zeros(2, np.uint8), 1,
                                        GATE, QD_MARGIN, SMOOTH_GAP_S)),
         (update_kernel.q_at_history, (af.q, af.ts, af.hist_t, af.hist_q, af.ih, 0.0)),
+        (consistent, (ref, ref, np.ones(2), 6.0, 1e-4)),
+        (image_kernels.select_measured, (np.array([0], np.int64), np.array([0], np.int64), np.zeros(1, np.int8),
+                                         np.zeros((1, 3)), np.ones(1), np.ones(1, np.bool_), np.zeros(1, np.int64),
+                                         np.zeros(1, np.int64), np.zeros((1, 3)), 0.0, False)),
     ]
     return warm(calls)
 

@@ -160,3 +160,40 @@ def measure_windows(spans, values, wins, off, off_start, off_len, cam, psf_sigma
         sig[i] = math.sqrt(var) / f
         state[i] = MEAS_OK
     return state, b, sig
+
+
+@njit(cache=True)
+def select_measured(wins, nav_planned, state, b_mid, sig, active, nav, misses, refs, cam_var, coast):
+    """The measured stars of one readout the filter may take, in window order: windows whose
+    slot still tracks the star the plan was made for (``active[slot]`` and ``nav[slot] ==
+    nav_planned``) with a spot measured (``MEAS_OK``); a live window that missed its spot
+    counts a miss (``misses`` in place). ``coast``: none is taken (the body turns faster than
+    the centroid model holds). σ is combined with the camera model's variance ``cam_var``
+    (rad², when > 0). Returns ``(slots (k,), b (k, 3), refs (k, 3), σ (k,) rad)``."""
+    n = wins.shape[0]
+    take = np.zeros(n, np.bool_)
+    k = 0
+    for i in range(n):
+        s = wins[i]
+        if not (active[s] and nav[s] == nav_planned[i]):
+            continue
+        if state[i] == MEAS_MISS:
+            misses[s] += 1
+        elif state[i] == MEAS_OK and not coast:
+            take[i] = True
+            k += 1
+    slots = np.empty(k, wins.dtype)
+    b = np.empty((k, 3))
+    r = np.empty((k, 3))
+    sg = np.empty(k)
+    j = 0
+    for i in range(n):
+        if take[i]:
+            s = wins[i]
+            slots[j] = s
+            for a in range(3):
+                b[j, a] = b_mid[i, a]
+                r[j, a] = refs[s, a]
+            sg[j] = math.sqrt(sig[i] * sig[i] + cam_var) if cam_var > 0 else sig[i]
+            j += 1
+    return slots, b, r, sg

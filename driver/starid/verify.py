@@ -103,6 +103,24 @@ def verify_matches(b, ref, match, tol):
 
 
 @njit(cache=True)
+def consistent(b, ref, sig, k_sigma, tol_min):
+    """Which of n measured stars agree with each other, whatever a prior says: bool (n,).
+    ``b`` (n, 3) measured and ``ref`` (n, 3) catalog unit vectors, ``sig`` (n,) centroid σ
+    (rad). With n ≥ 3, :func:`verify_matches` over all of them at the tolerance
+    max(``k_sigma`` × the median σ, ``tol_min``) rad; fewer stars are all kept."""
+    n = sig.shape[0]
+    out = np.ones(n, np.bool_)
+    if n < 3:
+        return out
+    srt = np.sort(sig)
+    med = srt[n // 2] if n % 2 else (srt[n // 2 - 1] + srt[n // 2]) / 2
+    _, match, n_ok, _ = verify_matches(b, ref, np.arange(n), max(k_sigma * med, tol_min))
+    for i in range(n):
+        out[i] = n_ok > 0 and match[i] >= 0
+    return out
+
+
+@njit(cache=True)
 def drop_ambiguous(b, q, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, tol, match):
     """Unmatch (in place) every star with more than one catalog star within ``tol`` of its
     direction under attitude ``q``: a close pair cannot be told apart by position, so
