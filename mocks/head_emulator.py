@@ -540,7 +540,7 @@ class HeadEmulator:
         """The FRAME messages (one or more parts) of frame ``s.frame`` read with ``active``."""
         _, ids, slices = active[:3]
         px, bounds = _window_pixels(pixels, slices)
-        sums = np.add.reduceat(px.astype(np.int64), bounds[:-1]) if len(ids) else np.zeros(0, np.int64)
+        sums = _bounded_sums(px, bounds)
         b = bounds.tolist()
         counts = [b[j + 1] - b[j] for j in range(len(b) - 1)]
         t0_us, t1_us = self.mcu_us(s.t_start), self.mcu_us(s.t_start + s.exposure_us * 1e-6)
@@ -805,10 +805,14 @@ def _window_pixels(pixels: np.ndarray, slices: list) -> tuple[np.ndarray, np.nda
     return np.concatenate(parts), bounds
 
 
+def _bounded_sums(px: np.ndarray, bounds: np.ndarray) -> np.ndarray:
+    """int64 (k,): the sum of ``px[bounds[j]:bounds[j + 1]]`` for each window j (empty ones 0),
+    from one running sum of the frame."""
+    c = np.zeros(len(px) + 1, np.int64)
+    np.cumsum(px, dtype=np.int64, out=c[1:])
+    return c[bounds[1:]] - c[bounds[:-1]]
+
+
 def _window_sums(pixels: np.ndarray, slices: list) -> list:
-    """Pixel sum (int) of each window's slice of ``pixels``: one reduction for the frame."""
-    px, bounds = _window_pixels(pixels, slices)
-    if len(bounds) < 2:
-        return []
-    return [int(px[bounds[j]:bounds[j + 1]].sum()) for j in range(len(bounds) - 1)] \
-        if np.any(np.diff(bounds) == 0) else np.add.reduceat(px.astype(np.int64), bounds[:-1]).tolist()
+    """Pixel sum (int) of each window's slice of ``pixels``."""
+    return _bounded_sums(*_window_pixels(pixels, slices)).tolist()
