@@ -25,8 +25,9 @@ from numba import njit
 
 from ..camera import P_CX, P_CY, P_F, unproject_point
 from ..core.centroid import cog, smear_fit, window_background, window_spans_of
-from ..core.motion import predict_trajectory
+from ..core.motion import predict_trajectory, substeps_for
 from ..core.windows import trajectory_window
+from .kernels import project_refs
 
 MEAS_OK = 0        # direction measured
 MEAS_MISS = 1      # window read, no spot above threshold (or too faint)
@@ -110,6 +111,34 @@ def plan_windows(uv, slots, rates, dt, bias, cam, model, substeps, skip, k, n_ro
             off[w * npts + i, 1] = trajs[j, i, 1] - mv
         w += 1
     return spans, wins, off, off_start, off_len
+
+
+@njit(cache=True)
+def plan_tracked(active, nav, vmag, refs, q, omega, bias, m, m_lat, dt, cam, model, k, n_rows, n_cols,
+                 pixel_budget, max_window_pixels, max_spans):
+    """:func:`plan_windows` for the tracked slots (``active``), brightest first (``vmag`` of
+    their navigation stars ``nav``, ties in slot order), at their places under attitude ``q``,
+    with the rate ``omega + bias`` held over ``m`` exposure and ``m_lat`` lag samples of
+    ``dt`` s. Returns plan_windows' arrays and the chosen slots' navigation stars."""
+    act = np.flatnonzero(active)
+    mags = np.empty(act.shape[0])
+    for i in range(act.shape[0]):
+        mags[i] = vmag[nav[act[i]]]
+    order = act[np.argsort(mags, kind="mergesort")].astype(np.int64)
+    uv, _ = project_refs(cam, q, np.ascontiguousarray(refs[order]))
+    rates = np.empty((m + m_lat, 3))
+    meas = np.empty((m + m_lat, 3))
+    for i in range(m + m_lat):
+        for j in range(3):
+            rates[i, j] = omega[j] + bias[j]
+            meas[i, j] = rates[i, j] - bias[j]
+    sub = substeps_for(meas, dt, cam[P_F], 0.5)
+    spans, wins, off, off_start, off_len = plan_windows(uv, order, rates, dt, bias, cam, model, sub, m_lat * sub, k,
+                                                        n_rows, n_cols, pixel_budget, max_window_pixels, max_spans)
+    nav_wins = np.empty(wins.shape[0], nav.dtype)
+    for i in range(wins.shape[0]):
+        nav_wins[i] = nav[wins[i]]
+    return spans, wins, off, off_start, off_len, nav_wins
 
 
 @njit(cache=True, nogil=True)

@@ -9,7 +9,7 @@ for a while that doubles with each such drop (:meth:`drop_wrong`: 1, 2, 4 … 32
 whose image a hot pixel or an unresolved neighbour pulls off its catalog place would
 otherwise come back at once and fail again, frame after frame. :meth:`plan` builds the windows of
 the next exposure for every tracked star (trajectory over the exposure and the command
-lag from the current rate, :func:`gyrostar.loop.image_kernels.plan_windows`).
+lag from the current rate, :func:`gyrostar.loop.image_kernels.plan_tracked`).
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import math
 import numpy as np
 
 from . import record as R
-from .image_kernels import plan_windows
+from .image_kernels import plan_tracked
 from .kernels import project_refs
 
 MODEL = 1                # core.motion.MODEL_PINHOLE
@@ -148,19 +148,12 @@ class StarTracks:
         ``budget`` (:class:`gyrostar.loop.linkbudget.LinkBudget`): the link's per-frame pixel
         and span budgets too, and no uncertainty margin while it says windows are tightened;
         the plan then holds ``n_stars`` (tracked stars it was made for)."""
-        from ..core.motion import substeps_for
-
-        act = self.tracked()
-        if not len(act):
+        n_stars = int(np.count_nonzero(self.active))
+        if not n_stars:
             return None
         p = self.p
-        order = act[np.argsort(self.mags(act), kind="stable")]
-        uv, _ = project_refs(self.cam, q, self.ref[order])
         m = max(1, int(round(p.exposure_s * odr_hz)))
         m_lat = int(round(lag_s * odr_hz))
-        rates = np.repeat((omega + bias)[None, :], m + m_lat, axis=0)
-        dt = p.exposure_s / m
-        sub = substeps_for(rates - bias, dt, self.f_px, 0.5)
         sig_px = sigma_att_rad * self.f_px
         speed = math.sqrt(float(omega @ omega)) * self.f_px          # px/s near the boresight
         margin = 3.0 * sig_px + speed * lag_jitter_s
@@ -169,12 +162,12 @@ class StarTracks:
         if budget is not None:
             if not budget.margin_allowed():
                 k = p.window_k                      # degrade step 2: tighter windows
-            px, sp = budget.limits(len(order))
+            px, sp = budget.limits(n_stars)
             pixel_budget, max_spans = min(pixel_budget, px), min(max_spans, sp)
-        spans, wins, off, off_start, off_len = plan_windows(
-            uv, order.astype(np.int64), rates, dt, bias, self.cam, MODEL, sub, m_lat * sub, k,
-            self.camera.height_px, self.camera.width_px, pixel_budget, p.max_window_pixels, max_spans)
+        spans, wins, off, off_start, off_len, nav = plan_tracked(
+            self.active, self.nav, self.index.vmag, self.ref, q, omega, bias, m, m_lat, p.exposure_s / m, self.cam,
+            MODEL, k, self.camera.height_px, self.camera.width_px, pixel_budget, p.max_window_pixels, max_spans)
         if not len(wins):
             return None
-        return {"spans": spans, "wins": wins, "nav": self.nav[wins].copy(), "off": off, "off_start": off_start,
-                "off_len": off_len, "n_stars": len(order)}
+        return {"spans": spans, "wins": wins, "nav": nav, "off": off, "off_start": off_start,
+                "off_len": off_len, "n_stars": n_stars}

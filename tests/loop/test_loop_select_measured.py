@@ -62,3 +62,36 @@ def test_consistent_drops_the_star_that_disagrees():
         else:
             assert got.all()
     assert math.isclose(float(np.median([1.0, 3.0])), 2.0)
+
+
+def test_plan_tracked_equals_its_parts():
+    """The tracked slots brightest first (ties in slot order), projected, with the held rate,
+    through plan_windows: the one-call plan gives the same arrays as the parts called one by one."""
+    from gyrostar.core.motion import substeps_for
+    from gyrostar.loop.image_kernels import plan_tracked, plan_windows
+    from gyrostar.loop.kernels import project_refs
+
+    rng = np.random.default_rng(5)
+    cam = np.array([6640.0, 511.5, 507.5, 0, 0, 0, 0, 0, 1024, 1024])
+    q = quat_from_boresight(0.7, -0.3, 0.5)
+    a = quat_to_dcm(q)
+    S = 20
+    ref = rng.standard_normal((S, 3)) * 0.03 + a[2]
+    ref /= np.linalg.norm(ref, axis=1)[:, None]
+    active = rng.random(S) < 0.7
+    nav = rng.permutation(40)[:S].astype(np.int64)
+    vmag = np.round(rng.uniform(2.0, 6.0, 40), 1)            # rounded: equal magnitudes occur
+    omega, bias = np.radians([0.4, -0.2, 0.1]), np.radians([0.01, 0.0, -0.02])
+    m, m_lat, dt = 4, 2, 0.0025
+    got = plan_tracked(active, nav, vmag, ref, q, omega, bias, m, m_lat, dt, cam, 1, 8, 1024, 1024, 4000, 2048, 400)
+    act = np.flatnonzero(active)
+    order = act[np.argsort(vmag[nav[act]], kind="stable")]
+    uv, _ = project_refs(cam, q, ref[order])
+    rates = np.repeat((omega + bias)[None, :], m + m_lat, axis=0)
+    sub = substeps_for(rates - bias, dt, cam[0], 0.5)
+    want = plan_windows(uv, order.astype(np.int64), rates, dt, bias, cam, 1, sub, m_lat * sub, 8, 1024, 1024, 4000,
+                        2048, 400)
+    for g, w in zip(got[:5], want):
+        assert np.array_equal(g, w)
+    assert np.array_equal(got[5], nav[want[1]]) and len(want[1]) >= 5
+    assert len(set(vmag[nav[act]])) < len(act)              # the field had ties to order
