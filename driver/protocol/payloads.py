@@ -93,19 +93,26 @@ _PACK10_BAD = 0xFF   # the kernel's trailing status byte: a value did not fit in
 def _pack10_kernel(v):
     """Bit-stream pack of uint16 values (LSB first): ``ceil(10 n / 8)`` bytes, then one status
     byte, 0 or ``_PACK10_BAD`` (0xFF) when a value exceeds 1023 (the packing stops there)."""
-    n = v.size
-    out = np.zeros((10 * n + 7) // 8 + 1, np.uint8)
-    for i in range(n):
+    out = np.zeros((10 * v.size + 7) // 8 + 1, np.uint8)
+    if not _pack10_into(v, out, 0, out.size - 1):
+        out[out.size - 1] = 0xFF
+    return out
+
+
+@njit(cache=True)
+def _pack10_into(v, out, o, stop):
+    """Pack uint16 ``v`` LSB first into the zeroed bytes ``out[o:stop]``; False at the first
+    value above 1023 (the packing stops there)."""
+    for i in range(v.size):
         if v[i] > 0x3FF:
-            out[out.size - 1] = 0xFF
-            return out
+            return False
         bit = 10 * i
-        byte = bit >> 3
+        byte = o + (bit >> 3)
         word = np.uint32(v[i]) << (bit & 7)
         out[byte] |= np.uint8(word & 0xFF)
-        if byte + 1 < out.size - 1:
+        if byte + 1 < stop:
             out[byte + 1] |= np.uint8((word >> 8) & 0xFF)
-    return out
+    return True
 
 
 def unpack10(data: bytes, n: int) -> np.ndarray:
@@ -120,15 +127,20 @@ def unpack10(data: bytes, n: int) -> np.ndarray:
 def _unpack10_kernel(b, n):
     """Bit-stream unpack of ``n`` 10-bit values from uint8 ``b`` (LSB first)."""
     out = np.empty(n, np.uint16)
+    _unpack10_from(b, 0, b.size, n, out, 0)
+    return out
+
+
+@njit(cache=True)
+def _unpack10_from(b, o, stop, n, out, p):
+    """``out[p:p + n]`` = the ``n`` 10-bit values packed LSB first in ``b[o:stop]``."""
     for i in range(n):
         bit = 10 * i
-        byte = bit >> 3
-        shift = bit & 7
+        byte = o + (bit >> 3)
         word = np.uint32(b[byte])
-        if byte + 1 < b.size:
+        if byte + 1 < stop:
             word |= np.uint32(b[byte + 1]) << 8
-        out[i] = (word >> shift) & 0x3FF
-    return out
+        out[p + i] = (word >> (bit & 7)) & 0x3FF
 
 
 def pixel_bytes(n: int, pixel_format: int) -> int:
@@ -210,14 +222,7 @@ def windows_tail_decode(tail, count, packed):
         n = bounds[j + 1] - bounds[j]
         p = bounds[j]
         if packed:
-            end = o + (10 * n + 7) // 8
-            for i in range(n):
-                bit = 10 * i
-                byte = o + (bit >> 3)
-                word = np.uint32(tail[byte])
-                if byte + 1 < end:
-                    word |= np.uint32(tail[byte + 1]) << 8
-                pixels[p + i] = (word >> (bit & 7)) & 0x3FF
+            _unpack10_from(tail, o, o + (10 * n + 7) // 8, n, pixels, p)
         else:
             for i in range(n):
                 pixels[p + i] = np.uint16(tail[o + 2 * i]) | (np.uint16(tail[o + 2 * i + 1]) << 8)
@@ -354,17 +359,9 @@ def _windows_tail_encode(ids, sums, pixels, bounds, packed):
         p = bounds[j]
         if packed:
             nb = (10 * n + 7) // 8
-            for i in range(n):
-                v = pixels[p + i]
-                if v > 0x3FF:
-                    out[size] = _PACK10_BAD
-                    return out
-                bit = 10 * i
-                byte = o + (bit >> 3)
-                word = np.uint32(v) << (bit & 7)
-                out[byte] |= np.uint8(word & 0xFF)
-                if byte + 1 < o + nb:
-                    out[byte + 1] |= np.uint8((word >> 8) & 0xFF)
+            if not _pack10_into(pixels[p:p + n], out, o, o + nb):
+                out[size] = _PACK10_BAD
+                return out
             o += nb
         else:
             for i in range(n):
