@@ -205,9 +205,9 @@ class Sky:
                 np.concatenate([electrons, self._spot_electrons]))
 
     def _near(self, bore: np.ndarray, reach: float) -> np.ndarray:
-        """Catalog indexes (ascending) within ``reach`` rad of ``bore``."""
-        c_idx, c_vec = self._candidates(bore, reach)
-        return c_idx[c_vec @ bore > math.cos(min(reach, math.pi))]
+        """Catalog indexes (ascending) within ``reach`` rad of ``bore``: the test of
+        :meth:`window_pixels` (``_within``), so both renderers see the same stars."""
+        return _within(*self._candidates(bore, reach), bore, math.cos(min(reach, math.pi)))[0]
 
     def _candidates(self, bore: np.ndarray, reach: float) -> tuple[np.ndarray, np.ndarray]:
         """``(catalog indexes (ascending), their vectors)`` of a cone 2° wider than ``reach``
