@@ -34,29 +34,59 @@ from numba import njit
 from .small_matrix import inv3_sym
 
 
+HIST_MAX_BINS = 4096    # a window whose integer values span more bins takes the sorting path
+
+
 @njit(cache=True)
 def window_background(values, n_sigma_clip):
-    """(background, noise σ) of a window: median/MAD, then mean/std of the clipped pixels."""
+    """(background, noise σ) of a window: median/MAD, then mean/std of the clipped pixels.
+
+    Windows of integer values (ADU, as a readout returns them) within ``HIST_MAX_BINS`` levels
+    are counted in a histogram instead of sorted (:func:`_background_hist`: the same order
+    statistics and the same sums, exact in float64 for integers, so the same result to the
+    bit); any other window is sorted."""
     n = values.shape[0]
     if n == 0:
         return np.nan, np.nan
+    lo = values[0]
+    hi = values[0]
+    integral = True
+    for i in range(n):
+        x = values[i]
+        if x != math.floor(x):      # also NaN
+            integral = False
+            break
+        lo = min(lo, x)
+        hi = max(hi, x)
+    if integral and hi - lo < HIST_MAX_BINS:
+        return _background_hist(values, n_sigma_clip, float(lo), int(hi - lo) + 1)
     v = np.sort(values.astype(np.float64))
     med = v[n // 2] if n % 2 == 1 else 0.5 * (v[n // 2 - 1] + v[n // 2])
     dev = np.sort(np.abs(v - med))
     mad = dev[n // 2]
+    return _clipped(v, np.ones(n, np.int64), med, mad, n_sigma_clip)
+
+
+@njit(cache=True)
+def _clipped(levels, counts, med, mad, n_sigma_clip):
+    """(mean, std) after clipping the star's pixels twice (one-sided: the star only adds
+    light) at ``n_sigma_clip`` σ above the level, from the median ``med`` and MAD ``mad``:
+    ``counts[i]`` pixels at each of the ascending ``levels``."""
     sig = 1.4826 * mad
     if sig <= 0.0:
         sig = 1.0
-    # clip the star's pixels (one-sided: the star only adds light) and re-estimate
     for _ in range(2):
         s = 0.0
         s2 = 0.0
         c = 0
-        for i in range(n):
-            if v[i] < med + n_sigma_clip * sig:
-                s += v[i]
-                s2 += v[i] * v[i]
-                c += 1
+        thr = med + n_sigma_clip * sig
+        for i in range(levels.shape[0]):
+            x = levels[i]
+            if not x < thr:     # ascending: the rest too (NaN, sorted last, included)
+                break
+            s += counts[i] * x
+            s2 += counts[i] * (x * x)
+            c += counts[i]
         if c < 3:
             break
         mean = s / c
@@ -64,6 +94,52 @@ def window_background(values, n_sigma_clip):
         med = mean
         sig = np.sqrt(max(var, 1e-12))
     return med, sig
+
+
+@njit(cache=True)
+def _kth_level(counts, lo, k):
+    """The value of order statistic ``k`` (0-based) of a histogram ``counts`` whose bin 0 holds ``lo``."""
+    c = 0
+    for b in range(counts.shape[0]):
+        c += counts[b]
+        if c > k:
+            return lo + b
+    return lo + counts.shape[0] - 1
+
+
+@njit(cache=True)
+def _background_hist(values, n_sigma_clip, lo, nbins):
+    """:func:`window_background` of integer ``values`` in [lo, lo + nbins): median and MAD
+    from a histogram (the MAD by walking outward from the median, nearest levels first),
+    then the clipped sums level by level (integer sums: exact in any order)."""
+    n = values.shape[0]
+    counts = np.zeros(nbins, np.int64)
+    for i in range(n):
+        counts[int(values[i] - lo)] += 1
+    if n % 2 == 1:
+        med = _kth_level(counts, lo, n // 2)
+    else:
+        med = 0.5 * (_kth_level(counts, lo, n // 2 - 1) + _kth_level(counts, lo, n // 2))
+    # |v − med| in increasing order: levels below med from bin L down, above it from bin R up
+    R = int(math.floor(med - lo)) + 1
+    L = R - 1
+    k = n // 2
+    c = 0
+    mad = 0.0
+    while True:
+        dl = med - (lo + L) if L >= 0 else np.inf
+        dr = (lo + R) - med if R < nbins else np.inf
+        if dl <= dr:
+            c += counts[L]
+            mad = dl
+            L -= 1
+        else:
+            c += counts[R]
+            mad = dr
+            R += 1
+        if c > k:
+            break
+    return _clipped(lo + np.arange(nbins, dtype=np.float64), counts, med, mad, n_sigma_clip)
 
 
 @njit(cache=True)

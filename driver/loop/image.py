@@ -18,6 +18,12 @@ LIS_MAX_SPOTS = 40     # spots handed to the identifier, brightest first
 LIS_HEAD_SPOTS = 64    # spot windows a head's FIND_SPOTS sends (its neighbour score ranks a little
                        # differently from the full box flux: the host re-ranks and keeps 40)
 LIS_BOX = 7            # px: centroid box and suppression distance
+FIT_MAX_ITER = 10      # Gauss–Newton iterations of the smeared-PSF fit, at most
+FIT_TOL_PX = 1e-2      # px (|Δu| + |Δv|): the fit stops after a step this small. It converges
+                       # linearly here, each step about 0.1× the one before: on the demo the
+                       # position it stops at lies 0.0002 px (median; p99 0.002) from the optimum,
+                       # against centroid σ of 0.03–0.14 px (10–90 %), in 3.3 iterations per
+                       # spot instead of 4.4 at 1e-3
 
 
 class ImagePipeline:
@@ -62,7 +68,8 @@ class ImagePipeline:
         p = self.p
         vals = np.ascontiguousarray(values, dtype=np.float64)
         return measure_windows(plan["spans"], vals, plan["wins"], plan["off"], plan["off_start"], plan["off_len"],
-                               self.cam, p.psf_sigma_px, p.thresh_sigma, p.min_signal, p.e_per_dn, 10, 1e-3)
+                               self.cam, p.psf_sigma_px, p.thresh_sigma, p.min_signal, p.e_per_dn, FIT_MAX_ITER,
+                               FIT_TOL_PX)
 
     def _measure_pool(self):
         if self._pool is None:

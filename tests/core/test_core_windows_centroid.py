@@ -208,3 +208,44 @@ def test_smear_fit_erf_and_pdf_match_the_library_within_the_stated_bound():
         worst = max(worst, abs(e - math.erf(z * inv_s)))
         assert abs(p - k_pdf * math.exp(-0.5 * (z / sigma) ** 2)) <= 1e-15
     assert 1e-9 < worst <= 1.5e-7
+
+
+def _background_reference(values, clip):
+    """window_background written out with numpy sorts: median/MAD, then two 3σ clips."""
+    v = np.sort(np.asarray(values, float))
+    med = float(np.median(v))
+    sig = 1.4826 * float(np.sort(np.abs(v - med))[len(v) // 2]) or 1.0
+    for _ in range(2):
+        kept = v[v < med + clip * sig]
+        if len(kept) < 3:
+            break
+        med = float(np.sum(kept)) / len(kept)
+        sig = float(np.sqrt(max(float(np.sum(kept * kept)) / len(kept) - med * med, 1e-12)))
+    return med, sig
+
+
+def test_window_background_by_hand():
+    """9 pixels, one star pixel: median 11, MAD 1 → clip at 11 + 3·1.4826 drops the 200;
+    the 8 left have mean 11 and variance 980/8 − 121 = 1.5."""
+    bg, sig = window_background(np.array([10, 12, 11, 10, 13, 200, 11, 12, 9], float), 3.0)
+    assert bg == 11.0 and sig == pytest.approx(np.sqrt(1.5), rel=1e-15)
+    # an even count takes the mean of the middle two as the median (10.5; MAD 0.5)
+    assert window_background(np.array([10, 11, 10, 11], float), 3.0) == (10.5, 0.5)
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.uint16])
+def test_window_background_integer_windows_match_the_sorted_estimate(dtype):
+    """ADU windows (integers: counted in a histogram) give the sorted estimate to the bit,
+    from flat windows to star windows with a wide dynamic range; non-integer windows and
+    windows spanning more levels than the histogram takes go the sorting way."""
+    rng = np.random.default_rng(7)
+    for n in list(range(1, 60)) + [112, 300, 528]:
+        for _ in range(20):
+            base = np.round(rng.normal(rng.uniform(20, 200), rng.uniform(0.0, 15.0), n))
+            star = (rng.random(n) < 0.15) * rng.integers(0, 4000, n)
+            vals = np.clip(base + star, 0, 65535).astype(dtype)
+            assert window_background(vals, 3.0) == _background_reference(vals, 3.0)
+    halves = np.round(rng.normal(100, 5, 50)) + 0.5
+    assert window_background(halves, 3.0) == pytest.approx(_background_reference(halves, 3.0), rel=1e-15)
+    wide = rng.integers(0, 60000, 40).astype(float)
+    assert window_background(wide, 3.0) == pytest.approx(_background_reference(wide, 3.0), rel=1e-15)
