@@ -33,7 +33,6 @@ from numba import njit
 
 from .small_matrix import inv3_sym
 
-
 HIST_MAX_BINS = 4096    # a window whose integer values span more bins takes the sorting path
 
 
