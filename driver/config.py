@@ -27,23 +27,40 @@ T = TypeVar("T")
 def load(path: str | Path, schema: type[T]) -> T:
     """Read ``path`` (TOML) and validate it into an instance of ``schema``."""
     path = Path(path)
-    try:
-        with open(path, "rb") as fh:
-            raw = tomllib.load(fh)
-    except FileNotFoundError as exc:
-        raise ConfigError(f"config file {path} does not exist") from exc
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"config file {path} is not valid TOML: {exc}") from exc
-    return from_dict(raw, schema, source=str(path))
+    return loads(read_text(path), schema, source=str(path), what="config file")
 
 
-def loads(text: str, schema: type[T], source: str = "<string>") -> T:
+def loads(text: str, schema: type[T], source: str = "<string>", what: str = "config") -> T:
     """Validate TOML text into ``schema`` (``source`` names it in errors)."""
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"config {source} is not valid TOML: {exc}") from exc
+        raise ConfigError(f"{what} {source} is not valid TOML: {exc}") from exc
     return from_dict(raw, schema, source=source)
+
+
+def read_text(path: str | Path, what: str = "config file") -> str:
+    """The text of ``path``; ``ConfigError`` naming it when missing, unreadable or not UTF-8."""
+    return decode(read_bytes(path, what), path, what)
+
+
+def read_bytes(path: str | Path, what: str = "config file") -> bytes:
+    """The bytes of ``path``; ``ConfigError`` naming it when missing or unreadable."""
+    try:
+        return Path(path).read_bytes()
+    except FileNotFoundError as exc:
+        raise ConfigError(f"{what} {path} does not exist") from exc
+    except OSError as exc:
+        raise ConfigError(f"{what} {path} cannot be read: {exc.strerror or exc}") from exc
+
+
+def decode(data: bytes, path: str | Path, what: str = "config file") -> str:
+    """``data`` as UTF-8 text; ``ConfigError`` naming ``path`` when it is not (a binary file)."""
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{what} {path} is not UTF-8 text TOML (byte {exc.start}: "
+                          f"{data[exc.start:exc.start + 1]!r})") from None
 
 
 def from_dict(raw: dict, schema: type[T], source: str = "<dict>", prefix: str = "") -> T:
@@ -105,6 +122,8 @@ def _coerce(value: Any, tp: Any, source: str, key: str) -> Any:
                 return _coerce(value, alt, source, key)
             except ConfigError as exc:
                 errors.append(exc)
+        if len(errors) == 1:        # ``X | None``: what is wrong inside X (e.g. a nested table's key)
+            raise errors[0]
         raise _bad(source, key, tp, value)
     if origin is Literal:
         if value in args and type(value) in {type(a) for a in args}:

@@ -86,3 +86,53 @@ def test_validate_hook_reports_range_errors():
 
     with pytest.raises(ConfigError, match="ms must be in"):
         config.loads("ms = -1", Exposure, source="e.toml")
+
+
+def test_non_utf8_file_is_a_config_error_naming_the_file(tmp_path):
+    p = tmp_path / "bin.toml"
+    p.write_bytes(b"\xff\xfe[a]\n")
+    with pytest.raises(ConfigError, match=f"config file {p} is not UTF-8 text TOML"):
+        config.load(p, Flatsat)
+    with pytest.raises(ConfigError, match="cannot be read"):
+        config.load(tmp_path, Flatsat)           # a directory
+    p.write_text('name = "é"\n', encoding="utf-8")   # non-ASCII UTF-8 still loads
+    assert config.load(p, Flatsat).name == "é"
+
+
+@dataclass
+class Tilt:
+    deg: float
+
+    def validate(self):
+        if not self.deg >= 0:
+            raise ValueError(f"tilt.deg must be ≥ 0, got {self.deg}")
+
+
+@dataclass
+class Mount:
+    tilt: Tilt | None = None
+    pair: tuple[float, float] | None = None
+    either: int | str = 0
+
+
+@pytest.mark.parametrize("text,expected", [
+    ("[tilt]", "missing required key 'tilt.deg' (a number)"),
+    ("[tilt]\ndeg = 1\nspin = 2", "unknown key 'tilt.spin'"),
+    ('[tilt]\ndeg = "big"', "key 'tilt.deg' expects a number, got string"),
+    ("[tilt]\ndeg = nan", "key 'tilt.deg' must be a finite number"),
+    ("[tilt]\ndeg = -5.0", "tilt.deg must be ≥ 0, got -5.0"),
+    ("pair = [1, 2, 3]", "key 'pair' must have 2 items, got 3"),
+])
+def test_optional_nested_table_reports_the_inner_error(text, expected):
+    with pytest.raises(ConfigError) as err:
+        config.loads(text, Mount, source="m.toml")
+    msg = str(err.value)
+    assert msg.startswith("m.toml: ") and expected in msg and "(optional)" not in msg
+    assert config.loads("[tilt]\ndeg = 2", Mount).tilt == Tilt(2.0)
+    assert config.loads("", Mount).tilt is None
+
+
+def test_union_of_two_types_still_reports_the_union():
+    assert config.loads('either = "x"', Mount).either == "x"
+    with pytest.raises(ConfigError, match="key 'either' expects an integer or a string, got float"):
+        config.loads("either = 1.5", Mount)
