@@ -123,12 +123,33 @@ def _no_progress(description, total):
     yield lambda *a: None
 
 
-def export(path: str | Path, fmt: str, out: str | Path) -> dict:
-    out = Path(out)
+def _check_target(log: Path, out: Path, force: bool) -> None:
+    """Refuse an export path that would destroy data: the log itself, any other gyrostar log,
+    or (without ``force``) any existing file."""
     if out.is_dir():
         raise ConfigError(f"--out {out} is a folder: give the export file's path")
     if not out.parent.is_dir():
         raise ConfigError(f"--out {out}: folder {out.parent} does not exist")
+    if not out.exists():
+        return
+    if log.exists() and out.samefile(log):
+        raise ConfigError(f"--out {out} is the log being exported: give another path")
+    try:
+        with open(out, "rb") as fh:
+            is_log = fh.read(len(lf.MAGIC)) == lf.MAGIC
+    except OSError:
+        is_log = False
+    if is_log:
+        raise ConfigError(f"--out {out} is a gyrostar log: an export never overwrites one")
+    if not force:
+        raise ConfigError(f"--out {out} exists (--force overwrites it)")
+
+
+def export(path: str | Path, fmt: str, out: str | Path, force: bool = False) -> dict:
+    """Write the log's outputs as ``fmt`` (csv, hdf5, aem, calib) to ``out``; an existing
+    ``out`` is refused unless ``force`` (a log never is overwritten)."""
+    out = Path(out)
+    _check_target(Path(path), out, force)
     if fmt not in ("csv", "hdf5", "aem", "calib"):
         raise ConfigError(f"unknown export format {fmt!r} (csv, hdf5, aem, calib)")
     if fmt == "calib":
@@ -235,10 +256,17 @@ def run(args) -> int:
         return 0
     from ..cli.output import progress
 
+    if args.out and not args.export:
+        raise ConfigError("--out is the export's path: give --export csv|hdf5|aem|calib with it")
+    if getattr(args, "force", False) and not args.export:
+        raise ConfigError("--force overwrites an export: give --export with it")
     if args.export:
         if not args.out:
             raise ConfigError("--export needs --out PATH")
-        res = export(args.log, args.export, args.out)
+        if args.check:
+            raise ConfigError("--check compares a replay with the log; an export does not replay: "
+                              "run them separately")
+        res = export(args.log, args.export, args.out, force=getattr(args, "force", False))
         what = (f"{res['fields']} star fields ({res['star_observations']} stars) and {res['gyro_samples']} gyro "
                 "samples" if args.export == "calib" else f"{res['outputs']} outputs")
         emit(args, res, f"exported {what} to {res['out']} ({res['export']})")

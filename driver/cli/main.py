@@ -35,7 +35,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "eval": ("evaluations reproducing the papers' simulations", "gyrostar.cli.evaluate"),
     "bench": ("speed benchmarks with same-run baselines (ratios)", "gyrostar.cli.bench"),
     "calibrate": ("field calibration: gyro, dark frames, camera, alignment", "gyrostar.cli.calibrate"),
-    "replay": ("replay a recorded log through the driver; export CSV/HDF5", "gyrostar.cli.replay"),
+    "replay": ("replay a recorded log through the driver; export CSV, HDF5, AEM or calibration inputs",
+               "gyrostar.cli.replay"),
     "fw": ("camera-head firmware: build, host program, ARM image, ping, spots", "gyrostar.cli.fw"),
     "sim": ("physical simulator: render frames", "gyrostar.cli.sim"),
 }

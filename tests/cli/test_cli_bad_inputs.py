@@ -85,6 +85,12 @@ CASES = [
     ("replay-export-missing-folder", ["replay", "{d}/notalog.gslog", "--export", "csv", "--out", "{d}/no/x.csv"],
      USAGE, ["--out", "does not exist"]),
     ("replay-export-format", ["replay", "x.gslog", "--export", "xml"], USAGE, ["--export"]),
+    ("replay-out-without-export", ["replay", "{d}/notalog.gslog", "--out", "{d}/x.csv"], USAGE, ["--export"]),
+    ("replay-force-without-export", ["replay", "{d}/notalog.gslog", "--force"], USAGE, ["--export"]),
+    ("replay-check-with-export", ["replay", "{d}/notalog.gslog", "--check", "--export", "csv", "--out", "{d}/x.csv"],
+     USAGE, ["--check"]),
+    ("replay-export-onto-existing", ["replay", "{d}/notalog.gslog", "--export", "csv", "--out", "{d}/bad.toml"],
+     USAGE, ["exists", "--force"]),
     # --- calibrate: bad inputs name the argument
     ("cal-static-text-npz", ["calibrate", "gyro-static", "{d}/text.npz"], USAGE,
      ["INPUT", "text.npz", "npz"]),

@@ -16,6 +16,7 @@ import time
 
 import numpy as np
 import pytest
+from gyrostar.errors import ConfigError
 from gyrostar.hil import config as hc
 from gyrostar.hil.replay import export, load_log, replay
 from gyrostar.hil.runner import run_flatsat
@@ -103,6 +104,31 @@ def test_export_csv_and_hdf5(demo_run, tmp_path):
         assert np.array_equal(h5["outputs"]["q"][:], load_log(folder / "flatsat.gslog")["outputs"]["q"])
         assert h5["columns/q_w"].attrs["unit"] == "1" and h5["columns/sigma_theta_x"].attrs["unit"] == "rad"
         assert h5["columns/utc"][0].decode() == first["utc"]
+
+
+def test_export_never_overwrites_a_log_and_asks_before_a_file(demo_run, tmp_path):
+    """--out onto the log itself (or any gyrostar log) is refused even with force; an
+    existing export is refused without force and replaced with it; the log is untouched."""
+    _, folder, _ = demo_run
+    log = folder / "flatsat.gslog"
+    before = log.read_bytes()
+    for fmt in ("csv", "hdf5", "aem"):
+        with pytest.raises(ConfigError, match="is the log being exported"):
+            export(log, fmt, log, force=True)
+    other = tmp_path / "copy.gslog"
+    other.write_bytes(before[:4096])
+    with pytest.raises(ConfigError, match="is a gyrostar log"):
+        export(log, "csv", other, force=True)
+    assert log.read_bytes() == before and other.read_bytes() == before[:4096]
+    out = tmp_path / "o.csv"
+    export(log, "csv", out)
+    first = out.read_bytes()
+    out.write_text("keep me")
+    with pytest.raises(ConfigError, match="exists"):
+        export(log, "csv", out)
+    assert out.read_text() == "keep me"
+    export(log, "csv", out, force=True)
+    assert out.read_bytes() == first
 
 
 def test_sigkill_leaves_a_replayable_log(tmp_path):
