@@ -91,8 +91,8 @@ def load_for_run(path: str | Path | None) -> RunCalibration:
     p = Path(path)
     if not p.is_file():
         raise ConfigError(f"calibration file {p} does not exist (config key 'calibration' or --calibration)")
-    data = p.read_bytes()
-    return from_text(data.decode("utf-8", errors="replace"), str(p), hashlib.sha256(data).hexdigest())
+    data = config.read_bytes(p, "calibration file")
+    return from_text(config.decode(data, p, "calibration file"), str(p), hashlib.sha256(data).hexdigest())
 
 
 def from_text(text: str, path: str, sha256: str = "") -> RunCalibration:

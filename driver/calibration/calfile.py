@@ -11,12 +11,16 @@ own table and keeps the others, so a field campaign builds up one file::
                     frame), time_offset_s (add to gyro timestamps to get camera time)
 
 Written with ``tomli-w``; read back with :func:`gyrostar.config.load`, which rejects
-unknown or ill-typed keys.
+unknown or ill-typed keys and values outside physical bounds (a [camera] whose diagonal field
+of view leaves :data:`FOV_DEG` or whose principal point is off the sensor, a time offset
+beyond :data:`TIME_OFFSET_MAX_S`, a quaternion whose norm is off 1 by more than
+:data:`QUAT_NORM_TOL` (it is normalised when applied), a bias beyond :data:`BIAS_MAX_RPS`).
 """
 
 from __future__ import annotations
 
 import datetime as _dt
+import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,6 +30,17 @@ from ..errors import ConfigError
 
 Vec3 = tuple[float, float, float]
 Mat3 = tuple[Vec3, Vec3, Vec3]
+
+FOV_DEG = (0.5, 58.0)       # diagonal field of view (deg) a [camera] may imply; the star index holds pairs < 60°
+CORNER_DISTORTION = 0.2     # |radial distortion| (fraction of the radius) allowed at the sensor corner
+TIME_OFFSET_MAX_S = 1.0     # |[alignment] time_offset_s| (s): more is a wrong clock, not a gyro-camera delay
+QUAT_NORM_TOL = 1e-3        # |‖q‖ − 1| accepted (hand-typed quaternions), normalised when applied
+BIAS_MAX_RPS = math.radians(10.0)   # |gyro bias| (rad/s): a MEMS zero-rate offset is ~1 °/s
+
+
+def _check_bias(key: str, bias: Vec3) -> None:
+    if max(abs(v) for v in bias) > BIAS_MAX_RPS:
+        raise ValueError(f"{key} must be within ±{BIAS_MAX_RPS:.3f} rad/s (10 °/s) per axis, got {list(bias)}")
 
 
 @dataclass
@@ -40,6 +55,9 @@ class GyroStaticCal:
     duration_s: float = 0.0
     temperature_c: float | None = None
     bias_temp_coeff_rps_per_c: Vec3 | None = None
+
+    def validate(self) -> None:
+        _check_bias("gyro_static.bias_rps", self.bias_rps)
 
 
 @dataclass
@@ -56,9 +74,10 @@ class GyroScaleCal:
     method: str = "rate-table"
 
     def validate(self) -> None:
-        for row in self.correction:
-            if any(abs(v) > 2.0 for v in row):
-                raise ValueError("correction matrix entries above 2 are not a gyro calibration")
+        for key in ("correction", "sensitivity"):
+            if any(abs(v) > 2.0 for row in getattr(self, key) for v in row):
+                raise ValueError(f"gyro_scale.{key}: entries above 2 in size are not a gyro calibration")
+        _check_bias("gyro_scale.bias_rps", self.bias_rps)
 
 
 @dataclass
@@ -89,8 +108,29 @@ class CameraCal:
     pixel_pitch_um: float = 15.0       # only turns the focal length into metres (the loop works in px)
 
     def validate(self) -> None:
-        if not self.focal_length_px > 0:
-            raise ValueError("focal_length_px must be positive")
+        w, h = self.image_size_px
+        f = self.focal_length_px
+        if w < 1 or h < 1:
+            raise ValueError(f"camera.image_size_px must be positive, got {list(self.image_size_px)}")
+        if not f > 0:
+            raise ValueError(f"camera.focal_length_px must be > 0, got {f!r}")
+        half_diag = 0.5 * math.hypot(w, h)
+        fov = 2.0 * math.degrees(math.atan(half_diag / f))
+        if not FOV_DEG[0] <= fov <= FOV_DEG[1]:
+            f_lo, f_hi = (half_diag / math.tan(math.radians(a / 2.0)) for a in FOV_DEG[::-1])
+            raise ValueError(f"camera.focal_length_px = {f:g} gives a {fov:.3g}° diagonal field of view on "
+                             f"{w}×{h} px; allowed {FOV_DEG[0]}–{FOV_DEG[1]}° ({f_lo:.0f}–{f_hi:.0f} px)")
+        cx, cy = self.principal_point_px
+        if not (0.0 <= cx <= w - 1 and 0.0 <= cy <= h - 1):
+            raise ValueError(f"camera.principal_point_px ({cx:g}, {cy:g}) is off the {w}×{h} px sensor "
+                             f"(column 0–{w - 1}, row 0–{h - 1})")
+        r2 = (half_diag / f) ** 2
+        radial = self.k1 * r2 + self.k2 * r2 ** 2 + self.k3 * r2 ** 3
+        if not abs(radial) <= CORNER_DISTORTION:
+            raise ValueError(f"camera.k1, k2, k3 distort the sensor corner by {radial:.3g} of its radius "
+                             f"(allowed ±{CORNER_DISTORTION:g})")
+        if not 0.0 < self.pixel_pitch_um <= 1000.0:
+            raise ValueError(f"camera.pixel_pitch_um must be in (0, 1000] µm, got {self.pixel_pitch_um!r}")
 
 
 @dataclass
@@ -102,9 +142,13 @@ class AlignmentCal:
     residual_rms_arcsec: float = 0.0
 
     def validate(self) -> None:
-        n = sum(v * v for v in self.q_gyro_to_camera) ** 0.5
-        if abs(n - 1.0) > 1e-6:
-            raise ValueError(f"q_gyro_to_camera must be a unit quaternion (norm {n:.9f})")
+        n = math.sqrt(sum(v * v for v in self.q_gyro_to_camera))
+        if not abs(n - 1.0) <= QUAT_NORM_TOL:
+            raise ValueError(f"alignment.q_gyro_to_camera must be a unit quaternion [x, y, z, w] (norm within "
+                             f"{QUAT_NORM_TOL:g} of 1), got norm {n:.9g}")
+        if not abs(self.time_offset_s) <= TIME_OFFSET_MAX_S:
+            raise ValueError(f"alignment.time_offset_s must be within ±{TIME_OFFSET_MAX_S:g} s, "
+                             f"got {self.time_offset_s!r}")
 
 
 @dataclass
@@ -132,14 +176,16 @@ SECTIONS = {"gyro_static": GyroStaticCal, "gyro_scale": GyroScaleCal, "dark": Da
 
 
 def load(path: str | Path) -> Calibration:
-    """Read and validate a calibration TOML (``ConfigError`` on any bad key or type)."""
-    return config.load(path, Calibration)
+    """Read and validate a calibration TOML (``ConfigError`` on any bad key, type or value)."""
+    what = "calibration file"
+    return config.loads(config.read_text(path, what), Calibration, source=str(path), what=what)
 
 
 def write_section(path: str | Path, section: str, value, source: str) -> Calibration:
     """Replace table ``section`` of the calibration file at ``path`` (created if absent),
     keeping the others. The merged result is validated before the file is replaced, and
-    the file is written to a temporary name first, so a failure loses nothing."""
+    the file is written to a temporary name first, so a failure loses nothing; an existing
+    file that is not a calibration TOML (binary, other TOML) is refused and left as it is."""
     import tomli_w
 
     if section not in SECTIONS or not isinstance(value, SECTIONS[section]):
@@ -147,11 +193,7 @@ def write_section(path: str | Path, section: str, value, source: str) -> Calibra
     path = Path(path)
     raw: dict = {}
     if path.exists():
-        try:
-            raw = tomllib.loads(path.read_text())
-        except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"existing calibration file {path} is not valid TOML: {exc}") from exc
-        config.from_dict(raw, Calibration, source=str(path))
+        raw = _existing(path)
     raw[section] = config.to_dict(value)
     meta = raw.setdefault("meta", {})
     meta.setdefault("updated", {})[section] = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
@@ -162,6 +204,23 @@ def write_section(path: str | Path, section: str, value, source: str) -> Calibra
     tmp.write_bytes(tomli_w.dumps(raw).encode())
     tmp.replace(path)
     return cal
+
+
+def _existing(path: Path) -> dict:
+    """The tables of the calibration file at ``path``: ``ConfigError`` when it is not one."""
+    refuse = f"{path} exists and is not a calibration file; left as it is (choose another --out)"
+    data = config.read_bytes(path, "existing file")
+    try:
+        raw = tomllib.loads(data.decode("utf-8"))
+    except UnicodeDecodeError:
+        raise ConfigError(f"{refuse}: it is not UTF-8 text TOML") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{refuse}: it is not valid TOML ({exc})") from None
+    foreign = sorted(set(raw) - {"meta", *SECTIONS})
+    if foreign:
+        raise ConfigError(f"{refuse}: it has key '{foreign[0]}' (a calibration file has "
+                          f"{', '.join(['meta', *SECTIONS])})")
+    return raw
 
 
 def camera_model(cal: Calibration, nominal):
@@ -198,7 +257,8 @@ def gyro_to_camera(cal: Calibration):
         b = np.asarray(cal.gyro_scale.bias_rps, float)
     dt = 0.0
     if cal.alignment is not None:
-        m = quat_to_dcm(np.asarray(cal.alignment.q_gyro_to_camera, float)) @ m
+        q = np.asarray(cal.alignment.q_gyro_to_camera, float)
+        m = quat_to_dcm(q / np.linalg.norm(q)) @ m
         dt = cal.alignment.time_offset_s
     return m, b, dt
 
