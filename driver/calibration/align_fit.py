@@ -17,6 +17,10 @@ Steps (:func:`fit_alignment`): the window increments against a general linear ma
 bias, by linear least squares for each δt; δt from the profile likelihood (each camera axis
 its own noise: the roll axis of a star tracker is several times noisier than the
 cross-boresight axes); ``R`` the rotation factor of ``M``.
+
+Data that do not determine ``R`` are refused (:class:`~gyrostar.calibration.scale_fit.NotDetermined`,
+exit 1): the fit's 1-σ of the rotation above :data:`ROTATION_SIGMA_MAX` on an axis, of δt
+above :data:`OFFSET_SIGMA_MAX`, or ``M`` not a MEMS gyro's (``scale_fit.check_determined``).
 """
 
 from __future__ import annotations
@@ -27,7 +31,11 @@ import numpy as np
 
 from ..errors import ConfigError
 from .gyro_integral import GyroIntegral
-from .scale_fit import attitude_increments
+from .scale_fit import NotDetermined, attitude_increments, check_determined
+
+ROTATION_SIGMA_MAX = np.radians(0.5)   # rad, 1-σ per axis: a slew about two axes gives arcminutes or better
+OFFSET_SIGMA_MAX = 5e-3                # s, 1-σ of δt
+SLEW_HINT = "slew back and forth about at least two axes at several °/s"
 
 
 @dataclass
@@ -154,12 +162,26 @@ def fit_alignment(t_g: np.ndarray, w_g: np.ndarray, t_c: np.ndarray, q_c: np.nda
     var_m = var_row[:, None] * np.diag(xtx_inv)[None, :3]        # var of M[a, j]
     rot_sigma = 0.5 * np.sqrt(np.array([var_m[2, 1] + var_m[1, 2], var_m[0, 2] + var_m[2, 0],
                                         var_m[1, 0] + var_m[0, 1]]))
+    _check(rot_sigma, dt_sigma, m, var_m)
     rot_sigma_gyro = None
     if arw is not None and arw > 0:
         var_g = arw * arw * float(np.mean(span)) * np.diag(xtx_inv)[:3]   # var of M[a, j], any row a
         rot_sigma_gyro = 0.5 * np.sqrt(np.array([var_g[1] + var_g[2], var_g[2] + var_g[0], var_g[0] + var_g[1]]))
     return AlignFit(rot, dt_off, bias, rot_sigma, dt_sigma, np.sqrt((res ** 2).mean(axis=0)), d0, n, m,
                     rot_sigma_gyro)
+
+
+def _check(rot_sigma: np.ndarray, dt_sigma: float, m: np.ndarray, var_m: np.ndarray) -> None:
+    """:class:`NotDetermined` unless the slew determines the rotation, δt and a gyro-like ``M``."""
+    worst = float(np.max(rot_sigma))
+    if not worst <= ROTATION_SIGMA_MAX:
+        raise NotDetermined(f"gyro-camera alignment: the data do not determine it (the fit's 1σ reaches "
+                            f"{np.degrees(worst):.3g}° on an axis, limit {np.degrees(ROTATION_SIGMA_MAX):g}°): "
+                            f"{SLEW_HINT}; nothing written")
+    if not dt_sigma <= OFFSET_SIGMA_MAX:
+        raise NotDetermined(f"gyro-camera time offset: the data do not determine it (1σ {dt_sigma * 1e3:.3g} ms, "
+                            f"limit {OFFSET_SIGMA_MAX * 1e3:g} ms): {SLEW_HINT}; nothing written")
+    check_determined("gyro-camera alignment", m, np.sqrt(var_m), SLEW_HINT)
 
 
 def _increments(q: np.ndarray, idx: np.ndarray, lag: int) -> np.ndarray:

@@ -10,6 +10,11 @@ errors) + off-diagonal misalignment``; the driver applies ``ω = S⁻¹ (ω_meas
   ``φ_k`` over ``[t_k, t_{k+1}]``; the integrated gyro over the same span ``g_k`` gives
   ``φ_k = C g_k − C b Δt_k`` with ``C = S⁻¹`` (camera axes, including the mounting if the
   gyro is not yet aligned), linear in ``C`` and ``e = C b``.
+
+Both fits refuse data that do not determine ``S`` (:func:`check_determined`, exit 1, nothing
+written): the fit's own 1-σ of an element above :data:`SIGMA_MAX`, or principal scales of
+``S`` (its singular values: mounting rotations do not change them) off 1 by more than
+:data:`SCALE_RANGE` — a MEMS gyro's scale error is ~0.3 % (BMI088), its cross-axis a few mrad.
 """
 
 from __future__ import annotations
@@ -18,7 +23,30 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import ConfigError
+from ..errors import ConfigError, GyrostarError
+
+SIGMA_MAX = 0.01        # 1-σ of an element of S (or of the gyro map), 10 000 ppm: above it S is not determined
+SCALE_RANGE = 0.05      # |singular value of S − 1| beyond which a fit is not a MEMS gyro's (BMI088 ~0.003)
+
+
+class NotDetermined(GyrostarError):
+    """The data do not determine the calibration (exit 1, a check failed); nothing is written."""
+
+    exit_code = 1
+
+
+def check_determined(what: str, matrix: np.ndarray, sigma: np.ndarray, hint: str) -> None:
+    """:class:`NotDetermined` when the 1-σ ``sigma`` of ``matrix`` (S or the gyro map, unitless)
+    exceeds :data:`SIGMA_MAX` or its singular values leave 1 ± :data:`SCALE_RANGE`."""
+    worst = float(np.max(sigma))
+    if not worst <= SIGMA_MAX:
+        raise NotDetermined(f"{what}: the data do not determine it (the fit's 1σ reaches {worst * 1e6:.3g} ppm, "
+                            f"limit {SIGMA_MAX * 1e6:.0f} ppm): {hint}; nothing written")
+    sv = np.linalg.svd(matrix, compute_uv=False)
+    if not np.all(np.abs(sv - 1.0) <= SCALE_RANGE):
+        raise NotDetermined(f"{what}: the data do not determine it (fitted gyro scales "
+                            f"{', '.join(f'{v:.4g}' for v in sv)}; a MEMS gyro's are 1 ± {SCALE_RANGE:g}): "
+                            f"{hint}; nothing written")
 
 
 @dataclass
@@ -81,6 +109,7 @@ def fit_rate_table(table_rates: np.ndarray, means: np.ndarray) -> ScaleFit:
     sigma2 = (resid**2).sum(axis=0) / dof
     cov_diag = np.diag(np.linalg.inv(design.T @ design))[:3]
     s_sigma = np.sqrt(np.outer(sigma2, cov_diag))
+    check_determined("gyro scale factors", s, s_sigma, "give more or longer rate-table runs")
     return ScaleFit(s, np.linalg.inv(s), b, s_sigma, float(np.sqrt((resid**2).mean())))
 
 
@@ -104,6 +133,7 @@ def fit_slews(phi: np.ndarray, g: np.ndarray, dt: np.ndarray) -> ScaleFit:
     sigma2 = (resid**2).sum(axis=0) / dof
     cov_diag = np.diag(np.linalg.inv(design.T @ design))[:3]
     c_sigma = np.sqrt(np.outer(sigma2, cov_diag))
+    check_determined("gyro scale factors", s, c_sigma, "slew about all three axes at several °/s")
     return ScaleFit(s, c, s @ e, c_sigma, float(np.sqrt((resid**2).mean())))
 
 
