@@ -18,6 +18,7 @@ The built-in files are ``hil/flatsat.toml`` and ``hil/scenarios/*.toml``.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -280,6 +281,14 @@ class Fault:
     seconds: float = 0.0
     rate: float = 0.01                 # link-corruption: fraction of bytes corrupted
 
+    def validate(self):
+        if self.at_s < 0:
+            raise ValueError(f"at_s = {self.at_s} must be ≥ 0 (s from the start of the run)")
+        if not self.seconds > 0:
+            raise ValueError(f"seconds = {self.seconds} must be > 0 (a fault of 0 s never fires)")
+        if not 0.0 <= self.rate <= 1.0:
+            raise ValueError(f"rate = {self.rate} must be in [0, 1] (link-corruption: the fraction of bytes corrupted)")
+
 
 @dataclass
 class TrueDevices:
@@ -330,8 +339,12 @@ class Scenario:
     must_reacquire: bool = False
 
     def validate(self):
-        if self.duration_s <= 0:
-            raise ValueError("duration_s must be positive")
+        if not self.duration_s > 0:
+            raise ValueError(f"duration_s = {self.duration_s} must be positive")
+        if not 0.0 <= self.min_track_fraction <= 1.0:
+            raise ValueError(f"min_track_fraction = {self.min_track_fraction} must be in [0, 1]")
+        if self.max_error_arcsec_1sigma < 0:
+            raise ValueError(f"max_error_arcsec_1sigma = {self.max_error_arcsec_1sigma} must be ≥ 0 (0: not checked)")
         for a, b in self.eclipse:
             if not 0 <= a < b:
                 raise ValueError(f"eclipse [{a}, {b}] must satisfy 0 <= start < end")
@@ -361,6 +374,8 @@ def load_scenario(name_or_path: str | None) -> Scenario:
         try:
             seed_s, dur_s = name_or_path[3:].split("@")
             seed, dur = int(seed_s), float(dur_s)
+            if not math.isfinite(dur):
+                raise ValueError(f"DURATION must be a finite number of seconds, got {dur_s!r}")
             return case_scenario(draw_case(seed, dur), dur)
         except ValueError as exc:
             raise ConfigError(f"--scenario {name_or_path}: a Monte Carlo case is mc:SEED@DURATION, "
