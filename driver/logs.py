@@ -22,3 +22,5 @@ def setup(verbosity: int) -> None:
         fmt = "%(name)s: %(levelname)s: %(message)s"
     handler.setFormatter(logging.Formatter(fmt))
     logging.basicConfig(level=level, handlers=[handler], force=True)
+    # numba's compiler logs every bytecode it reads at DEBUG: nothing a user of -vv looks for
+    logging.getLogger("numba").setLevel(max(level, logging.WARNING))

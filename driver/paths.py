@@ -7,6 +7,8 @@ Caches (catalog arrays, star-pair indexes, numba) go under ``$GYROSTAR_CACHE`` o
 import os
 from pathlib import Path
 
+from .errors import ConfigError
+
 
 def cache_dir(*parts: str) -> Path:
     """Return (and create) a cache sub-folder."""
@@ -18,8 +20,13 @@ def cache_dir(*parts: str) -> Path:
 
 def runs_dir() -> Path:
     """Return (and create) the folder that holds one sub-folder per run."""
-    path = Path(os.environ.get("GYROSTAR_RUNS", "runs"))
-    path.mkdir(parents=True, exist_ok=True)
+    given = os.environ.get("GYROSTAR_RUNS")
+    path = Path(given or "runs")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        where = f"GYROSTAR_RUNS={given}" if given else f"the default run folder {path.resolve()}"
+        raise ConfigError(f"{where}: cannot be used as the runs folder ({exc.strerror or exc})") from None
     return path
 
 

@@ -14,12 +14,13 @@ HELP = "Monte Carlo of the coupled loop: many simulated flatsat runs on Dask, fa
 
 
 def configure(parser) -> None:
+    from ..cli.argtypes import seed as seed_type
     from ..cli.main import add_json
 
     parser.add_argument("--runs", type=int, default=200, help="number of runs (default: 200)")
     parser.add_argument("--duration", type=float, default=30.0, metavar="S",
                         help="flatsat seconds per run (default: 30, at least 10)")
-    parser.add_argument("--seed", type=int, default=1,
+    parser.add_argument("--seed", type=seed_type, default=1,
                         help="campaign seed: run k uses seed SEED*100000 + k (default: 1)")
     parser.add_argument("--workers", type=int, default=2, help="LocalCluster worker processes (default: 2)")
     parser.add_argument("--scheduler", default=None, metavar="ADDRESS",
@@ -33,6 +34,17 @@ def configure(parser) -> None:
                         help="folder for results.parquet, summary.json and plots (default: runs/mc-<time>)")
     parser.add_argument("--plot", default=None, metavar="DIR", help="write the plots to DIR (default: --out)")
     add_json(parser)
+
+
+def _preflight(args) -> None:
+    """Refuse up front (exit 2) a flatsat config the campaign's fast runs cannot use: every
+    run would fail for the same reason."""
+    from . import config as hc
+    from .flatsat import preflight
+
+    cfg = hc.load_flatsat(args.config)
+    preflight(cfg, hc.load_scenario(f"mc:{run_seeds(args.seed, 1)[0]}@{args.duration:g}"), simulated_clock=True,
+              devices=False)
 
 
 def run_seeds(campaign_seed: int, runs: int) -> list[int]:
@@ -67,7 +79,11 @@ def run(args) -> int:
         if value and not Path(value).is_file():
             raise ConfigError(f"{flag} {value}: no such file")
     tls = TlsFiles(args.tls_ca, args.tls_cert, args.tls_key) if all(tls_given) else None
+    _preflight(args)
     folder = Path(args.out) if args.out else runs_dir() / f"mc-{datetime.now(UTC):%Y%m%dT%H%M%S}"
+    for kept in ("summary.json", "results.parquet"):
+        if (folder / kept).exists():
+            raise ConfigError(f"--out {folder} already holds a campaign ({kept}); choose another --out")
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:

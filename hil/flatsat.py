@@ -457,6 +457,15 @@ def preflight(cfg: hc.FlatsatConfig, scen: hc.Scenario, simulated_clock: bool = 
                           f"(head.kind = '{cfg.head.kind}')")
     if simulated_clock and not cfg.simulated:
         raise ConfigError("a simulated clock (--fast) needs every device emulated: real devices keep real time")
+    if simulated_clock and (cfg.head.kind != "emulator" or cfg.gyro.kind != "emulator"):
+        raise ConfigError(f"--fast runs the emulated head and gyro only (this config: head.kind = '{cfg.head.kind}', "
+                          f"gyro.kind = '{cfg.gyro.kind}'); run it in real time")
+    if cfg.head.kind == "firmware-host" and cfg.head.program and not os.path.isfile(cfg.head.program):
+        raise ConfigError(f"head.program = '{cfg.head.program}' does not exist (the firmware's host program; "
+                          "empty: the one `make -C firmware host` builds)")
+    calib = load_calibration(cfg)           # a missing or invalid file: exit 2 naming it
+    if not emulated_head(cfg):
+        calib.camera(None, real_head=True)  # a real head needs the calibrated camera model
     if not devices:
         return
     if cfg.head.kind == "serial" and "://" not in cfg.head.url and not os.path.exists(cfg.head.url):
@@ -465,9 +474,6 @@ def preflight(cfg: hc.FlatsatConfig, scen: hc.Scenario, simulated_clock: bool = 
         raise DeviceError(f"gyro I2C bus /dev/i2c-{cfg.gyro.i2c_bus} does not exist (i2cdetect -l lists the buses)")
     if cfg.gyro.kind == "spi" and not os.path.exists(f"/dev/spidev{cfg.gyro.spi_bus}.{cfg.gyro.spi_device}"):
         raise DeviceError(f"gyro SPI device /dev/spidev{cfg.gyro.spi_bus}.{cfg.gyro.spi_device} does not exist")
-    calib = load_calibration(cfg)           # a missing or invalid file: exit 2 naming it
-    if not emulated_head(cfg):
-        calib.camera(None, real_head=True)  # a real head needs the calibrated camera model
 
 
 def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, writer, fast: bool = False,
@@ -497,12 +503,11 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
     base = MONOTONIC
     lockstep = None
     if fast:
-        from ..errors import NotAvailableError
         from .lockstep import Lockstep
 
         if cfg.head.kind != "emulator" or cfg.gyro.kind != "emulator":
-            raise NotAvailableError(f"--fast runs the emulated head and gyro only (this config: head.kind = "
-                                    f"'{cfg.head.kind}', gyro.kind = '{cfg.gyro.kind}'); run it in real time")
+            raise ConfigError(f"--fast runs the emulated head and gyro only (this config: head.kind = "
+                              f"'{cfg.head.kind}', gyro.kind = '{cfg.gyro.kind}'); run it in real time")
         base = SimulatedClock(FAST_T0)
         lockstep = Lockstep(base)
     truth = sim = gsamp = None
@@ -906,6 +911,8 @@ def replay_loop(meta: dict, records, sinks):
                 steps += 1
         except taps.ReplayExhausted as exc:
             return steps, f"end of log ({exc})"
+        except taps.ReplayDivergence as exc:   # a corrupt stretch took records the loop needed, or a bug
+            return steps, f"diverged from the log: {exc}"
         finally:
             loop.close()
             head.close()

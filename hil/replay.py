@@ -68,6 +68,10 @@ def replay(path: str | Path, progress=None) -> dict:
         log = load_log(path, lambda pos, size: advance_read(pos, size))
     recorded = log["outputs"]
     report = log["report"]
+    if not len(recorded):
+        why = next((e["aborted"] for e in log["events"] if "aborted" in e), None)
+        raise ConfigError(f"log {path} holds no loop outputs: nothing to replay (the run "
+                          + (f"stopped during start-up: {why})" if why else "ended before its first output)"))
     got: list[np.ndarray] = []
     from ..loop.sinks import CallbackSink
 
@@ -163,7 +167,8 @@ def export(path: str | Path, fmt: str, out: str | Path, force: bool = False) -> 
             from ..telemetry import aem, timescale
 
             counts = aem.write(out, recs, timescale.from_meta(log["meta"].get("time")))
-            return {"log": str(path), "export": fmt, "out": str(out), "outputs": counts["lines"], **counts}
+            return {"log": str(path), "export": fmt, "out": str(out), "outputs": counts["lines"], **counts,
+                    "log_skipped_bytes": log["report"].skipped_bytes, "log_skipped_places": len(log["report"].skipped)}
         if fmt == "csv":
             _export_csv(recs, log["truth"], log["meta"], out)
         else:
@@ -171,7 +176,8 @@ def export(path: str | Path, fmt: str, out: str | Path, force: bool = False) -> 
     except OSError as exc:
         raise ConfigError(f"--out {out}: cannot write the export: {exc.strerror or exc}") from exc
     return {"log": str(path), "export": fmt, "out": str(out), "outputs": int(len(recs)),
-            "truth": log["truth"] is not None}
+            "truth": log["truth"] is not None, "log_skipped_bytes": log["report"].skipped_bytes,
+            "log_skipped_places": len(log["report"].skipped)}
 
 
 def _export_csv(recs: np.ndarray, truth, meta: dict, out: Path) -> None:
@@ -234,6 +240,8 @@ def _export_hdf5(recs: np.ndarray, truth, meta: dict, out: Path) -> None:
 def verdict_text(res: dict) -> str:
     """The one-line verdict of a replay."""
     v = res["verdict"]
+    stop = res.get("stopped") or ""
+    why = f"; the replay stopped at step {res['steps']}: {stop}" if stop.startswith("diverged") else ""
     if v == "bit-exact":
         return "bit-exact"
     if v == "prefix":
@@ -243,8 +251,9 @@ def verdict_text(res: dict) -> str:
         sk = res["log_skipped"][0]
         return (f"CORRUPT LOG: {res['log_skipped_bytes']} bytes skipped in {len(res['log_skipped'])} place(s), "
                 f"first at byte {sk['offset']} ({sk['reason']}); the records around them replayed "
-                + ("bit-exact" if res["prefix_exact"] else f"DIFFERENT from output {res['first_difference_at']}"))
-    return f"DIFFERENT (first difference at output {res['first_difference_at']})"
+                + ("bit-exact" if res["prefix_exact"] else f"DIFFERENT from output {res['first_difference_at']}")
+                + why)
+    return f"DIFFERENT (first difference at output {res['first_difference_at']}){why}"
 
 
 def run(args) -> int:
@@ -269,7 +278,10 @@ def run(args) -> int:
         res = export(args.log, args.export, args.out, force=getattr(args, "force", False))
         what = (f"{res['fields']} star fields ({res['star_observations']} stars) and {res['gyro_samples']} gyro "
                 "samples" if args.export == "calib" else f"{res['outputs']} outputs")
-        emit(args, res, f"exported {what} to {res['out']} ({res['export']})")
+        skipped = res.get("log_skipped_bytes") or 0
+        note = (f"; CORRUPT LOG: {skipped} bytes skipped in {res['log_skipped_places']} place(s), the export holds "
+                "the intact records only") if skipped else ""
+        emit(args, res, f"exported {what} to {res['out']} ({res['export']}){note}")
         return 0
     res = replay(args.log, lambda d, total: _bytes_or_items(args, d, total, progress))
     human = (f"replayed {res['replayed_outputs']} outputs of {res['recorded_outputs']} recorded "

@@ -88,6 +88,12 @@ def run(args) -> int:
                          plots=not getattr(args, "no_plots", False),
                          status=getattr(args, "verbose", 0) >= 0,
                          config_path=getattr(args, "config", None), fast=bool(getattr(args, "fast", False)))
+    if result.get("log_error"):
+        result["exit_code"] = 3
+        emit(args, result, human_summary(result))
+        log.error("%s (%.1f s of %.1f s ran; summary in %s)", result["log_error"], result.get("ran_s") or 0.0,
+                  duration, folder)
+        return 3
     if result.get("interrupted"):
         result["exit_code"] = 130
         emit(args, result, human_summary(result))
@@ -98,7 +104,7 @@ def run(args) -> int:
     result["acceptance"] = acc
     failed = acceptance.failures(acc)
     result["exit_code"] = 1 if failed else 0
-    (folder / "summary.json").write_text(json.dumps(_jsonable(result), indent=2))
+    _write_summary(folder, result)
     emit(args, result, human_summary(result))
     if failed:
         log.error("scenario acceptance failed: %s", "; ".join(failed))
@@ -247,6 +253,8 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
     gate = fs.lockstep if fs.lockstep is not None else StepGate()
     sched = None
     interrupted = False
+    log_failed = None
+    hold = None
     if hasattr(loop.head, "step_gate") and not (fs.lockstep is not None and fs.lockstep.inline_jobs):
         loop.head.step_gate = gate
     try:
@@ -265,14 +273,19 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
                 if fs.lockstep is not None:
                     loop.image.threaded = False      # centroid in the step: same result, no hand-over per frame
                     cpu_loop = _run_lockstep(fs, loop, duration, period, step_wall, line if status else None,
-                                             boundary)
+                                             boundary, writer)
                 else:
                     sched = PeriodicScheduler(period)
                     cpu_loop = _run_realtime(fs, loop, gate, sched, duration, step_wall,
-                                             line if status else None, probe, boundary)
+                                             line if status else None, probe, boundary, writer)
         except KeyboardInterrupt:       # Ctrl-C: stop here, keep and report the part that ran
             interrupted = True
             cpu_loop = None
+        except lf.LogWriteError as exc:  # the disk took no more: stop, keep and report the part that ran
+            log_failed = exc
+            cpu_loop = None
+        # from here to summary.json a second Ctrl-C or SIGTERM waits (raised once it is on disk)
+        hold = interrupt.SignalHold()
     finally:
         gate.open()
         line.close()
@@ -288,119 +301,126 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
         # sessions (a Monte Carlo worker) must not keep every run's objects frozen forever
         gc.unfreeze()
         gc.set_threshold(*gc_thresholds)
-    wall = time.perf_counter() - t_wall0
-    cpu_proc = time.process_time() - cpu0
-    out = kept.records
-    truth = fs.truth_rows(out["t"]) if len(out) else None
-    if writer and truth is not None:
-        writer.append(lf.TRUTH, truth.tobytes(), t_ns=0)
-    res = summarize(out, truth, loop.gyro.odr_hz)
-    floor = loop.floor_summary()
-    if truth is not None and len(out):
-        from .analysis import mid_exposure_errors, nees_at_updates
+    try:
+        wall = time.perf_counter() - t_wall0
+        cpu_proc = time.process_time() - cpu0
+        out = kept.records
+        truth = fs.truth_rows(out["t"]) if len(out) else None
+        if writer and truth is not None:
+            writer.append(lf.TRUTH, truth.tobytes(), t_ns=0)
+        res = summarize(out, truth, loop.gyro.odr_hz)
+        floor = loop.floor_summary()
+        if truth is not None and len(out):
+            from .analysis import mid_exposure_errors, nees_at_updates
 
-        res.update(nees_at_updates(out, truth))
-        res.update(mid_exposure_errors(out, fs.truth_rows))
-    counters = loop.counters()
-    res_top = {
-        "scenario": scen.name,
-        "flatsat": cfg.name,
-        "duration_s": duration,
-        "attitude_error_arcsec_1sigma": res.get("attitude_error_arcsec_1sigma"),
-        "floor_arcsec": floor.get("floor_arcsec"),
-        "measured_over_floor": (res["attitude_error_arcsec_1sigma"] / floor["floor_arcsec"]
-                                if res.get("attitude_error_arcsec_1sigma") and floor.get("floor_arcsec") else None),
-        "mid_exposure_error_arcsec_1sigma": res.get("mid_exposure_error_arcsec_1sigma"),
-        "mid_exposure_error_arcsec_1sigma_at_rest": res.get("mid_exposure_error_arcsec_1sigma_at_rest"),
-        "mid_exposure_smoothed_error_arcsec_1sigma": res.get("mid_exposure_smoothed_error_arcsec_1sigma"),
-        "floor_mid_exposure_arcsec": floor.get("floor_mid_exposure_arcsec"),
-        "nees_after_update": res.get("nees_after_update"),
-        "nees_before_update": res.get("nees_before_update"),
-        "latency_p99_ms": res.get("latency_p99_ms"),
-        # fast mode: loop CPU per second of flatsat time (the share of a core it needs in real time)
-        "cpu_percent": (100.0 * cpu_loop / (duration if fast else wall)) if wall > 0 and cpu_loop is not None
-        else None,
-        # of which inside the in-process emulated gyro (fake bus, register model, its truth): on a real
-        # flatsat the kernel's I2C driver and a GPIO edge read take this part
-        "device_emulation_cpu_percent": (100.0 * fs.device_cpu.cpu_s / (duration if fast else wall))
-        if wall > 0 and cpu_loop is not None and fs.device_cpu is not None else None,
-        "overruns": sched.overruns if sched is not None else 0,
-        "mode_seconds": res["mode_seconds"],
-        "frames": counters["frames"],
-        "gyro_samples": counters["gyro_samples"],
-        "samples_lost": counters["samples_lost"],
-        "host_us_per_gyro_sample": loop.host_us_per_gyro_sample(),            # CPU of the loop thread
-        "host_us_per_gyro_sample_wall": loop.host_us_per_gyro_sample_wall(),  # + other threads' turns
-    }
-    res_top.update({k: v for k, v in res.items() if k not in res_top})
-    if floor.get("floor_inputs"):
-        res_top["floor_inputs"] = floor["floor_inputs"]
-    res_top["step_wall_p99_ms"] = float(np.percentile(step_wall, 99)) * 1e3 if step_wall else None
-    # steps the loop took (a tick every gyro period, a step when due: CoupledLoop.step_due)
-    res_top["loop_steps"] = len(step_wall)
-    res_top["samples_per_step"] = counters["gyro_samples"] / len(step_wall) if step_wall else None
-    res_top["process_cpu_percent"] = 100.0 * cpu_proc / wall if wall > 0 else None
-    res_top["wall_s"] = wall
-    res_top["realtime"] = realtime
-    res_top["fast"] = fast
-    if fast:
-        res_top["speedup"] = duration / wall if wall > 0 else None
-    res_top["latency_clock"] = "host monotonic clock, FIFO read complete → output emitted" + (
-        " (host compute time; the simulated clock stands still inside a step)" if fast else "")
-    res_top["counters"] = counters
-    client = getattr(loop.head, "client", None)
-    if client is not None:
-        res_top["link"] = dict(client.stats)
-    if getattr(loop, "streaming", False):
-        res_top.update(loop.stream_summary())
-        res_top["stream"] = loop.head.stats()
-        res_top["link_utilisation"] = res_top["stream"].get("link_utilisation")
-        res_top["head_mode"] = "stream"
-    else:
-        res_top["head_mode"] = "request"
-    port = loop.head
-    if hasattr(port, "acquire"):
-        # the lost-in-space image the port used: the head's spot list, or full frames (by
-        # configuration, or because the firmware answered FIND_SPOTS with UNKNOWN_TYPE)
-        res_top["acquisition_image"] = "full_frame" if port.acquire != "spots" or port.spots_unsupported \
-            else "spots"
-    res_top["calibration"] = {"path": calib.path, "sha256": calib.sha256} if calib.cal is not None else None
-    from .health import health
+            res.update(nees_at_updates(out, truth))
+            res.update(mid_exposure_errors(out, fs.truth_rows))
+        counters = loop.counters()
+        res_top = {
+            "scenario": scen.name,
+            "flatsat": cfg.name,
+            "duration_s": duration,
+            "attitude_error_arcsec_1sigma": res.get("attitude_error_arcsec_1sigma"),
+            "floor_arcsec": floor.get("floor_arcsec"),
+            "measured_over_floor": (res["attitude_error_arcsec_1sigma"] / floor["floor_arcsec"]
+                                    if res.get("attitude_error_arcsec_1sigma") and floor.get("floor_arcsec") else None),
+            "mid_exposure_error_arcsec_1sigma": res.get("mid_exposure_error_arcsec_1sigma"),
+            "mid_exposure_error_arcsec_1sigma_at_rest": res.get("mid_exposure_error_arcsec_1sigma_at_rest"),
+            "mid_exposure_smoothed_error_arcsec_1sigma": res.get("mid_exposure_smoothed_error_arcsec_1sigma"),
+            "floor_mid_exposure_arcsec": floor.get("floor_mid_exposure_arcsec"),
+            "nees_after_update": res.get("nees_after_update"),
+            "nees_before_update": res.get("nees_before_update"),
+            "latency_p99_ms": res.get("latency_p99_ms"),
+            # fast mode: loop CPU per second of flatsat time (the share of a core it needs in real time)
+            "cpu_percent": (100.0 * cpu_loop / (duration if fast else wall)) if wall > 0 and cpu_loop is not None
+            else None,
+            # of which inside the in-process emulated gyro (fake bus, register model, its truth): on a real
+            # flatsat the kernel's I2C driver and a GPIO edge read take this part
+            "device_emulation_cpu_percent": (100.0 * fs.device_cpu.cpu_s / (duration if fast else wall))
+            if wall > 0 and cpu_loop is not None and fs.device_cpu is not None else None,
+            "overruns": sched.overruns if sched is not None else 0,
+            "mode_seconds": res["mode_seconds"],
+            "frames": counters["frames"],
+            "gyro_samples": counters["gyro_samples"],
+            "samples_lost": counters["samples_lost"],
+            "host_us_per_gyro_sample": loop.host_us_per_gyro_sample(),            # CPU of the loop thread
+            "host_us_per_gyro_sample_wall": loop.host_us_per_gyro_sample_wall(),  # + other threads' turns
+        }
+        res_top.update({k: v for k, v in res.items() if k not in res_top})
+        if floor.get("floor_inputs"):
+            res_top["floor_inputs"] = floor["floor_inputs"]
+        res_top["step_wall_p99_ms"] = float(np.percentile(step_wall, 99)) * 1e3 if step_wall else None
+        # steps the loop took (a tick every gyro period, a step when due: CoupledLoop.step_due)
+        res_top["loop_steps"] = len(step_wall)
+        res_top["samples_per_step"] = counters["gyro_samples"] / len(step_wall) if step_wall else None
+        res_top["process_cpu_percent"] = 100.0 * cpu_proc / wall if wall > 0 else None
+        res_top["wall_s"] = wall
+        res_top["realtime"] = realtime
+        res_top["fast"] = fast
+        if fast:
+            res_top["speedup"] = duration / wall if wall > 0 else None
+        res_top["latency_clock"] = "host monotonic clock, FIFO read complete → output emitted" + (
+            " (host compute time; the simulated clock stands still inside a step)" if fast else "")
+        res_top["counters"] = counters
+        client = getattr(loop.head, "client", None)
+        if client is not None:
+            res_top["link"] = dict(client.stats)
+        if getattr(loop, "streaming", False):
+            res_top.update(loop.stream_summary())
+            res_top["stream"] = loop.head.stats()
+            res_top["link_utilisation"] = res_top["stream"].get("link_utilisation")
+            res_top["head_mode"] = "stream"
+        else:
+            res_top["head_mode"] = "request"
+        port = loop.head
+        if hasattr(port, "acquire"):
+            # the lost-in-space image the port used: the head's spot list, or full frames (by
+            # configuration, or because the firmware answered FIND_SPOTS with UNKNOWN_TYPE)
+            res_top["acquisition_image"] = "full_frame" if port.acquire != "spots" or port.spots_unsupported \
+                else "spots"
+        res_top["calibration"] = {"path": calib.path, "sha256": calib.sha256} if calib.cal is not None else None
+        from .health import health
 
-    res_top["health"] = health(out, loop.gyro.odr_hz, counters, dict(client.stats) if client is not None else None)
-    res_top["numba_startup"] = warm
-    res_top["wiring"] = wiring
-    if rt is not None:
-        res_top["realtime_setup"] = {"sched_fifo": rt.sched_fifo, "cpus": rt.cpus, "notes": rt.notes}
-    if tm is not None:
-        res_top["space_packets"] = {"sent": tm.sent, "dropped": tm.dropped, "to": f"{tm.addr[0]}:{tm.addr[1]}",
-                                    "apid": tm.apid}
-    t_first = float(out["t"][0]) if len(out) else timemap.monotonic_s
-    res_top["time"] = {"clock": "host CLOCK_MONOTONIC (s); TAI/UTC from the start pair (docs/TELEMETRY.md)",
-                       "first_output_monotonic_s": t_first, "first_output_tai_s": float(timemap.tai(t_first)),
-                       "first_output_utc": timemap.utc_iso(t_first)[0], "tai_minus_utc_s": timemap.tai_minus_utc_s}
-    if udp is not None:
-        res_top["udp"] = {"sent": udp.sent, "dropped": udp.dropped, "to": f"{udp.addr[0]}:{udp.addr[1]}"}
-    if probe is not None:
-        from ..loop.wakeup_probe import LATE_S, coincident
+        res_top["health"] = health(out, loop.gyro.odr_hz, counters, dict(client.stats) if client is not None else None)
+        res_top["numba_startup"] = warm
+        res_top["wiring"] = wiring
+        if rt is not None:
+            res_top["realtime_setup"] = {"sched_fifo": rt.sched_fifo, "cpus": rt.cpus, "notes": rt.notes}
+        if tm is not None:
+            res_top["space_packets"] = {"sent": tm.sent, "dropped": tm.dropped, "to": f"{tm.addr[0]}:{tm.addr[1]}",
+                                        "apid": tm.apid}
+        t_first = float(out["t"][0]) if len(out) else timemap.monotonic_s
+        res_top["time"] = {"clock": "host CLOCK_MONOTONIC (s); TAI/UTC from the start pair (docs/TELEMETRY.md)",
+                           "first_output_monotonic_s": t_first, "first_output_tai_s": float(timemap.tai(t_first)),
+                           "first_output_utc": timemap.utc_iso(t_first)[0], "tai_minus_utc_s": timemap.tai_minus_utc_s}
+        if udp is not None:
+            res_top["udp"] = {"sent": udp.sent, "dropped": udp.dropped, "to": f"{udp.addr[0]}:{udp.addr[1]}"}
+        if probe is not None:
+            from ..loop.wakeup_probe import LATE_S, coincident
 
-        pr = probe.result()
-        res_top["host_wakeups"] = {
-            "probe_sched_fifo": pr["granted"], "probe_priority": probe.priority, "wakeups": pr["wakeups"],
-            f"late_over_{LATE_S * 1e3:.0f}ms": len(pr["late_s"]), "max_late_ms": pr["max_s"] * 1e3,
-            "overrun_events": len(sched.overrun_t),
-            "overrun_events_during_host_stalls": coincident(np.array(sched.overrun_t), pr["late_t"], pr["late_s"])}
-    from ..loop.record import MODE_TRACK
+            pr = probe.result()
+            res_top["host_wakeups"] = {
+                "probe_sched_fifo": pr["granted"], "probe_priority": probe.priority, "wakeups": pr["wakeups"],
+                f"late_over_{LATE_S * 1e3:.0f}ms": len(pr["late_s"]), "max_late_ms": pr["max_s"] * 1e3,
+                "overrun_events": len(sched.overrun_t),
+                "overrun_events_during_host_stalls": coincident(np.array(sched.overrun_t), pr["late_t"], pr["late_s"])}
+        from ..loop.record import MODE_TRACK
 
-    res_top["track_regained"] = acceptance.track_regained(out["mode"], MODE_TRACK)
-    res_top["run_folder"] = str(folder)
-    if interrupted:
-        res_top["interrupted"] = True
-        res_top["ran_s"] = float(out["t"][-1] - t_start_of(fs)) if len(out) else 0.0
-    if writer:
-        writer.event({"summary": _jsonable(res_top)})
-        writer.close()
-        res_top["log"] = str(folder / "flatsat.gslog")
+        res_top["track_regained"] = acceptance.track_regained(out["mode"], MODE_TRACK)
+        res_top["run_folder"] = str(folder)
+        if interrupted or log_failed is not None:
+            res_top["interrupted"] = interrupted
+            res_top["ran_s"] = float(out["t"][-1] - t_start_of(fs)) if len(out) else 0.0
+        if log_failed is not None:
+            res_top["log_error"] = str(log_failed)
+        if writer:
+            if writer.error is None:
+                writer.event({"summary": _jsonable(res_top)})
+            writer.close()
+            res_top["log"] = str(folder / "flatsat.gslog")
+        _write_summary(folder, res_top)
+    finally:
+        hold.release()   # a Ctrl-C held since the run ended is raised here: the summary is on disk
     if plots and len(out):
         from .plots import write_plots
 
@@ -410,14 +430,14 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
         from .health import plot_overview
 
         res_top["plots"] = [str(p) for p in write_plots(folder, out, truth, cerr) + [plot_overview(folder, out)]]
-    (folder / "summary.json").write_text(json.dumps(_jsonable(res_top), indent=2))
+        _write_summary(folder, res_top)
     if keep_arrays:
         # for evaluations (gyrostar eval loop): the outputs, the truth at each, the scenario start, the camera
         res_top["arrays"] = {"out": out, "truth": truth, "t0": t_start_of(fs), "camera": fs.camera}
     return res_top
 
 
-def _run_realtime(fs, loop, gate, sched, duration: float, step_wall: list, line, probe, boundary) -> float:
+def _run_realtime(fs, loop, gate, sched, duration: float, step_wall: list, line, probe, boundary, writer) -> float:
     """Real time: a tick every gyro period on the monotonic clock, a loop step at each tick the
     loop says is due (:meth:`CoupledLoop.step_due`). Returns the loop's CPU seconds."""
     cpu = 0.0
@@ -445,6 +465,8 @@ def _run_realtime(fs, loop, gate, sched, duration: float, step_wall: list, line,
         sched.done()
         gate.loop_exit(sched.deadline)
         boundary.step_done()
+        if writer is not None and writer.error is not None:
+            raise writer.failure()
         if line is not None and loop.last_output is not None and line.due():
             # the truth row (an attitude integration) only when the line redraws, not every step
             line.update(loop.last_output, fs.truth_at(loop.last_output["t"]), step_wall[-1] * 1e6,
@@ -452,7 +474,7 @@ def _run_realtime(fs, loop, gate, sched, duration: float, step_wall: list, line,
     return cpu
 
 
-def _run_lockstep(fs, loop, duration: float, period: float, step_wall: list, line, boundary) -> float:
+def _run_lockstep(fs, loop, duration: float, period: float, step_wall: list, line, boundary, writer) -> float:
     """Fast mode: tick every gyro period of simulated time, step when the loop says a step is
     due (:meth:`CoupledLoop.step_due`). The head port's jobs (and
     a streaming port's turns) run at once on their own time line (:meth:`Lockstep.run_job`); a worker
@@ -495,6 +517,8 @@ def _run_lockstep(fs, loop, duration: float, period: float, step_wall: list, lin
         loop.step()
         step_wall.append(time.perf_counter() - w0)
         boundary.step_done()
+        if writer is not None and writer.error is not None:
+            raise writer.failure()
         if not inline:
             lk.settle(head)
         if line is not None and loop.last_output is not None and w0 - shown > 0.2:
@@ -503,6 +527,15 @@ def _run_lockstep(fs, loop, duration: float, period: float, step_wall: list, lin
                         t0=t_start)
     # the loop's CPU: the head jobs ran on this thread too (the emulated head and its client)
     return time.thread_time() - cpu0 - lk.job_cpu_s
+
+
+def _write_summary(folder: Path, res: dict) -> None:
+    """summary.json of a run; a disk that takes no more is logged, not raised (the figures
+    are printed all the same)."""
+    try:
+        (folder / "summary.json").write_text(json.dumps(_jsonable(res), indent=2))
+    except OSError as exc:
+        log.error("%s/summary.json not written: %s", folder, exc.strerror or exc)
 
 
 def t_start_of(fs) -> float:

@@ -180,9 +180,15 @@ class FirmwareHost:
                 return self.path
             if self.proc.poll() is not None:
                 break
-        err = self.proc.stderr.read() if self.proc.poll() is not None else ""
+        code = self.proc.poll()
+        err = (self.proc.stderr.read() or "").strip().splitlines() if code is not None else []
         self.stop()
-        raise DeviceError(f"firmware host program did not report its pty within {timeout} s: {line!r} {err!r}")
+        if code is not None:
+            said = f": {err[-1]}" if err else " and printed nothing"
+            raise DeviceError(f"firmware host program {self.binary} exited with code {code} before it reported "
+                              f"its pty{said}")
+        raise DeviceError(f"firmware host program {self.binary} did not report its pty within {timeout} s"
+                          + (f" (its last line: {line.strip()!r})" if line.strip() else ""))
 
     def stop(self) -> None:
         if self.proc is not None and self.proc.poll() is None:

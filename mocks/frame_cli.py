@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from gyrostar.cli.argtypes import seed
 from gyrostar.cli.main import add_json
 from gyrostar.errors import ConfigError
 
@@ -37,7 +38,7 @@ def configure(parser) -> None:
     parser.add_argument("--ra-deg", type=float, default=None, help="boresight RA at exposure start (deg)")
     parser.add_argument("--dec-deg", type=float, default=None, help="boresight Dec at exposure start (deg)")
     parser.add_argument("--roll-deg", type=float, default=0.0, help="roll about the boresight (deg)")
-    parser.add_argument("--seed", type=int, default=0, help="sensor seed (noise, and the attitude if no RA/Dec)")
+    parser.add_argument("--seed", type=seed, default=0, help="sensor seed (noise, and the attitude if no RA/Dec)")
     parser.add_argument("--frame", type=int, default=0, help="frame counter (noise realisation)")
     parser.add_argument("--catalog", default="hip2", help="catalog: hip2 or gaia")
     parser.add_argument("--mag-limit", type=float, default=8.5, help="faintest V rendered")
@@ -72,10 +73,19 @@ def run(args) -> int:
     from .sky import Sky
     from .trajectory import random_attitudes
 
+    out = Path(args.out)
+    if out.suffix.lower() not in (".fits", ".fit", ".fts"):
+        raise ConfigError(f"--out must name a .fits file, got {out}")
+    if not out.parent.is_dir():
+        raise ConfigError(f"--out {out}: folder {out.parent} does not exist")
     rate = np.radians(_triple(args.rate_dps))
     preset = load_preset(args.preset)
     if (args.ra_deg is None) != (args.dec_deg is None):
         raise ConfigError("give both --ra-deg and --dec-deg, or neither (random attitude from --seed)")
+    for flag, value, lo, hi in (("--ra-deg", args.ra_deg, 0.0, 360.0), ("--dec-deg", args.dec_deg, -90.0, 90.0),
+                                ("--roll-deg", args.roll_deg, -360.0, 360.0)):
+        if value is not None and not lo <= value <= hi:
+            raise ConfigError(f"{flag} must be in [{lo:g}, {hi:g}], got {value:g}")
     if args.ra_deg is None:
         q0 = random_attitudes(1, np.random.default_rng(args.seed))[0]
     else:
@@ -83,10 +93,6 @@ def run(args) -> int:
     sky = Sky(load_catalog(args.catalog, args.mag_limit), preset, seed=args.seed)
     img, truth = sky.render_frame(q0, rate, frame=args.frame, noise=not args.no_noise)
 
-    out = Path(args.out)
-    if out.suffix.lower() not in (".fits", ".fit", ".fts"):
-        raise ConfigError(f"--out must name a .fits file, got {out}")
-    out.parent.mkdir(parents=True, exist_ok=True)
     cam = preset.camera
     cd, ra_c, dec_c = wcs_cd(truth.q_mid, cam)
     hdu = fits.PrimaryHDU(img)

@@ -16,12 +16,13 @@ from ..errors import ConfigError
 def add_common_args(parser, input_help: str, live: bool = False) -> None:
     """``INPUT``/``--simulate``/``--seed``/``--toml``(``--out``)/``--report``/``--json`` for one
     command; ``--live`` only where the command records from a device itself (``live``)."""
+    from ..cli.argtypes import seed as seed_type
     from ..cli.main import add_json
 
     parser.add_argument("input", nargs="?", type=Path, help=input_help)
     parser.add_argument("--simulate", action="store_true",
                         help="generate simulated data with known truth and calibrate on it")
-    parser.add_argument("--seed", type=int, default=1, help="random seed for --simulate (default 1)")
+    parser.add_argument("--seed", type=seed_type, default=1, help="random seed for --simulate (default 1)")
     if live:
         parser.add_argument("--live", action="store_true", help="record from the connected device")
     parser.add_argument("--toml", "--out", dest="toml", type=Path, default=None,

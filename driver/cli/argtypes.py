@@ -36,6 +36,28 @@ def int_at_least(minimum: int):
 
 positive_int = int_at_least(1)
 
+SEED_MAX = 2**32 - 1
+
+
+def seed(text: str) -> int:
+    """A random seed: an integer in [0, 2³² − 1] (what every generator of the simulator takes)."""
+    value = int_at_least(0)(text)
+    if value > SEED_MAX:
+        raise argparse.ArgumentTypeError(f"must be at most {SEED_MAX}, got {text!r}")
+    return value
+
+
+def run_seconds(text: str) -> float:
+    """A run length: a finite number of seconds ≥ ``MIN_RUN_S`` (a run shorter than its first
+    identification has no figures)."""
+    value = positive_float(text)
+    if value < MIN_RUN_S:
+        raise argparse.ArgumentTypeError(f"must be at least {MIN_RUN_S:g} s, got {text!r}")
+    return value
+
+
+MIN_RUN_S = 1.0
+
 
 def positive_float_list(text: str) -> list[float]:
     """Comma-separated finite numbers > 0 (at least one)."""

@@ -8,6 +8,7 @@ fails to import is still listed, and running it explains why (exit code 4).
 
 from __future__ import annotations
 
+import argparse
 import importlib
 import logging
 
@@ -42,6 +43,16 @@ def run_registered(command: str, args) -> int:
     return module.run(args)
 
 
+def add_verbosity(parser) -> None:
+    """-v/-vv and -q on ``parser``: accepted at every level of the command line (before or
+    after a command or target; the innermost level given wins); absent unless given
+    (``verbose`` 0 then)."""
+    parser.add_argument("-v", "--verbose", action="count", default=argparse.SUPPRESS,
+                        help="more log output (-vv debug)")
+    parser.add_argument("-q", "--quiet", action="store_const", const=-1, dest="verbose", default=argparse.SUPPRESS,
+                        help="errors only, no progress bars")
+
+
 def add_targets(parser, targets: dict[str, str], dest: str) -> None:
     """Register one sub-parser per target module (name -> dotted module path)."""
     sub = parser.add_subparsers(dest=dest, metavar="TARGET", required=True)
@@ -53,6 +64,7 @@ def add_targets(parser, targets: dict[str, str], dest: str) -> None:
             p.set_defaults(_target_run=_unavailable(name, module_path, exc))
             continue
         p = sub.add_parser(name, help=module.HELP, description=module.HELP)
+        add_verbosity(p)
         module.configure(p)
         p.set_defaults(_target_run=module.run)
 

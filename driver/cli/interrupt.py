@@ -7,8 +7,9 @@ part that ran, exit 130. A Ctrl-C that lands inside native code
 (numba's cache loader, a C extension calling back into Python) can surface as another
 exception (``SystemError``, ``EOFError``...); :func:`seen` lets the CLI still report it as an
 interruption (exit 130) rather than a crash. Child processes the driver forks ignore SIGINT
-(:func:`ignore_in_child`): the parent stops them, so a terminal's Ctrl-C, which reaches the
-whole process group, never leaves a traceback from a child.
+and take SIGTERM's default action (:func:`ignore_in_child`): the parent stops them, so a
+terminal's Ctrl-C or a service manager's SIGTERM, which reach the whole process group, never
+leave a traceback from a child.
 """
 
 from __future__ import annotations
@@ -119,8 +120,12 @@ def sigint_blocked():
 
 
 def ignore_in_child() -> None:
-    """In a forked child: ignore SIGINT (the parent stops us), then unblock it."""
+    """In a forked child: ignore SIGINT (the parent stops us), then unblock it; SIGTERM gets
+    its default action back (the parent's handler, inherited through the fork, would raise
+    KeyboardInterrupt and print a traceback when a service manager stops the process group:
+    the child ends at once, quietly, and the parent stops the run as for Ctrl-C)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 

@@ -68,15 +68,12 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--version", action="version", version=f"gyrostar {__version__}")
-    common = argparse.ArgumentParser(add_help=False)
-    common.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv debug)")
-    common.add_argument("-q", "--quiet", action="store_const", const=-1, dest="verbose",
-                        help="errors only, no progress bars")
+    group.add_verbosity(parser)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=Parser)
     for name, (text, module_path) in COMMANDS.items():
-        p = sub.add_parser(name, help=text, description=text, parents=[common],
-                           epilog=f"exit codes:\n{codes}",
+        p = sub.add_parser(name, help=text, description=text, epilog=f"exit codes:\n{codes}",
                            formatter_class=argparse.RawDescriptionHelpFormatter)
+        group.add_verbosity(p)
         module = importlib.import_module(module_path)
         module.configure(p)
         p.set_defaults(_run=module.run)
@@ -94,7 +91,8 @@ def main(argv: list[str] | None = None) -> int:
             return 130
         from .. import logs
 
-        logs.setup(args.verbose)
+        verbosity = getattr(args, "verbose", 0)
+        logs.setup(verbosity)
         as_json = bool(getattr(args, "json", False))
         try:
             return int(args._run(args) or 0)
@@ -110,8 +108,8 @@ def main(argv: list[str] | None = None) -> int:
             if isinstance(exc, OSError):
                 return _fail(as_json, _os_text(exc), 3)
             log.debug("unexpected error", exc_info=True)
-            return _fail(as_json, f"internal error: {type(exc).__name__}: {exc} (run with -vv for the traceback)",
-                         1)
+            hint = "" if verbosity >= 2 else " (run with -vv for the traceback)"
+            return _fail(as_json, f"internal error: {type(exc).__name__}: {exc}{hint}", 1)
 
 
 def _os_text(exc: OSError) -> str:

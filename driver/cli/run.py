@@ -6,19 +6,20 @@ The loop itself lives in :mod:`gyrostar.hil.runner`; this module only parses arg
 from __future__ import annotations
 
 from . import group
-from .argtypes import positive_float
+from .argtypes import run_seconds, seed
 from .main import add_json
 
 
 def configure(parser) -> None:
     parser.add_argument("--config", metavar="TOML", help="flatsat config (default: built-in simulated flatsat)")
-    parser.add_argument("--duration", type=positive_float, default=None, metavar="S",
+    parser.add_argument("--duration", type=run_seconds, default=None, metavar="S",
                         help="run length in seconds of flatsat time (default: the scenario's, ~30 s)")
     parser.add_argument("--scenario", default=None,
-                        help="built-in scenario name or TOML path (default: demo; bench when the head is real)")
+                        help="built-in scenario name, TOML path, or mc:SEED@DURATION (a random Monte Carlo "
+                             "scenario; default: demo, bench when the head is real)")
     parser.add_argument("--calibration", metavar="TOML", default=None,
                         help="calibration file from gyrostar calibrate (overrides the config's 'calibration' key)")
-    parser.add_argument("--seed", type=int, default=1, help="simulator seed")
+    parser.add_argument("--seed", type=seed, default=1, help="simulator seed (0 … 2³² − 1)")
     parser.add_argument("--out", metavar="DIR", default=None, help="run folder (default: runs/<timestamp>)")
     parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     parser.add_argument("--realtime", action="store_true",

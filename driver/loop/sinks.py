@@ -93,7 +93,10 @@ class RecorderSink:
             self.writer.append(lf.OUTPUT, records.tobytes(), t_ns=t_ns)
 
     def close(self) -> None:
-        self.writer.flush()
+        """Hand the last records to the kernel (a log that failed is left to its owner:
+        :attr:`LogWriter.error`)."""
+        if self.writer.error is None:
+            self.writer.flush()
 
 
 class UdpSink:

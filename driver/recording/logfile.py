@@ -28,7 +28,7 @@ from pathlib import Path
 
 import crc32c
 
-from ..errors import ConfigError
+from ..errors import ConfigError, GyrostarError
 
 MAGIC = b"GYSTLOG1"
 SYNC = 0xA5
@@ -63,8 +63,20 @@ class Record:
     payload: bytes
 
 
+class LogWriteError(GyrostarError):
+    """The log could not be written (disk full, file too large, I/O error): the run stops,
+    the log keeps every record written before. Not a :class:`DeviceError`: no loop stage
+    may take it for a device's failure and carry on."""
+
+    exit_code = 3
+
+
 class LogWriter:
-    """Append records to a log file; thread-safe (a link reader thread may record too)."""
+    """Append records to a log file; thread-safe (a link reader thread may record too).
+
+    A failed write (``OSError``) is kept in :attr:`error`: from then on records are dropped
+    (the disk takes no more), nothing raises on the recording threads, and the owner stops
+    the run at its next check (:meth:`failure`)."""
 
     def __init__(self, path: str | Path, flush_bytes: int = 64 * 1024, flush_s: float = 0.05,
                  fsync: bool = False, background: bool = False):
@@ -83,6 +95,7 @@ class LogWriter:
         self._last_flush = time.monotonic()
         self.records = 0
         self.bytes_written = 0
+        self.error: OSError | None = None
         self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_APPEND, 0o644)
         self._write_all(MAGIC)
 
@@ -106,6 +119,8 @@ class LogWriter:
         with self._lock:
             if self._fd < 0:
                 raise ValueError(f"log {self.path} is closed")
+            if self.error is not None:
+                return
             buf = self._buf
             buf += head
             if payload:
@@ -129,22 +144,35 @@ class LogWriter:
         self.append(EVENT, json.dumps(obj, sort_keys=True).encode(), t_ns=t_ns)
 
     def flush(self) -> None:
-        """Hand every buffered record to the kernel now."""
+        """Hand every buffered record to the kernel now (:class:`LogWriteError` if it fails)."""
         self._drain()
+        if self.error is not None:
+            raise self.failure()
+
+    def failure(self) -> LogWriteError:
+        """The error to stop a run with, once :attr:`error` is set."""
+        err = self.error
+        why = (err.strerror or str(err)) if err is not None else "unknown error"
+        return LogWriteError(f"log {self.path}: write failed after {self.bytes_written} bytes ({why}); "
+                             "the run stopped, the log keeps what was written before")
 
     def _drain(self) -> bool:
         """Take the buffer (under the buffer lock, O(1)) and write it outside that lock, in
-        buffer order (the file lock); False once the log is closed."""
+        buffer order (the file lock); False once the log is closed or failed."""
         with self._wlock:
             with self._lock:
-                if self._fd < 0:
+                if self._fd < 0 or self.error is not None:
                     return False
                 data, self._buf = self._buf, bytearray()
                 self._last_flush = time.monotonic()
             if data:
-                self._write_all(data)
-                if self.fsync:
-                    os.fsync(self._fd)
+                try:
+                    self._write_all(data)
+                    if self.fsync:
+                        os.fsync(self._fd)
+                except OSError as exc:
+                    self.error = exc
+                    return False
         return True
 
     def _start_writer(self) -> None:
@@ -174,10 +202,16 @@ class LogWriter:
             view = view[n:]
 
     def close(self) -> None:
+        """Write what is buffered and close (a failed log is closed as it is; never raises
+        for the disk: :attr:`error` tells)."""
         with self._wlock:
-            if self._drain():
-                with self._lock:
-                    os.fsync(self._fd)
+            self._drain()
+            with self._lock:
+                if self._fd >= 0:
+                    try:
+                        os.fsync(self._fd)
+                    except OSError as exc:
+                        self.error = self.error or exc
                     os.close(self._fd)
                     self._fd = -1
         if self._writer is not None:

@@ -87,6 +87,7 @@ class TrialConfig:
 
 def configure(parser) -> None:
     from ..cli.argtypes import positive_float
+    from ..cli.argtypes import seed as seed_type
     from ..cli.main import add_json
 
     d = TrialConfig()
@@ -131,7 +132,7 @@ def configure(parser) -> None:
                              "cedar-solve) in the same worker, after ours (default: none)")
     parser.add_argument("--trials", type=int, default=1000,
                         help="Monte Carlo trials (per sweep point with --sweep; default %(default)s)")
-    parser.add_argument("--seed", type=int, default=1, help="random seed (default %(default)s)")
+    parser.add_argument("--seed", type=seed_type, default=1, help="random seed (default %(default)s)")
     parser.add_argument("--scheduler", default=None, help="address of an existing Dask scheduler, e.g. tcp://host:8786 "
                              "(default: a LocalCluster on this machine)")
     parser.add_argument("--scheduler-timeout", type=positive_float, default=5.0, metavar="S",

@@ -31,7 +31,8 @@ DEG = np.pi / 180.0
 def configure(parser) -> None:
     from ...calibration.report import add_common_args
 
-    add_common_args(parser, "gyro log .npz (see --help: t, rate, run, table_rate; or t_cam, q_cam for slews)")
+    add_common_args(parser, "gyro log .npz: t, rate (N×3 rad/s), run and table_rate for rate-table runs; or t, "
+                            "rate, t_cam and q_cam (gyrostar replay LOG --export calib) for slews")
     parser.add_argument("--method", choices=("rate-table", "slew"), default=None,
                         help="default: slew when INPUT has no 'run' array (a flatsat run's export), else rate-table")
     parser.add_argument("--trim", type=float, default=0.5, help="rate table: seconds dropped at each run end")

@@ -8,6 +8,7 @@
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -56,7 +57,9 @@ def write_plots(rows: list[dict], folder: Path, seed: int = 0) -> list[Path]:
     with np.errstate(invalid="ignore", divide="ignore"):
         est = np.sqrt(sq.sum(0) / cnt.sum(0))
         bs = np.sqrt(np.array([sq[b].sum(0) / cnt[b].sum(0) for b in boot]))
-    lo, hi = np.nanpercentile(bs, [5, 95], axis=0)
+    with warnings.catch_warnings():      # a rate bin no run reached is all NaN: no band, no warning
+        warnings.simplefilter("ignore", RuntimeWarning)
+        lo, hi = np.nanpercentile(bs, [5, 95], axis=0)
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
     xs = np.arange(len(RATE_BINS))
     m = np.isfinite(est)

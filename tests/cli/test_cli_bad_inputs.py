@@ -5,6 +5,7 @@ Inputs are chosen to fail at load (parse, config, file checks), so the table sta
 """
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -27,6 +28,9 @@ def _files(d):
     (d / "notalog.gslog").write_bytes(b"hello, not a log")
     (d / "bad.toml").write_text("[loop\nframe_hz = 1\n")
     (d / "plain.txt").write_text("x")
+    (d / "camp").mkdir()
+    (d / "camp" / "summary.json").write_text("{}")
+    (d / "afile").write_text("x")
     return d
 
 
@@ -47,6 +51,8 @@ def _flatsat(d, section: str, key: str, value: str):
     return path
 
 
+FWHOST = str(Path(__file__).resolve().parents[2] / "hil" / "flatsat_fwhost.toml")
+
 # (id, argv with {d} for the bad-input folder, exit code, words the one line must hold)
 CASES = [
     # --- usage: unknown commands, flags, bad numbers
@@ -58,6 +64,19 @@ CASES = [
     ("run-duration-inf", ["run", "--duration", "inf"], USAGE, ["--duration"]),
     ("run-duration-word", ["run", "--duration", "ten"], USAGE, ["--duration"]),
     ("run-seed-float", ["run", "--seed", "1.5"], USAGE, ["--seed"]),
+    ("run-seed-negative", ["run", "--seed", "-1"], USAGE, ["--seed", "at least 0"]),
+    ("run-duration-tiny", ["run", "--duration", "1e-9"], USAGE, ["--duration", "at least"]),
+    ("run-fwhost-fast", ["run", "--config", FWHOST, "--fast"], USAGE, ["--fast", "firmware-host"]),
+    # a config that cannot work is refused before any device is looked for (the port is missing too)
+    ("run-real-head-no-camera", ["run", "--config", ("head", "kind", '"serial"'), '+url="/dev/ttyUSB9"'], USAGE,
+     ["camera model"]),
+    ("eval-loop-real-head", ["eval", "loop", "--runs", "1", "--duration", "10", "--out", "{d}/mc",
+                             "--config", ("head", "kind", '"serial"'), '+url="/dev/ttyUSB9"'], USAGE, ["emulated"]),
+    ("eval-loop-out-holds-campaign", ["eval", "loop", "--runs", "1", "--duration", "10", "--out", "{d}/camp"],
+     USAGE, ["already holds"]),
+    ("sim-frame-missing-folder", ["sim", "frame", "--out", "{d}/no/x.fits"], USAGE, ["does not exist"]),
+    ("sim-frame-dec-200", ["sim", "frame", "--out", "{d}/x.fits", "--ra-deg", "10", "--dec-deg", "200"], USAGE,
+     ["--dec-deg"]),
     # --- run: configuration the devices reject (exit 2 naming key and file)
     ("run-config-missing", ["run", "--config", "{d}/nope.toml"], USAGE, ["nope.toml"]),
     ("run-config-not-toml", ["run", "--config", "{d}/bad.toml"], USAGE, ["bad.toml", "TOML"]),
@@ -196,3 +215,24 @@ def test_long_error_is_not_wrapped_off_a_terminal(bad, tmp_path):
     res = gyrostar(["replay", deep], cwd=tmp_path)
     lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
     assert res.returncode == USAGE and len(lines) == 1 and str(deep) in lines[0] and len(lines[0]) > 150
+
+
+def test_verbosity_flags_at_every_level_of_the_command_line():
+    """-v/-vv/-q before or after a command or a target (calibrate camera … -vv was refused)."""
+    from gyrostar.cli.main import build_parser
+
+    p = build_parser()
+    cases = [(["-vv", "run"], 2), (["run", "-vv"], 2), (["-q", "run"], -1), (["run"], None),
+             (["calibrate", "camera", "x.npz", "-vv"], 2), (["calibrate", "-v", "camera", "x.npz"], 1),
+             (["eval", "starcount", "-q"], -1), (["fw", "ping", "/dev/ttyACM0", "-v"], 1),
+             (["sim", "frame", "--out", "f.fits", "-vv"], 2)]
+    for argv, want in cases:
+        assert getattr(p.parse_args(argv), "verbose", None) == want, argv
+
+
+def test_runs_folder_that_is_a_file_names_the_variable(bad, tmp_path):
+    res = gyrostar(["run", "--fast", "--duration", "2"], cwd=tmp_path, env={"GYROSTAR_RUNS": str(bad / "afile")},
+                   timeout=60)
+    assert res.returncode == USAGE and "Traceback" not in res.stderr, res.stderr
+    lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "GYROSTAR_RUNS=" in lines[0], res.stderr

@@ -119,3 +119,25 @@ def test_replay_check_reports_a_cut_log_as_a_prefix(run_log, tmp_path):
     assert obj["compared_outputs"] == obj["recorded_outputs"] > 0
     assert obj["log_tail_ignored_bytes"] == 11 and obj["first_difference_at"] is None
     assert "PREFIX" in res.stderr and "None" not in res.stderr
+
+
+def test_heavily_corrupt_log_gives_a_verdict_not_an_error(run_log, tmp_path):
+    """Every 4th record of the log's second half flipped: the loop's replay loses link frames
+    it needs and diverges from the log. The replay stops there with the CORRUPT verdict
+    (exit 0; 1 with --check), no error; an export says it holds the intact records only."""
+    data = bytearray(run_log.read_bytes())
+    spans = _record_spans(data)
+    for off, size, _ in spans[len(spans) // 2::4]:
+        data[off + HEAD + (size - HEAD - CRC) // 2] ^= 0x10
+    bad = tmp_path / "heavy.gslog"
+    bad.write_bytes(bytes(data))
+    res, obj = _replay(bad)
+    assert res.returncode == 1, res.stderr
+    assert obj["verdict"] == "corrupt" and obj["stopped"].startswith("diverged from the log")
+    assert len(obj["log_skipped"]) >= len(spans[len(spans) // 2::4]) // 2
+    plain = gyrostar(["replay", bad])
+    assert plain.returncode == 0 and "Traceback" not in plain.stderr, plain.stderr
+    assert "CORRUPT LOG" in plain.stdout + plain.stderr and "replay stopped" in plain.stdout + plain.stderr
+    exp = gyrostar(["replay", bad, "--export", "csv", "--out", tmp_path / "h.csv"])
+    assert exp.returncode == 0, exp.stderr
+    assert "the export holds the intact records only" in exp.stdout + exp.stderr

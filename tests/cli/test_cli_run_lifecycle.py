@@ -35,11 +35,11 @@ def _records(path):
 
 def test_failed_run_leaves_meta_and_its_out_is_reused(tmp_path):
     out = tmp_path / "run"
-    # real devices that are not there: the run fails after its log was opened
-    cfg = _config(tmp_path, **{"head.kind": '"serial"', "head.url": '"/nonexistent/tty"', "gyro.kind": '"i2c"',
-                               "gyro.i2c_bus": "97"})
+    # a real device that is not there: the run fails after its log was opened (a real head
+    # without a camera model is refused before: test_cli_bad_inputs)
+    cfg = _config(tmp_path, **{"gyro.kind": '"i2c"', "gyro.i2c_bus": "97"})
     res = gyrostar(["run", "--config", cfg, "--out", out])
-    assert res.returncode == 3, res.stderr
+    assert res.returncode == 3 and "/dev/i2c-97" in res.stderr, res.stderr
     assert "Traceback" not in res.stderr
     recs = _records(out / "flatsat.gslog")
     assert recs[0][0] == "meta" and json.loads(recs[0][1])["config"]["gyro"]["i2c_bus"] == 97
@@ -92,10 +92,12 @@ def test_acceptance_not_applied_to_a_shortened_run(tmp_path):
     assert not acc["applied"] and "shorter" in acc["note"]
 
 
-def _interrupt(tmp_path, ready, extra=(), sig=signal.SIGINT):
+def _interrupt(tmp_path, ready, extra=(), sig=signal.SIGINT, group=None, again_after=None):
     """Start ``gyrostar run`` in its own process group, wait for ``ready(out)``, send SIGINT
     to the group (as a terminal's Ctrl-C does) or SIGTERM to the main process only (as
-    ``kill PID`` does) and return (result, out, seconds to ready)."""
+    ``kill PID`` does; ``group=True``: to the group, as a service manager stopping its cgroup
+    does), once more ``again_after`` s later if given, and return (result, out, seconds to
+    ready)."""
     out = tmp_path / "run"
     p = subprocess.Popen([GYROSTAR, "run", "--duration", "60", "--out", str(out), *extra], stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, text=True, start_new_session=True, stdin=subprocess.DEVNULL)
@@ -106,10 +108,14 @@ def _interrupt(tmp_path, ready, extra=(), sig=signal.SIGINT):
             assert time.monotonic() - t0 < 90, "run never got ready"
             time.sleep(0.01)
         waited = time.monotonic() - t0
-        if sig == signal.SIGINT:
-            os.killpg(p.pid, signal.SIGINT)
-        else:
-            os.kill(p.pid, sig)
+        to_group = sig == signal.SIGINT if group is None else group
+        for k in range(1 if again_after is None else 2):
+            if k:
+                time.sleep(again_after)
+            if to_group:
+                os.killpg(p.pid, sig)
+            else:
+                os.kill(p.pid, sig)
         stdout, stderr = p.communicate(timeout=60)
     finally:
         if p.poll() is None:
@@ -198,15 +204,34 @@ def test_ctrl_c_mid_run_keeps_summary_and_plots(tmp_path):
     assert json.loads(rep.stdout)["verdict"] == "bit-exact"
 
 
-def test_sigterm_mid_run_ends_like_ctrl_c(tmp_path):
-    """``kill PID`` (SIGTERM to the main process, as a service manager stops a run): one line
-    saying so, exit 130, the summary of the part that ran, a log that replays bit-exact."""
+def test_second_ctrl_c_while_the_run_winds_up_keeps_the_summary(tmp_path):
+    """Ctrl-C, and again 0.2 s later while the devices stop and the figures are computed: the
+    second waits until summary.json is on disk (it may skip the plots), one line, exit 130."""
 
     def running(out):
         log = out / "flatsat.gslog"
         return log.exists() and log.stat().st_size > 400_000
 
-    res, out, _ = _interrupt(tmp_path, running, sig=signal.SIGTERM)
+    res, out, _ = _interrupt(tmp_path, running, again_after=0.2)
+    _one_interrupt_line(res)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["interrupted"] is True and summary["outputs"] > 0
+    rep = gyrostar(["replay", out / "flatsat.gslog", "--check", "--json"])
+    assert rep.returncode == 0, rep.stderr
+
+
+@pytest.mark.parametrize("group", [False, True])
+def test_sigterm_mid_run_ends_like_ctrl_c(tmp_path, group):
+    """``kill PID`` (SIGTERM to the main process) or SIGTERM to the whole process group (a
+    service manager stopping the run's cgroup: the head emulator and link relay processes get
+    it too): one line saying so, no traceback from any process, exit 130, the summary of the
+    part that ran, a log that replays bit-exact."""
+
+    def running(out):
+        log = out / "flatsat.gslog"
+        return log.exists() and log.stat().st_size > 400_000
+
+    res, out, _ = _interrupt(tmp_path, running, sig=signal.SIGTERM, group=group)
     line = _one_interrupt_line(res, "terminated (SIGTERM)")
     assert str(out) in line
     summary = json.loads((out / "summary.json").read_text())
@@ -262,3 +287,30 @@ def test_a_failure_without_a_signal_is_logged_as_itself(tmp_path, monkeypatch):
                            folder=tmp_path / "run", plots=False, status=False, fast=True)
     ev = [json.loads(p) for k, p in _records(tmp_path / "run" / "flatsat.gslog") if k == "event"]
     assert ev[-1] == {"aborted": "RuntimeError: disk full"}
+
+
+def test_log_write_failure_stops_the_run_cleanly(tmp_path):
+    """The disk takes no more (a file-size limit cuts the log at 2 MB, as a full disk would):
+    one line naming the log and the reason, exit 3, no traceback from the writer thread;
+    summary.json of the part that ran; the log replays bit-exact up to where it was cut."""
+    import resource
+
+    out = tmp_path / "full"
+    limit = 2_000_000
+
+    def cap():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    res = subprocess.run([GYROSTAR, "run", "--fast", "--duration", "20", "--out", str(out), "--no-plots", "-q"],
+                         capture_output=True, text=True, preexec_fn=cap, timeout=300, stdin=subprocess.DEVNULL)
+    assert res.returncode == 3, res.stderr
+    assert "Traceback" not in res.stderr and "Exception in thread" not in res.stderr, res.stderr
+    lines = [ln for ln in res.stderr.splitlines() if "write failed" in ln]
+    assert len(lines) == 1 and "flatsat.gslog" in lines[0] and "File too large" in lines[0], res.stderr
+    assert (out / "flatsat.gslog").stat().st_size <= limit
+    summary = json.loads((out / "summary.json").read_text())
+    assert "write failed" in summary["log_error"] and 0 < summary["ran_s"] < 20
+    rep = gyrostar(["replay", out / "flatsat.gslog", "--json"])
+    assert rep.returncode == 0, rep.stderr
+    rj = json.loads(rep.stdout)
+    assert rj["verdict"] == "prefix" and rj["compared_outputs"] > 0
