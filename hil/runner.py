@@ -97,8 +97,10 @@ def run(args) -> int:
     if result.get("interrupted"):
         result["exit_code"] = 130
         emit(args, result, human_summary(result))
-        log.error("%s at %.1f s of %.1f s: the summary and plots of the part that ran are in %s",
-                  interrupt.reason(), result.get("ran_s") or 0.0, duration, folder)
+        plotted = isinstance(result.get("plots"), list) and result["plots"]
+        what = "the summary and plots of the part that ran are" if plotted else "the summary of the part that ran is"
+        log.error("%s at %.1f s of %.1f s: %s in %s",
+                  interrupt.reason(), result.get("ran_s") or 0.0, duration, what, folder)
         return 130
     acc = acceptance.evaluate(scen, result, duration)
     result["acceptance"] = acc
@@ -247,6 +249,7 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
     line = StatusLine(enabled=status)
     step_wall: list[float] = []
     cpu_loop = 0.0
+    cpu_box: list = [None]     # the loop's CPU seconds, also when a run is stopped early
     t_wall0 = time.perf_counter()
     cpu0 = time.process_time()
     # the head worker's Python work stays out of the steps (it shares the interpreter lock)
@@ -273,17 +276,22 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
                 if fs.lockstep is not None:
                     loop.image.threaded = False      # centroid in the step: same result, no hand-over per frame
                     cpu_loop = _run_lockstep(fs, loop, duration, period, step_wall, line if status else None,
-                                             boundary, writer)
+                                             boundary, writer, cpu_box)
                 else:
                     sched = PeriodicScheduler(period)
                     cpu_loop = _run_realtime(fs, loop, gate, sched, duration, step_wall,
-                                             line if status else None, probe, boundary, writer)
+                                             line if status else None, probe, boundary, writer, cpu_box)
         except KeyboardInterrupt:       # Ctrl-C: stop here, keep and report the part that ran
             interrupted = True
-            cpu_loop = None
+            cpu_loop = cpu_box[0]
         except lf.LogWriteError as exc:  # the disk took no more: stop, keep and report the part that ran
             log_failed = exc
-            cpu_loop = None
+            cpu_loop = cpu_box[0]
+        except Exception:               # a Ctrl-C that surfaced from native code as another exception
+            if not interrupt.seen():
+                raise
+            interrupted = True
+            cpu_loop = cpu_box[0]
         # from here to summary.json a second Ctrl-C or SIGTERM waits (raised once it is on disk)
         hold = interrupt.SignalHold()
     finally:
@@ -308,7 +316,8 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
         truth = fs.truth_rows(out["t"]) if len(out) else None
         if writer and truth is not None:
             writer.append(lf.TRUTH, truth.tobytes(), t_ns=0)
-        res = summarize(out, truth, loop.gyro.odr_hz)
+        seen = _bias_seen_by_loop(truth, calib)     # the bias the loop estimates: after the calibration's
+        res = summarize(out, seen, loop.gyro.odr_hz)
         floor = loop.floor_summary()
         if truth is not None and len(out):
             from .analysis import mid_exposure_errors, nees_at_updates
@@ -316,6 +325,8 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
             res.update(nees_at_updates(out, truth))
             res.update(mid_exposure_errors(out, fs.truth_rows))
         counters = loop.counters()
+        # flatsat seconds the run covered (the whole duration unless it was stopped early)
+        ran_s = float(out["t"][-1] - t_start_of(fs)) if len(out) and (interrupted or log_failed) else duration
         res_top = {
             "scenario": scen.name,
             "flatsat": cfg.name,
@@ -332,12 +343,12 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
             "nees_before_update": res.get("nees_before_update"),
             "latency_p99_ms": res.get("latency_p99_ms"),
             # fast mode: loop CPU per second of flatsat time (the share of a core it needs in real time)
-            "cpu_percent": (100.0 * cpu_loop / (duration if fast else wall)) if wall > 0 and cpu_loop is not None
-            else None,
+            "cpu_percent": (100.0 * cpu_loop / (ran_s if fast else wall)) if wall > 0 and ran_s > 0
+            and cpu_loop is not None else None,
             # of which inside the in-process emulated gyro (fake bus, register model, its truth): on a real
             # flatsat the kernel's I2C driver and a GPIO edge read take this part
-            "device_emulation_cpu_percent": (100.0 * fs.device_cpu.cpu_s / (duration if fast else wall))
-            if wall > 0 and cpu_loop is not None and fs.device_cpu is not None else None,
+            "device_emulation_cpu_percent": (100.0 * fs.device_cpu.cpu_s / (ran_s if fast else wall))
+            if wall > 0 and ran_s > 0 and cpu_loop is not None and fs.device_cpu is not None else None,
             "overruns": sched.overruns if sched is not None else 0,
             "mode_seconds": res["mode_seconds"],
             "frames": counters["frames"],
@@ -410,7 +421,7 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
         res_top["run_folder"] = str(folder)
         if interrupted or log_failed is not None:
             res_top["interrupted"] = interrupted
-            res_top["ran_s"] = float(out["t"][-1] - t_start_of(fs)) if len(out) else 0.0
+            res_top["ran_s"] = ran_s if len(out) else 0.0
         if log_failed is not None:
             res_top["log_error"] = str(log_failed)
         if writer:
@@ -420,16 +431,26 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
             res_top["log"] = str(folder / "flatsat.gslog")
         _write_summary(folder, res_top)
     finally:
-        hold.release()   # a Ctrl-C held since the run ended is raised here: the summary is on disk
-    if plots and len(out):
-        from .plots import write_plots
+        late = bool(hold.held)     # a Ctrl-C while the run wound up: its summary is on disk now
+        hold.held.clear()
+        hold.release()
+    try:
+        if late:
+            raise KeyboardInterrupt
+        if plots and len(out):
+            from .plots import write_plots
 
-        cerr = fs.centroid_errors(out) if truth is not None else None
-        if cerr is not None and len(cerr):
-            res_top["centroid_error_px_rms"] = float(np.sqrt(np.mean(cerr[:, 1:] ** 2)))
-        from .health import plot_overview
+            cerr = fs.centroid_errors(out) if truth is not None else None
+            if cerr is not None and len(cerr):
+                res_top["centroid_error_px_rms"] = float(np.sqrt(np.mean(cerr[:, 1:] ** 2)))
+            from .health import plot_overview
 
-        res_top["plots"] = [str(p) for p in write_plots(folder, out, truth, cerr) + [plot_overview(folder, out)]]
+            res_top["plots"] = [str(p) for p in write_plots(folder, out, seen, cerr) + [plot_overview(folder, out)]]
+            _write_summary(folder, res_top)
+    except KeyboardInterrupt:      # Ctrl-C while winding up or plotting: the summary stands, no plots
+        res_top["interrupted"] = True
+        res_top.setdefault("ran_s", ran_s)
+        res_top["plots"] = "skipped: interrupted"
         _write_summary(folder, res_top)
     if keep_arrays:
         # for evaluations (gyrostar eval loop): the outputs, the truth at each, the scenario start, the camera
@@ -437,7 +458,8 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
     return res_top
 
 
-def _run_realtime(fs, loop, gate, sched, duration: float, step_wall: list, line, probe, boundary, writer) -> float:
+def _run_realtime(fs, loop, gate, sched, duration: float, step_wall: list, line, probe, boundary, writer,
+                  cpu_box) -> float:
     """Real time: a tick every gyro period on the monotonic clock, a loop step at each tick the
     loop says is due (:meth:`CoupledLoop.step_due`). Returns the loop's CPU seconds."""
     cpu = 0.0
@@ -462,6 +484,7 @@ def _run_realtime(fs, loop, gate, sched, duration: float, step_wall: list, line,
         loop.step()
         step_wall.append(time.perf_counter() - w0)
         cpu += time.thread_time() - c0
+        cpu_box[0] = cpu
         sched.done()
         gate.loop_exit(sched.deadline)
         boundary.step_done()
@@ -474,7 +497,8 @@ def _run_realtime(fs, loop, gate, sched, duration: float, step_wall: list, line,
     return cpu
 
 
-def _run_lockstep(fs, loop, duration: float, period: float, step_wall: list, line, boundary, writer) -> float:
+def _run_lockstep(fs, loop, duration: float, period: float, step_wall: list, line, boundary, writer,
+                  cpu_box) -> float:
     """Fast mode: tick every gyro period of simulated time, step when the loop says a step is
     due (:meth:`CoupledLoop.step_due`). The head port's jobs (and
     a streaming port's turns) run at once on their own time line (:meth:`Lockstep.run_job`); a worker
@@ -494,39 +518,55 @@ def _run_lockstep(fs, loop, duration: float, period: float, step_wall: list, lin
     t_next = clock.now() + period
     cpu0 = time.thread_time()      # this thread runs only the loop and the schedule: one reading
     shown = time.perf_counter()
-    while True:
-        lk.horizon = t_next
-        while not inline:
-            w = lk.wake_time
-            if w is None or w > t_next:
+    try:
+        while True:
+            lk.horizon = t_next
+            while not inline:
+                w = lk.wake_time
+                if w is None or w > t_next:
+                    break
+                lk.wake()
+                lk.settle(head)
+            if t_next - t_start >= duration:
                 break
-            lk.wake()
-            lk.settle(head)
-        if t_next - t_start >= duration:
-            break
-        if t_next > clock.now():
-            clock.set(t_next)
-        t = t_next - t_start
-        t_next += period
-        fs.apply_faults(t)
-        # an injected "loop does not read the FIFO" fault, or no step due at this tick
-        if fs.loop_stalled(t) or not loop.step_due(t + t_start):
-            continue
-        w0 = time.perf_counter()
-        boundary.inside = True
-        loop.step()
-        step_wall.append(time.perf_counter() - w0)
-        boundary.step_done()
-        if writer is not None and writer.error is not None:
-            raise writer.failure()
-        if not inline:
-            lk.settle(head)
-        if line is not None and loop.last_output is not None and w0 - shown > 0.2:
-            shown = w0
-            line.update(loop.last_output, fs.truth_at(loop.last_output["t"]), step_wall[-1] * 1e6, 0, duration,
-                        t0=t_start)
-    # the loop's CPU: the head jobs ran on this thread too (the emulated head and its client)
-    return time.thread_time() - cpu0 - lk.job_cpu_s
+            if t_next > clock.now():
+                clock.set(t_next)
+            t = t_next - t_start
+            t_next += period
+            fs.apply_faults(t)
+            # an injected "loop does not read the FIFO" fault, or no step due at this tick
+            if fs.loop_stalled(t) or not loop.step_due(t + t_start):
+                continue
+            w0 = time.perf_counter()
+            boundary.inside = True
+            loop.step()
+            step_wall.append(time.perf_counter() - w0)
+            boundary.step_done()
+            if writer is not None and writer.error is not None:
+                raise writer.failure()
+            if not inline:
+                lk.settle(head)
+            if line is not None and loop.last_output is not None and w0 - shown > 0.2:
+                shown = w0
+                line.update(loop.last_output, fs.truth_at(loop.last_output["t"]), step_wall[-1] * 1e6, 0, duration,
+                            t0=t_start)
+    finally:
+        # the loop's CPU: the head jobs ran on this thread too (the emulated head and its client)
+        cpu_box[0] = time.thread_time() - cpu0 - lk.job_cpu_s
+    return cpu_box[0]
+
+
+def _bias_seen_by_loop(truth, calib):
+    """Truth rows whose ``bias`` is what the loop's bias state estimates: a calibration's gyro
+    map ω_camera = M (ω_meas − b) leaves M (b_true − b) (rad/s, camera axes); without one, the
+    gyro's own bias. The log keeps the gyro's truth as it is."""
+    gm = calib.gyro_map() if truth is not None and calib is not None else None
+    if gm is None:
+        return truth
+    m, b, _ = gm
+    seen = truth.copy()
+    seen["bias"] = (np.asarray(truth["bias"]) - b) @ np.asarray(m).T
+    return seen
 
 
 def _write_summary(folder: Path, res: dict) -> None:

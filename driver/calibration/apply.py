@@ -89,6 +89,9 @@ def load_for_run(path: str | Path | None) -> RunCalibration:
     if not path:
         return RunCalibration(None)
     p = Path(path)
+    if p.is_dir():
+        raise ConfigError(f"calibration file {p} is a folder: give the .toml file (config key 'calibration' or "
+                          "--calibration)")
     if not p.is_file():
         raise ConfigError(f"calibration file {p} does not exist (config key 'calibration' or --calibration)")
     data = config.read_bytes(p, "calibration file")

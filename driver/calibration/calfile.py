@@ -206,6 +206,16 @@ def write_section(path: str | Path, section: str, value, source: str) -> Calibra
     return cal
 
 
+def check_target(path: str | Path) -> None:
+    """``ConfigError`` when ``path`` exists and is not a calibration file (or is a folder):
+    what :func:`write_section` refuses, checked before the work that would write it."""
+    path = Path(path)
+    if path.is_dir():
+        raise ConfigError(f"{path} is a folder: give the calibration file's path")
+    if path.exists():
+        _existing(path)
+
+
 def _existing(path: Path) -> dict:
     """The tables of the calibration file at ``path``: ``ConfigError`` when it is not one."""
     refuse = f"{path} exists and is not a calibration file; left as it is (choose another --out)"

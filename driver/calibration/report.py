@@ -13,6 +13,21 @@ import numpy as np
 from ..errors import ConfigError
 
 
+def calibration_out(text: str) -> Path:
+    """argparse type of ``--out``: a path whose existing file must be a calibration file,
+    checked before any fit runs (a foreign file is refused, never overwritten)."""
+    import argparse
+
+    from .calfile import check_target
+
+    path = Path(text)
+    try:
+        check_target(path)
+    except ConfigError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return path
+
+
 def add_common_args(parser, input_help: str, live: bool = False) -> None:
     """``INPUT``/``--simulate``/``--seed``/``--toml``(``--out``)/``--report``/``--json`` for one
     command; ``--live`` only where the command records from a device itself (``live``)."""
@@ -25,7 +40,7 @@ def add_common_args(parser, input_help: str, live: bool = False) -> None:
     parser.add_argument("--seed", type=seed_type, default=1, help="random seed for --simulate (default 1)")
     if live:
         parser.add_argument("--live", action="store_true", help="record from the connected device")
-    parser.add_argument("--toml", "--out", dest="toml", type=Path, default=None,
+    parser.add_argument("--toml", "--out", dest="toml", type=calibration_out, default=None,
                         help="calibration TOML to update: this command replaces its own table and keeps the others "
                              "(default: calibration.toml in the report folder)")
     parser.add_argument("--report", type=Path, default=None,

@@ -18,10 +18,19 @@ def run(args) -> int:
     (SIGTERM, then SIGKILL after 2 s) before this returns, and ``--exit-with-parent`` makes it
     follow a launcher that was killed outright (SIGKILL)."""
     import subprocess
+    from pathlib import Path
 
+    from ..errors import ConfigError
     from . import build
     from .interrupt import release_held_signals, signals_held, sigterm_as_interrupt, stop_child
 
+    sensor = Path(args.sensor)
+    if sensor.is_dir() or not sensor.parent.is_dir():
+        raise ConfigError(f"--sensor {sensor}: " + ("is a folder: give the pixel file's path" if sensor.is_dir()
+                                                     else f"folder {sensor.parent} does not exist"))
+    for flag, value in (("--width", args.width), ("--height", args.height)):
+        if not 1 <= value <= 65535:       # what the host program takes (u16)
+            raise ConfigError(f"{flag} must be 1 … 65535 pixels, got {value}")
     build.build("host")
     cmd = [str(build.host_binary_path()), "--sensor", args.sensor, "--width", str(args.width),
            "--height", str(args.height), "--planes", str(args.planes), "--exit-with-parent"]

@@ -133,3 +133,19 @@ def test_cli_refuses_bad_files_with_exit_2(tmp_path, capsys, argv):
     name = next(str(v) for v in files.values() if str(v) in argv)
     assert name in err, err
     assert ("UTF-8" in err) or ("time_offset_s" in err) or ("focal_length_px" in err and "field of view" in err)
+
+
+def test_calibrate_refuses_a_foreign_out_before_its_fit(tmp_path):
+    """--out naming a file that is not a calibration file (or a folder) is a usage error at
+    parse time, before any fit runs; the file is left as it was."""
+    import argparse
+
+    from gyrostar.calibration.report import calibration_out
+
+    foreign = tmp_path / "flatsat.toml"
+    foreign.write_text("[loop]\nframe_hz = 100\n")
+    for bad, words in ((foreign, "not a calibration file"), (tmp_path, "is a folder")):
+        with pytest.raises(argparse.ArgumentTypeError, match=words):
+            calibration_out(str(bad))
+    assert foreign.read_text() == "[loop]\nframe_hz = 100\n"
+    assert calibration_out(str(tmp_path / "new.toml")) == tmp_path / "new.toml"

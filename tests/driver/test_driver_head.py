@@ -396,7 +396,9 @@ def test_stream_frames_follow_the_timer_back_to_back(head, leg):
     # gap that its dropped counter accounts for, never a silent one
     assert ks[0] - rep["first_frame"] == got[0].dropped and np.all(np.diff(ks) >= 1)
     assert got[-1].dropped == (ks[-1] - ks[0] + 1 - len(ks)) + got[0].dropped
-    assert got[-1].dropped <= 2 and got[-1].backpressure == 0
+    # (a frame the host read too late for — the pty's buffer still full — is dropped for
+    # backpressure: counted in both)
+    assert got[-1].backpressure <= got[-1].dropped <= 2
     starts = np.array([f.t_start_us for f in got])
     assert np.all(np.abs(np.diff(starts) - 10_000 * np.diff(ks)) <= 1)      # on the head's timer grid
     assert all(f.t_end_us - f.t_start_us == pytest.approx(10_000, abs=1) for f in got)
