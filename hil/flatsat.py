@@ -464,10 +464,19 @@ def preflight(cfg: hc.FlatsatConfig, scen: hc.Scenario, simulated_clock: bool = 
         raise ConfigError(f"head.program = '{cfg.head.program}' does not exist (the firmware's host program; "
                           "empty: the one `make -C firmware host` builds)")
     calib = load_calibration(cfg)           # a missing or invalid file: exit 2 naming it
-    if not emulated_head(cfg):
-        calib.camera(None, real_head=True)  # a real head needs the calibrated camera model
     if not devices:
         return
+    # the device nodes next (the log already holds the run's META, so the failed run says what it
+    # was): a device that is not there is the first thing to fix, before its camera model
+    _check_device_nodes(cfg)
+    if not emulated_head(cfg):
+        calib.camera(None, real_head=True)  # a real head needs the calibrated camera model
+
+
+def _check_device_nodes(cfg: hc.FlatsatConfig) -> None:
+    """:class:`DeviceError` (exit 3) naming a real device node that is not there."""
+    import os
+
     if cfg.head.kind == "serial" and "://" not in cfg.head.url and not os.path.exists(cfg.head.url):
         raise DeviceError(f"head serial port {cfg.head.url} does not exist")
     if cfg.gyro.kind == "i2c" and not os.path.exists(f"/dev/i2c-{cfg.gyro.i2c_bus}"):

@@ -67,9 +67,6 @@ CASES = [
     ("run-seed-negative", ["run", "--seed", "-1"], USAGE, ["--seed", "at least 0"]),
     ("run-duration-tiny", ["run", "--duration", "1e-9"], USAGE, ["--duration", "at least"]),
     ("run-fwhost-fast", ["run", "--config", FWHOST, "--fast"], USAGE, ["--fast", "firmware-host"]),
-    # a config that cannot work is refused before any device is looked for (the port is missing too)
-    ("run-real-head-no-camera", ["run", "--config", ("head", "kind", '"serial"'), '+url="/dev/ttyUSB9"'], USAGE,
-     ["camera model"]),
     ("eval-loop-real-head", ["eval", "loop", "--runs", "1", "--duration", "10", "--out", "{d}/mc",
                              "--config", ("head", "kind", '"serial"'), '+url="/dev/ttyUSB9"'], USAGE, ["emulated"]),
     ("eval-loop-out-holds-campaign", ["eval", "loop", "--runs", "1", "--duration", "10", "--out", "{d}/camp"],
