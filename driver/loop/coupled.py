@@ -784,9 +784,11 @@ def warmup() -> dict:
     with the argument types it uses, timed (see warmup.py). Kernels called only from inside
     other kernels (centroiding, trajectories, windows) come with their callers."""
     from ..attitude import quat_conj, quat_mult, quat_normalize, quat_propagate, quat_to_dcm
+    from ..camera import unproject_many
     from ..core.mekf import mekf_init, mekf_update
     from ..core.motion import substeps_for
     from ..gyro.convert import convert_frames
+    from ..gyro.timebase import polygon_centroid
     from ..protocol.payloads import _unpack10_kernel, windows_tail_decode
     from ..starid.verify import consistent
     from . import acquire, image_kernels, kernels, update_kernel
@@ -833,6 +835,8 @@ def warmup() -> dict:
                                        GATE, QD_MARGIN, SMOOTH_GAP_S)),
         (update_kernel.q_at_history, (af.q, af.ts, af.hist_t, af.hist_q, af.ih, 0.0)),
         (consistent, (ref, ref, np.ones(2), 6.0, 1e-4)),
+        (unproject_many, (cam, np.zeros((2, 2)))),                            # lost-in-space spots (head worker)
+        (polygon_centroid, (np.arange(4.0), np.arange(4.0) * 0.0025, 0.0024, 0.0026)),   # gyro timebase, no irq
         (image_kernels.select_measured, (np.array([0], np.int64), np.array([0], np.int64), np.zeros(1, np.int8),
                                          np.zeros((1, 3)), np.ones(1), np.ones(1, np.bool_), np.zeros(1, np.int64),
                                          np.zeros(1, np.int64), np.zeros((1, 3)), 0.0, False)),
