@@ -67,6 +67,11 @@ CASES = [
     ("run-seed-negative", ["run", "--seed", "-1"], USAGE, ["--seed", "at least 0"]),
     ("run-duration-tiny", ["run", "--duration", "1e-9"], USAGE, ["--duration", "at least"]),
     ("run-fwhost-fast", ["run", "--config", FWHOST, "--fast"], USAGE, ["--fast", "firmware-host"]),
+    # outputs to another machine without outputs.allow_remote: refused before a run folder exists
+    ("run-udp-remote", ["run", "--fast", "--config", ("outputs", "udp", "true"), '+udp_host="192.0.2.1"'], USAGE,
+     ["UDP output", "192.0.2.1", "allow_remote"]),
+    ("run-tm-remote", ["run", "--fast", "--config", ("outputs", "space_packets", "true"), '+tm_host="192.0.2.1"'],
+     USAGE, ["space-packet output", "allow_remote"]),
     ("eval-loop-real-head", ["eval", "loop", "--runs", "1", "--duration", "10", "--out", "{d}/mc",
                              "--config", ("head", "kind", '"serial"'), '+url="/dev/ttyUSB9"'], USAGE, ["emulated"]),
     ("eval-loop-out-holds-campaign", ["eval", "loop", "--runs", "1", "--duration", "10", "--out", "{d}/camp"],
