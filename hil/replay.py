@@ -162,22 +162,22 @@ def export(path: str | Path, fmt: str, out: str | Path, force: bool = False) -> 
         return export_calib(path, out)
     log = load_log(path)
     recs = log["outputs"]
+    res = {"log": str(path), "export": fmt, "out": str(out), "outputs": int(len(recs)),
+           "truth": log["truth"] is not None, "log_skipped_bytes": log["report"].skipped_bytes,
+           "log_skipped_places": len(log["report"].skipped)}
     try:
         if fmt == "aem":
             from ..telemetry import aem, timescale
 
             counts = aem.write(out, recs, timescale.from_meta(log["meta"].get("time")))
-            return {"log": str(path), "export": fmt, "out": str(out), "outputs": counts["lines"], **counts,
-                    "log_skipped_bytes": log["report"].skipped_bytes, "log_skipped_places": len(log["report"].skipped)}
+            return res | counts | {"outputs": counts["lines"]}
         if fmt == "csv":
             _export_csv(recs, log["truth"], log["meta"], out)
         else:
             _export_hdf5(recs, log["truth"], log["meta"], out)
     except OSError as exc:
         raise ConfigError(f"--out {out}: cannot write the export: {exc.strerror or exc}") from exc
-    return {"log": str(path), "export": fmt, "out": str(out), "outputs": int(len(recs)),
-            "truth": log["truth"] is not None, "log_skipped_bytes": log["report"].skipped_bytes,
-            "log_skipped_places": len(log["report"].skipped)}
+    return res
 
 
 def _export_csv(recs: np.ndarray, truth, meta: dict, out: Path) -> None:

@@ -248,8 +248,7 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
     wiring = fs.wiring
     line = StatusLine(enabled=status)
     step_wall: list[float] = []
-    cpu_loop = 0.0
-    cpu_box: list = [None]     # the loop's CPU seconds, also when a run is stopped early
+    cpu_box: list = [None]     # the loop's CPU seconds, written by the runner as it goes (a run stopped early too)
     t_wall0 = time.perf_counter()
     cpu0 = time.process_time()
     # the head worker's Python work stays out of the steps (it shares the interpreter lock)
@@ -275,23 +274,21 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
             with interrupt.StepBoundary() as boundary:
                 if fs.lockstep is not None:
                     loop.image.threaded = False      # centroid in the step: same result, no hand-over per frame
-                    cpu_loop = _run_lockstep(fs, loop, duration, period, step_wall, line if status else None,
-                                             boundary, writer, cpu_box)
+                    _run_lockstep(fs, loop, duration, period, step_wall, line if status else None, boundary,
+                                  writer, cpu_box)
                 else:
                     sched = PeriodicScheduler(period)
-                    cpu_loop = _run_realtime(fs, loop, gate, sched, duration, step_wall,
-                                             line if status else None, probe, boundary, writer, cpu_box)
+                    _run_realtime(fs, loop, gate, sched, duration, step_wall, line if status else None, probe,
+                                  boundary, writer, cpu_box)
         except KeyboardInterrupt:       # Ctrl-C: stop here, keep and report the part that ran
             interrupted = True
-            cpu_loop = cpu_box[0]
         except lf.LogWriteError as exc:  # the disk took no more: stop, keep and report the part that ran
             log_failed = exc
-            cpu_loop = cpu_box[0]
         except Exception:               # a Ctrl-C that surfaced from native code as another exception
             if not interrupt.seen():
                 raise
             interrupted = True
-            cpu_loop = cpu_box[0]
+        cpu_loop = cpu_box[0]
         # from here to summary.json a second Ctrl-C or SIGTERM waits (raised once it is on disk)
         hold = interrupt.SignalHold()
     finally:
@@ -459,9 +456,10 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
 
 
 def _run_realtime(fs, loop, gate, sched, duration: float, step_wall: list, line, probe, boundary, writer,
-                  cpu_box) -> float:
+                  cpu_box) -> None:
     """Real time: a tick every gyro period on the monotonic clock, a loop step at each tick the
-    loop says is due (:meth:`CoupledLoop.step_due`). Returns the loop's CPU seconds."""
+    loop says is due (:meth:`CoupledLoop.step_due`). The loop's CPU seconds go to
+    ``cpu_box[0]`` after every step (a run stopped early keeps them)."""
     cpu = 0.0
     if probe is not None:
         probe.start(duration)
@@ -494,17 +492,16 @@ def _run_realtime(fs, loop, gate, sched, duration: float, step_wall: list, line,
             # the truth row (an attitude integration) only when the line redraws, not every step
             line.update(loop.last_output, fs.truth_at(loop.last_output["t"]), step_wall[-1] * 1e6,
                         sched.overruns, duration, t0=t_start)
-    return cpu
 
 
 def _run_lockstep(fs, loop, duration: float, period: float, step_wall: list, line, boundary, writer,
-                  cpu_box) -> float:
+                  cpu_box) -> None:
     """Fast mode: tick every gyro period of simulated time, step when the loop says a step is
     due (:meth:`CoupledLoop.step_due`). The head port's jobs (and
     a streaming port's turns) run at once on their own time line (:meth:`Lockstep.run_job`); a worker
     thread (other head ports) runs between steps at the simulated times its replies (or
-    timeouts) are due. Returns the loop's CPU seconds on this thread (its steps and the
-    few µs of scheduling per step, not the head jobs')."""
+    timeouts) are due. The loop's CPU seconds on this thread (its steps and the
+    few µs of scheduling per step, not the head jobs') go to ``cpu_box[0]`` when it ends."""
     lk = fs.lockstep
     clock = fs.base_clock
     head = loop.head
@@ -553,7 +550,6 @@ def _run_lockstep(fs, loop, duration: float, period: float, step_wall: list, lin
     finally:
         # the loop's CPU: the head jobs ran on this thread too (the emulated head and its client)
         cpu_box[0] = time.thread_time() - cpu0 - lk.job_cpu_s
-    return cpu_box[0]
 
 
 def _bias_seen_by_loop(truth, calib):
