@@ -28,7 +28,7 @@ from numba import njit
 def _fields(n, seed):
     """Tracking frames (qian2015, 1 px, 0.2 mag) with their gyro-predicted attitudes."""
     from gyrostar.attitude import quat_propagate, random_attitudes
-    from gyrostar.starid import eval_starid as ev
+    from gyrostar.hil.evaluation import eval_starid as ev
 
     cfg = ev.TrialConfig(method="extended-grid")
     s = ev.setup(cfg)
@@ -61,7 +61,7 @@ _LIS = {
 
 def _pyramid_vs_peer(case, peer, n):
     """Ours and the peer on the same fields in this process (``eval_starid.run_chunk``)."""
-    from gyrostar.starid import eval_starid as ev
+    from gyrostar.hil.evaluation import eval_starid as ev
 
     cfg = ev.TrialConfig(method="pyramid", pixels=1024, mag_noise=0.0, cat_pos_noise_px=0.0, cat_mag_noise=0.0,
                          peer=peer, **_LIS[case])
@@ -84,8 +84,8 @@ def _pyramid_vs_peer(case, peer, n):
 
 
 def _track_vs_pyramid(n):
+    from gyrostar.mocks.star_lists import score
     from gyrostar.starid.pyramid import Pyramid
-    from gyrostar.starid.synth import score
 
     s, fields = _fields(n, 8)
     ext = s["ident"]

@@ -56,7 +56,7 @@ def run(args) -> int:
     import json
     from datetime import UTC, datetime
 
-    from ..cli.output import _clean, emit
+    from ..cli.output import emit, json_safe
     from ..errors import ConfigError
     from ..paths import runs_dir
     from .montecarlo.campaign import Cluster, TlsFiles, summarize, write_table
@@ -107,13 +107,13 @@ def run(args) -> int:
                duration_s=args.duration, seed=args.seed,
                scheduler=args.scheduler or f"LocalCluster({args.workers} processes)")
     res["results_table"] = str(folder / "results.parquet")
-    (folder / "summary.json").write_text(json.dumps(_clean(res), indent=2))   # first: nothing after can lose it
+    (folder / "summary.json").write_text(json.dumps(json_safe(res), indent=2))   # first: nothing after can lose it
     write_table(rows, folder / "results.parquet")
     res["plots"] = [str(p) for p in write_plots(rows, Path(args.plot) if args.plot else folder)]
-    (folder / "summary.json").write_text(json.dumps(_clean(res), indent=2))
+    (folder / "summary.json").write_text(json.dumps(json_safe(res), indent=2))
     if interrupted:
         res["interrupted"] = True
-        (folder / "summary.json").write_text(json.dumps(_clean(res), indent=2))
+        (folder / "summary.json").write_text(json.dumps(json_safe(res), indent=2))
         import logging
 
         logging.getLogger("gyrostar").error("interrupted after %d of %d runs: their results are in %s",

@@ -586,9 +586,9 @@ def _cfg_dict(obj) -> dict:
 
 
 def _jsonable(obj):
-    from ..cli.output import _clean
+    from ..cli.output import json_safe
 
-    return _clean(obj)
+    return json_safe(obj)
 
 
 def human_summary(r: dict) -> str:

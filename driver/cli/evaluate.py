@@ -3,9 +3,7 @@
 from . import group
 
 # target -> module exposing HELP, configure(parser), run(args)
-TARGETS = {
-    "starid": "gyrostar.starid.eval_starid",
-} | group.registered_targets("eval")   # simulator-based ones (starcount, centroid) by entry point
+TARGETS = group.registered_targets("eval")   # ground code (simulator, evaluations) by entry point
 
 
 def configure(parser) -> None:

@@ -21,14 +21,14 @@ def human_console(args) -> Console:
     return Console(stderr=bool(getattr(args, "json", False)), highlight=False, soft_wrap=True)
 
 
-def _clean(obj: Any) -> Any:
+def json_safe(obj: Any) -> Any:
     """Make numpy scalars/arrays and non-finite floats JSON-safe."""
     if isinstance(obj, dict):
-        return {str(k): _clean(v) for k, v in obj.items()}
+        return {str(k): json_safe(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
-        return [_clean(v) for v in obj]
+        return [json_safe(v) for v in obj]
     if hasattr(obj, "tolist"):
-        return _clean(obj.tolist())
+        return json_safe(obj.tolist())
     if isinstance(obj, float) and not math.isfinite(obj):
         return None
     return obj
@@ -39,7 +39,7 @@ def emit(args, result: dict, human: str | None = None) -> None:
     if human:
         human_console(args).print(human)
     if getattr(args, "json", False):
-        sys.stdout.write(json.dumps(_clean(result), sort_keys=False) + "\n")
+        sys.stdout.write(json.dumps(json_safe(result), sort_keys=False) + "\n")
         sys.stdout.flush()
 
 

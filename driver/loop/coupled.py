@@ -789,7 +789,7 @@ def warmup() -> dict:
     from ..core.motion import substeps_for
     from ..gyro.convert import convert_frames
     from ..gyro.timebase import polygon_centroid
-    from ..protocol.payloads import _unpack10_kernel, windows_tail_decode
+    from ..protocol.payloads import unpack10_kernel, windows_tail_decode
     from ..starid.verify import consistent
     from . import acquire, image_kernels, kernels, update_kernel
     from .warmup import warm
@@ -815,7 +815,7 @@ def warmup() -> dict:
         (quat_conj, (q,)),
         (quat_normalize, (q,)),
         (quat_to_dcm, (q,)),
-        (_unpack10_kernel, (np.frombuffer(bytes(20), np.uint8), 16)),   # full-frame chunks (head worker)
+        (unpack10_kernel, (np.frombuffer(bytes(20), np.uint8), 16)),   # full-frame chunks (head worker)
         (windows_tail_decode, (np.frombuffer(bytes(8), np.uint8), 1, False)),   # every streamed frame
         (substeps_for, (rates, 0.0025, 6666.0, 0.25)),
         (acquire.detect_spots, (img, 6.0, 40, 7)),

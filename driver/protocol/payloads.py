@@ -120,11 +120,11 @@ def unpack10(data: bytes, n: int) -> np.ndarray:
     need = (10 * n + 7) // 8
     if len(data) < need:
         raise PayloadError(f"{n} packed 10-bit pixels need {need} bytes, got {len(data)}")
-    return _unpack10_kernel(np.frombuffer(data, dtype=np.uint8, count=need), n)
+    return unpack10_kernel(np.frombuffer(data, dtype=np.uint8, count=need), n)
 
 
 @njit(cache=True)
-def _unpack10_kernel(b, n):
+def unpack10_kernel(b, n):
     """Bit-stream unpack of ``n`` 10-bit values from uint8 ``b`` (LSB first)."""
     out = np.empty(n, np.uint16)
     _unpack10_from(b, 0, b.size, n, out, 0)

@@ -10,8 +10,9 @@
 * :mod:`.verify` — QUEST residual verification shared by every method.
 * :mod:`.star_check` — per-star χ² check (position, magnitude) after the solution.
 * :mod:`.tracker` — lost-in-space → tracking → lost state machine.
-* :mod:`.synth` — synthetic centroid fields for Monte Carlo; :mod:`.eval_starid` — the
-  ``gyrostar eval starid`` target.
+
+Synthetic star lists live in :mod:`gyrostar.mocks.star_lists`; ``gyrostar eval starid``,
+its figure sweeps and the optional peers in :mod:`gyrostar.hil.evaluation`.
 
 Heavy modules are imported on use: ``from gyrostar.starid.pyramid import Pyramid``.
 """

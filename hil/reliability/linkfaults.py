@@ -142,10 +142,10 @@ def main(argv=None) -> int:
     ap.add_argument("--duration", type=float, default=30.0)
     ap.add_argument("--seed", type=int, default=1)
     a = ap.parse_args(argv)
-    from ...cli.output import _clean
+    from ...cli.output import json_safe
 
     s = run(a.duration, a.seed)
-    json.dump(_clean(s), sys.stdout, indent=1)
+    json.dump(json_safe(s), sys.stdout, indent=1)
     print()
     return 0 if s["pass"] else 1
 

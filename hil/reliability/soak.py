@@ -131,9 +131,9 @@ def main(argv=None) -> int:
     ap.add_argument("--max-rss-growth-mb", type=float, default=20.0)
     ap.add_argument("--out", default="", help="also write the JSON here")
     a = ap.parse_args(argv)
-    from ...cli.output import _clean
+    from ...cli.output import json_safe
 
-    s = _clean(run(a.duration, a.seed, a.fault_every, a.max_rss_growth_mb))
+    s = json_safe(run(a.duration, a.seed, a.fault_every, a.max_rss_growth_mb))
     text = json.dumps(s, indent=1)
     print(text)
     if a.out:

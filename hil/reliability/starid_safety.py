@@ -2,7 +2,7 @@
 
 ``python -m gyrostar.hil.reliability.starid_safety [--trials 10000] [--seed 1]``. Each trial
 draws a random attitude, 0–5 false stars (uniform over the sensor, as bright as real ones)
-and noisy magnitudes and centroids (:class:`gyrostar.starid.synth.Sky`), and runs the image
+and noisy magnitudes and centroids (:class:`gyrostar.mocks.star_lists.Sky`), and runs the image
 through :class:`gyrostar.starid.tracker.StarTracker` — Pyramid lost-in-space and the
 extended-grid tracking identifier, each verified by QUEST residuals: even trials start
 LOST (Pyramid), odd trials are TRACKING from the previous image 0.1–1 s earlier with a
@@ -47,7 +47,7 @@ def _with_checks(sp: dict, se: dict, cfg) -> tuple:
 
 
 def _configs(mag_noise: float, pos_noise: float):
-    from ...starid.eval_starid import TrialConfig
+    from ..evaluation.eval_starid import TrialConfig
 
     base = dict(preset="qian2015", catalog="hip2", mag_limit=7.5, pos_noise_px=pos_noise, mag_noise=mag_noise)
     return TrialConfig(method="pyramid", **base), TrialConfig(method="extended-grid", **base)
@@ -63,9 +63,9 @@ def boresight_and_roll_arcsec(q_est, q_true) -> tuple[float, float]:
 
 def run(trials: int = 10000, seed: int = 1, mag_noise: float = 0.3, pos_noise: float = 0.5) -> dict:
     from ...attitude import quat_propagate, random_attitudes
-    from ...starid.eval_starid import setup
-    from ...starid.synth import score
+    from ...mocks.star_lists import score
     from ...starid.tracker import Mode, StarTracker
+    from ..evaluation.eval_starid import setup
 
     cfg_p, cfg_e = _configs(mag_noise, pos_noise)
     sp, se = setup(cfg_p), setup(cfg_e)

@@ -7,11 +7,11 @@ import math
 import numpy as np
 import pytest
 from gyrostar.attitude import quat_mult, random_attitudes, rotvec_to_quat
-from gyrostar.starid import eval_starid as E
+from gyrostar.hil.evaluation import eval_starid as E
+from gyrostar.mocks.star_lists import score
 from gyrostar.starid.absent import BLEND_PX, EDGE_PX, MARGIN_MAG, absent_stars
 from gyrostar.starid.faint import FaintStars, drop_near_faint
 from gyrostar.starid.pyramid import Pyramid
-from gyrostar.starid.synth import score
 
 
 @pytest.fixture(scope="module")

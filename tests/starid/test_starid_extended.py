@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 from gyrostar.attitude import quat_propagate, random_attitudes
-from gyrostar.starid import eval_starid as ev
-from gyrostar.starid.synth import score
+from gyrostar.hil.evaluation import eval_starid as ev
+from gyrostar.mocks.star_lists import score
 
 
 def _run(method, n, **kw):

@@ -6,9 +6,9 @@ import numpy as np
 from gyrostar.attitude import quat_to_dcm, random_attitudes
 from gyrostar.camera import camera_preset
 from gyrostar.catalog import load_catalog
+from gyrostar.mocks.star_lists import Sky, score
 from gyrostar.starid.grid import GridIdentifier, GridParams, grid_pattern, load_grid_database
 from gyrostar.starid.index import load_index
-from gyrostar.starid.synth import Sky, score
 
 
 def _unit(x_deg, y_deg):

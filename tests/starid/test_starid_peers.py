@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from gyrostar.attitude import quat_from_boresight, quat_mult, quat_to_dcm, random_attitudes, rotvec_to_quat
 from gyrostar.catalog import load_catalog
-from gyrostar.starid.peers import attitude_correct, load_peer
-from gyrostar.starid.synth import Sky, camera_for_fov
+from gyrostar.hil.evaluation.starid_peers import attitude_correct, load_peer
+from gyrostar.mocks.star_lists import Sky, camera_for_fov
 
 
 def test_attitude_correct_against_hand_made_rotations():

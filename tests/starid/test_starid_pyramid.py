@@ -5,9 +5,9 @@ import pytest
 from gyrostar.attitude import quat_error_angles, random_attitudes
 from gyrostar.catalog import load_catalog
 from gyrostar.errors import ConfigError
+from gyrostar.mocks.star_lists import Sky, camera_for_fov, score
 from gyrostar.starid.index import load_index
 from gyrostar.starid.pyramid import Pyramid
-from gyrostar.starid.synth import Sky, camera_for_fov, score
 
 
 @pytest.fixture(scope="module")

@@ -8,10 +8,10 @@ from gyrostar.attitude import quat_propagate, random_attitudes
 from gyrostar.camera import camera_preset
 from gyrostar.catalog import load_catalog
 from gyrostar.errors import ConfigError
+from gyrostar.mocks.star_lists import Sky, score
 from gyrostar.starid.extended import ExtendedIdentifier
 from gyrostar.starid.index import load_index
 from gyrostar.starid.pyramid import Pyramid
-from gyrostar.starid.synth import Sky, score
 from gyrostar.starid.tracker import Mode, StarTracker
 
 

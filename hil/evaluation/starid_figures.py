@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ConfigError
+from ...errors import ConfigError
 
 PN_POINTS = (0.0, 0.25, 0.5, 0.75, 1.0, 1.5, 2.0)
 MN_POINTS = (0.0, 0.1, 0.2, 0.3, 0.4, 0.5)
@@ -38,7 +38,7 @@ def _series(runner, base, trials, seed, field, xs, key, advance, **over):
 
 def run_sweeps(args, base, runner) -> dict:
     """Run the chosen sweep(s); returns ``{"figures": {...}, "plots": [...]}``."""
-    from ..cli.output import progress
+    from ...cli.output import progress
 
     figs = ("fig10", "fig11", "fig12", "fig13", "fig14", "fig15", "fig16") if args.sweep == "all" else (args.sweep,)
     base = dataclasses.replace(base, method="extended-grid", false_stars=0)
@@ -93,9 +93,9 @@ def run_sweeps(args, base, runner) -> dict:
                                            runner, dataclasses.replace(base, pos_noise_px=0.3), n, seed,
                                            "update_period_s", T_POINTS, "success_rate", adv)}}
             elif fig == "fig16":
-                from .eval_starid import DPH, _camera
+                from .eval_starid import DPH, trial_camera
 
-                f_px = _camera(base).focal_length_px
+                f_px = trial_camera(base).focal_length_px
                 sim = _series(runner, dataclasses.replace(base, pos_noise_px=0.3), n, seed, "update_period_s",
                               T_POINTS, "gyro_error_px_rms", adv)
                 eq6 = [math.sqrt(2.0 * (base.bias_dph ** 2 + base.random_dph ** 2)) * DPH * t * f_px

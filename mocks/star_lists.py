@@ -21,7 +21,7 @@ import numpy as np
 from ..attitude import quat_to_dcm
 from ..camera import project_many
 from ..errors import ConfigError
-from .index import cone_query, n_brighter, select_navigation_stars, voxel_grid
+from ..starid.index import cone_query, n_brighter, select_navigation_stars, voxel_grid
 
 
 @dataclasses.dataclass(frozen=True)

@@ -2,7 +2,7 @@
 
 Each trial draws a random attitude (uniform on SO(3)) and, for the tracking methods, a
 random body rate (uniform direction, magnitude ≤ ``--rate-dps``). Centroids come from
-:class:`gyrostar.starid.synth.Sky` (no rendering): catalog stars projected through the
+:class:`gyrostar.mocks.star_lists.Sky` (no rendering): catalog stars projected through the
 camera, Gaussian position noise (px per axis) and magnitude noise, the sensor limit,
 blending of spots closer than 3 px, ``--false-stars`` spurious spots. Paper 001's catalog
 noise (0.1 mag, 0.1 px) enters as extra noise on the same difference: the effective
@@ -24,7 +24,7 @@ oriented on (for the extended grid: one of its ``--orientations``).
 
 Pyramid is given the measured magnitudes with the centroids (its per-star check tests
 them; a peer gets them as brightness). ``--peer`` (Pyramid only): each worker also solves its fields with a peer of
-:mod:`gyrostar.starid.peers` (tetra3rs, or cedar-solve), after ours, on the same centroids
+:mod:`gyrostar.hil.evaluation.starid_peers` (tetra3rs, or cedar-solve), after ours, on the same centroids
 (with their brightness) and a database built for the same field; reported with the ratios
 of its median and p99 time to ours, wall and CPU (the process's CPU time for the peer:
 under load its wall time waits on thread wake-ups).
@@ -41,8 +41,8 @@ import time
 
 import numpy as np
 
-from ..errors import ConfigError, NotAvailableError
-from .peers import PEERS
+from ...errors import ConfigError, NotAvailableError
+from .starid_peers import PEERS
 
 HELP = "star identification Monte Carlo (paper 001 Figs 10–16): pyramid, grid, extended grid/triangle"
 METHODS = ("pyramid", "grid", "extended-grid", "extended-triangle")
@@ -86,9 +86,9 @@ class TrialConfig:
 
 
 def configure(parser) -> None:
-    from ..cli.argtypes import positive_float
-    from ..cli.argtypes import seed as seed_type
-    from ..cli.main import add_json
+    from ...cli.argtypes import positive_float
+    from ...cli.argtypes import seed as seed_type
+    from ...cli.main import add_json
 
     d = TrialConfig()
     parser.add_argument("--method", choices=METHODS, default=d.method,
@@ -171,9 +171,10 @@ def validate(cfg: TrialConfig) -> None:
 _SETUP: dict = {}
 
 
-def _camera(cfg: TrialConfig):
-    from ..camera import camera_preset
-    from .synth import camera_for_fov
+def trial_camera(cfg: TrialConfig):
+    """The camera of a trial configuration: a pinhole for ``--fov-deg``, else the preset."""
+    from ...camera import camera_preset
+    from ...mocks.star_lists import camera_for_fov
 
     return camera_for_fov(cfg.fov_deg, cfg.pixels) if cfg.fov_deg else camera_preset(cfg.preset)
 
@@ -189,15 +190,15 @@ def setup(cfg: TrialConfig) -> dict:
                                update_period_s=1.0, false_stars=0), sigma, sigma_mag)
     if key in _SETUP:
         return _SETUP[key]
-    from ..catalog import deepest_limit, load_catalog
-    from .extended import ExtendedIdentifier
-    from .faint import faint_stars
-    from .grid import GridIdentifier, GridParams, load_grid_database
-    from .index import load_index
-    from .pyramid import Pyramid
-    from .synth import Sky
+    from ...catalog import deepest_limit, load_catalog
+    from ...mocks.star_lists import Sky
+    from ...starid.extended import ExtendedIdentifier
+    from ...starid.faint import faint_stars
+    from ...starid.grid import GridIdentifier, GridParams, load_grid_database
+    from ...starid.index import load_index
+    from ...starid.pyramid import Pyramid
 
-    cam = _camera(cfg)
+    cam = trial_camera(cfg)
     diag = 2.0 * math.degrees(math.atan(0.5 * math.hypot(cam.width_px, cam.height_px) / cam.focal_length_px))
     deep = load_catalog(cfg.catalog, deepest_limit(cfg.catalog, cfg.mag_limit + 1.0))
     sky = Sky(deep)
@@ -213,7 +214,7 @@ def setup(cfg: TrialConfig) -> dict:
         out["ident"] = Pyramid(index, cam, sigma_px=sigma, fast_index=fast, sigma_mag=sigma_mag,
                                faint=faint_stars(deep, index))
         if cfg.peer:
-            from .peers import load_peer
+            from .starid_peers import load_peer
 
             out["peer"] = load_peer(cfg.peer, cam, cfg.mag_limit, cfg.catalog)
     elif cfg.method == "grid":
@@ -236,7 +237,7 @@ def setup(cfg: TrialConfig) -> dict:
 
 def _warm_up(cfg: TrialConfig, s: dict) -> None:
     """One untimed identification, so that loading compiled code is not in the timings."""
-    from ..attitude import quat_from_boresight
+    from ...attitude import quat_from_boresight
 
     q = quat_from_boresight(1.0, 0.3, 0.2)
     frame = s["sky"].observe(s["camera"], q, cfg.mag_limit, 0.0, 0.0, 0, np.random.default_rng(0))
@@ -247,7 +248,7 @@ def _warm_up(cfg: TrialConfig, s: dict) -> None:
 
 
 def _gyro_prediction(q0_est, omega, cfg, rng):
-    from ..attitude import quat_propagate
+    from ...attitude import quat_propagate
 
     bias = cfg.bias_dph * DPH * rng.choice([-1.0, 1.0], 3)
     eta = rng.normal(0.0, cfg.random_dph * DPH, 3)
@@ -256,9 +257,9 @@ def _gyro_prediction(q0_est, omega, cfg, rng):
 
 def run_chunk(cfg: TrialConfig, seed: int, n: int) -> dict:
     """Run ``n`` trials; per-trial arrays (seeded, reproducible)."""
-    from ..attitude import quat_propagate, quat_to_dcm, random_attitudes
-    from .synth import score
-    from .verify import solve
+    from ...attitude import quat_propagate, quat_to_dcm, random_attitudes
+    from ...mocks.star_lists import score
+    from ...starid.verify import solve
 
     s = setup(cfg)
     cam, sky, ident, index, row_of = s["camera"], s["sky"], s["ident"], s["index"], s["row_of_id"]
@@ -310,7 +311,7 @@ def run_chunk(cfg: TrialConfig, seed: int, n: int) -> dict:
         not isinstance(s.get("peer"), str) else []
     # the peer solves the same fields after ours, so neither runs on the other's cold caches
     if peer_frames:
-        from .peers import score_peer
+        from .starid_peers import score_peer
 
         peer = s["peer"]
         peer.solve(peer_frames[0].uv, peer_frames[0].mag, cam)  # untimed: loads the peer's code and data
@@ -337,7 +338,7 @@ def _neighbour_stats(cfg, ident, frame, index, row_of) -> tuple[int, int]:
     ids = index.ids
     if cfg.method == "grid":
         b = ident.camera.unproject(frame.uv) if frame.uv.size else np.empty((0, 3))
-        from .grid import grid_lis_core
+        from ...starid.grid import grid_lis_core
 
         p = ident.db.params
         _, nb_obs = grid_lis_core(np.ascontiguousarray(b), ident.max_ref, p.br, p.pr, p.g, p.cell, p.xi,
@@ -428,7 +429,7 @@ class Runner:
             try:
                 self.client = Client(scheduler, timeout=connect_timeout_s)
             except (OSError, TimeoutError, ValueError) as exc:
-                from ..errors import DeviceError
+                from ...errors import DeviceError
 
                 raise DeviceError(f"--scheduler {scheduler}: no Dask scheduler answered within "
                                   f"{connect_timeout_s:g} s ({type(exc).__name__})") from exc
@@ -466,7 +467,7 @@ class Runner:
 
 
 def run(args) -> int:
-    from ..cli.output import emit, progress
+    from ...cli.output import emit, progress
 
     cfg = config_from_args(args)
     if args.trials < 1:
@@ -474,7 +475,7 @@ def run(args) -> int:
     runner = Runner(args.scheduler, args.workers, args.scheduler_timeout)
     try:
         if args.sweep:
-            from .figures import run_sweeps
+            from .starid_figures import run_sweeps
 
             result = run_sweeps(args, cfg, runner)
             emit(args, result, _sweep_text(result))

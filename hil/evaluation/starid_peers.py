@@ -24,7 +24,7 @@ import time
 
 import numpy as np
 
-from ..paths import cache_dir
+from ...paths import cache_dir
 
 PEERS = ("tetra3rs", "cedar-solve")
 WRONG_PX = 10.0  # an attitude is right when no star of the field moves more than this
@@ -34,7 +34,7 @@ def attitude_correct(r_est: np.ndarray, q_true: np.ndarray, camera) -> bool:
     """Whether rotation ``r_est`` (ICRS → camera) puts every point of the field within
     ``WRONG_PX`` pixels of where the true attitude ``q_true`` (ICRS → body) puts it:
     boresight error × focal length and roll error × half diagonal, each ≤ ``WRONG_PX``."""
-    from ..attitude import quat_to_dcm
+    from ...attitude import quat_to_dcm
 
     d = np.asarray(r_est, dtype=np.float64) @ quat_to_dcm(np.asarray(q_true, dtype=np.float64)).T
     # small-angle error vector of d (rotation from the true camera frame to the estimated one)
@@ -151,7 +151,7 @@ def load_peer(name: str, camera, mag_limit: float, catalog: str = "hip2"):
 def score_peer(peer, solved: bool, ids, r_est, frame, camera) -> tuple[bool, bool]:
     """``(solved, correct)`` of one peer answer against the simulator's truth: by ids (≥ 2
     right, none wrong) when the peer names HIP stars, else by attitude."""
-    from .synth import score
+    from ...mocks.star_lists import score
 
     if not solved:
         return False, False
