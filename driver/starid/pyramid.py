@@ -71,7 +71,7 @@ from .index import StarIndex, cone_query, voxel_span
 from .kvector import query
 from .result import StarIdResult, to_body_vectors
 from .star_check import StarCheck, check_stars
-from .verify import solve, verify_matches
+from .verify import drop_ambiguous, drop_shared, solve, verify_matches
 
 ST_OK, ST_TOO_FEW, ST_NO_MATCH, ST_REJECTED, ST_STAR_CHECK, ST_SPARSE, ST_BAD, ST_ABSENT = range(8)
 STATUS_TEXT = {ST_OK: "ok", ST_TOO_FEW: "fewer than 3 stars", ST_NO_MATCH: "no unique pyramid",
@@ -471,6 +471,12 @@ def _search(b, vec, vmag, is_nav, pt, pa, pb, kv, km, kq, vstart, vstars, vvec, 
                         status = ST_REJECTED
                         match[:] = -1
                         continue
+                    # unambiguous both ways again at the refined attitude (the labels were given at
+                    # the pyramid's own): a spot with two indexed stars in reach, or a star with two
+                    # spots in reach, keeps no label — a close pair's members swap under the noise
+                    if drop_ambiguous(b, q, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, label_tol, out) \
+                            + drop_shared(b, q, vec, label_tol, out) > 0:
+                        q, out, nok, _ = verify_matches(b, vec, out, label_tol)
                     # every further label: a random spot near a star of the right magnitude
                     for s in range(n):
                         if out[s] >= 0 and s != i and s != j and s != k and s != br:

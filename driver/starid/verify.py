@@ -147,6 +147,36 @@ def drop_ambiguous(b, q, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, to
 
 
 @njit(cache=True)
+def drop_shared(b, q, vec, tol, match):
+    """Unmatch (in place) every star whose catalog star has a second observed star within
+    ``tol`` of it under attitude ``q``: either spot could be the star's. Returns the number
+    of stars dropped."""
+    a = quat_to_dcm(q)
+    n = b.shape[0]
+    cos_tol = np.cos(tol)
+    icrs = np.empty((n, 3))
+    for i in range(n):
+        for j in range(3):
+            icrs[i, j] = a[0, j] * b[i, 0] + a[1, j] * b[i, 1] + a[2, j] * b[i, 2]
+    drop = np.zeros(n, dtype=np.bool_)
+    for i in range(n):
+        s = match[i]
+        if s < 0:
+            continue
+        within = 0
+        for j in range(n):
+            if icrs[j, 0] * vec[s, 0] + icrs[j, 1] * vec[s, 1] + icrs[j, 2] * vec[s, 2] >= cos_tol:
+                within += 1
+        drop[i] = within >= 2
+    dropped = 0
+    for i in range(n):
+        if drop[i]:
+            match[i] = -1
+            dropped += 1
+    return dropped
+
+
+@njit(cache=True)
 def loo_reject(b, ref, match, tol):
     """Leave-one-out test (in place): each matched star's residual under the attitude solved
     from the others; the worst, if beyond ``tol``, is unmatched. Returns True if one was.

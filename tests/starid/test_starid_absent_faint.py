@@ -1,5 +1,6 @@
 """Pyramid's checks after the attitude: surely-seen stars must have spots (absent-star
-check), and a label next to a catalog star the index leaves out is dropped (faint stars).
+check), a label next to a catalog star the index leaves out is dropped (faint stars), and
+a label must be unambiguous both ways at the refined attitude (close pairs).
 Truth: the synthetic fields' own star ids (real Hipparcos catalog, the paper-001 camera)."""
 
 import math
@@ -12,6 +13,7 @@ from gyrostar.mocks.star_lists import score
 from gyrostar.starid.absent import BLEND_PX, EDGE_PX, MARGIN_MAG, absent_stars
 from gyrostar.starid.faint import FaintStars, drop_near_faint
 from gyrostar.starid.pyramid import Pyramid
+from gyrostar.starid.verify import drop_shared
 
 
 @pytest.fixture(scope="module")
@@ -104,6 +106,40 @@ def test_a_label_on_an_index_star_missed_next_to_a_fainter_one_seen_is_dropped(q
                    sigma_mag=pyr.sigma_mag)
     r = bare.identify(f.uv, mag=f.mag)
     assert score(r.ids, f.truth, f.alt)[1] == 1 and 97016 in r.ids.tolist()
+
+
+def test_a_close_pair_seen_as_two_spots_keeps_no_label(qian):
+    """qian2015, `--trials 2000 --seed 7`, chunk 4 field 199: HIP 92750 (V 6.88) and
+    HIP 92760 (V 7.32), both in the index, 88″ apart (3.1 px), both detected. The pyramid's
+    confirming star named 92760's spot 92750 — at the refined attitude that spot has both
+    stars within the 106″ label tolerance, and star 92750 has both spots: either label
+    could be wrong, so neither is given."""
+    cfg, s = qian
+    f = _chunk_frames(cfg, s, 7, 2000, 4)[199]
+    pyr = s["ident"]
+    ix = pyr.index
+    row = {int(i): k for k, i in enumerate(ix.ids)}
+    sep = math.acos(min(1.0, float(ix.vectors[row[92750]] @ ix.vectors[row[92760]])))
+    assert sep < pyr.label_tol and {92750, 92760} <= set(f.truth.tolist())
+    r = pyr.identify(f.uv, mag=f.mag)
+    c, w = score(r.ids, f.truth, f.alt)
+    assert r.ok and w == 0 and c >= 10
+    assert 92750 not in r.ids.tolist() and 92760 not in r.ids.tolist()
+
+
+def test_drop_shared_unlabels_a_star_with_two_spots_in_reach():
+    q = np.array([0.0, 0.0, 0.0, 1.0])                 # body = ICRS
+    vec = np.array([[0.0, 0.0, 1.0], [0.01, 0.0, 1.0], [0.0, 0.02, 1.0]])
+    vec /= np.linalg.norm(vec, axis=1)[:, None]
+    off = math.radians(60 / 3600)
+    b = np.array([[0.0, 0.0, 1.0], [0.01, 0.0, 1.0], [0.01, off, 1.0], [0.0, 0.02, 1.0]])
+    b /= np.linalg.norm(b, axis=1)[:, None]
+    tol = math.radians(100 / 3600)
+    match = np.array([0, 1, -1, 2], np.int64)           # spot 2 sits 60″ from star 1
+    assert drop_shared(b, q, vec, tol, match) == 1
+    assert match.tolist() == [0, -1, -1, 2]
+    match = np.array([0, 1, -1, 2], np.int64)
+    assert drop_shared(b, q, vec, math.radians(50 / 3600), match) == 0 and match.tolist() == [0, 1, -1, 2]
 
 
 def test_a_wrong_attitude_that_leaves_bright_stars_without_spots_is_rejected(qian):
