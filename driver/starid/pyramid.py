@@ -71,7 +71,7 @@ from .index import StarIndex, cone_query, voxel_span
 from .kvector import query
 from .result import StarIdResult, to_body_vectors
 from .star_check import StarCheck, check_stars
-from .verify import drop_ambiguous, drop_shared, solve, verify_matches
+from .verify import body_to_icrs, drop_ambiguous, drop_shared, solve, verify_matches
 
 ST_OK, ST_TOO_FEW, ST_NO_MATCH, ST_REJECTED, ST_STAR_CHECK, ST_SPARSE, ST_BAD, ST_ABSENT = range(8)
 STATUS_TEXT = {ST_OK: "ok", ST_TOO_FEW: "fewer than 3 stars", ST_NO_MATCH: "no unique pyramid",
@@ -571,10 +571,7 @@ def label_rest(b, q, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, tol, m
     m = near.shape[0]
     n = b.shape[0]
     cos_tol = np.cos(tol)
-    obs_icrs = np.empty((n, 3))
-    for i in range(n):
-        for j in range(3):
-            obs_icrs[i, j] = a[0, j] * b[i, 0] + a[1, j] * b[i, 1] + a[2, j] * b[i, 2]
+    obs_icrs = body_to_icrs(a, b)
     count_obs = np.zeros(m, dtype=np.int64)
     used = np.zeros(m, dtype=np.bool_)
     for t in range(m):

@@ -147,17 +147,24 @@ def drop_ambiguous(b, q, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, to
 
 
 @njit(cache=True)
+def body_to_icrs(a, b):
+    """Body unit vectors ``b`` (n, 3) in ICRS under the attitude matrix ``a`` (ICRS → body): ``b @ a``."""
+    n = b.shape[0]
+    out = np.empty((n, 3))
+    for i in range(n):
+        for j in range(3):
+            out[i, j] = a[0, j] * b[i, 0] + a[1, j] * b[i, 1] + a[2, j] * b[i, 2]
+    return out
+
+
+@njit(cache=True)
 def drop_shared(b, q, vec, tol, match):
     """Unmatch (in place) every star whose catalog star has a second observed star within
     ``tol`` of it under attitude ``q``: either spot could be the star's. Returns the number
     of stars dropped."""
-    a = quat_to_dcm(q)
     n = b.shape[0]
     cos_tol = np.cos(tol)
-    icrs = np.empty((n, 3))
-    for i in range(n):
-        for j in range(3):
-            icrs[i, j] = a[0, j] * b[i, 0] + a[1, j] * b[i, 1] + a[2, j] * b[i, 2]
+    icrs = body_to_icrs(quat_to_dcm(q), b)
     drop = np.zeros(n, dtype=np.bool_)
     for i in range(n):
         s = match[i]
