@@ -80,6 +80,7 @@ STATUS_TEXT = {ST_OK: "ok", ST_TOO_FEW: "fewer than 3 stars", ST_NO_MATCH: "no u
                ST_BAD: "centroids must be finite pixel coordinates",
                ST_ABSENT: "the attitude puts surely-seen stars where no spot is"}
 _MAX_CAND = 256
+RELABEL_WIDE = 3.0   # × label_tol, relabel_wide's first pass: one wrong pyramid member bends the attitude ~100″s
 
 
 @njit(cache=True)
@@ -495,6 +496,10 @@ def _search(b, vec, vmag, is_nav, pt, pa, pb, kv, km, kq, vstart, vstars, vvec, 
                         if 2 * nok >= n:
                             last_q = q
                         continue
+                    if 4 * nok < 3 * n:
+                        # a quarter of the spots or more unnamed: look again from scratch around this attitude
+                        q, out = relabel_wide(b, q, out, nok, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius,
+                                              label_tol, smag, mwin)
                     return out, q, pf, ST_OK, tried
         prev = nb
     return match, q, np.inf, status, tried
@@ -618,6 +623,39 @@ def label_rest(b, q, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, tol, m
             match[i] = -1
             if match[best] < 0 and bd >= cos_tol:
                 match[best] = s
+
+
+@njit(cache=True)
+def relabel_wide(b, q, match, nok, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, label_tol, smag, mwin):
+    """The accepted attitude's labels made again from scratch (in the neighbourhood the bound
+    accepted): unambiguous labels within ``RELABEL_WIDE`` × ``label_tol`` of it, the attitude
+    they give, then labels within ``label_tol`` of that one (verified, unambiguous both ways).
+    They replace ``match`` when they name more stars. A pyramid with one wrong member — a
+    neighbour of the right star, when the spot's magnitude was off and shut the right star
+    out — fits its tolerances but bends the attitude by a few hundred arcseconds, so most
+    spots go unnamed and one may be misnamed; the wider first pass finds the rest of the
+    field and the attitude they all agree on. Returns ``(q, match)``."""
+    n = b.shape[0]
+    wide = -np.ones(n, dtype=np.int64)
+    label_rest(b, q, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, RELABEL_WIDE * label_tol, wide, smag, mwin)
+    n_wide = 0
+    for i in range(n):
+        if wide[i] >= 0:
+            n_wide += 1
+    if n_wide <= nok:
+        return q, match
+    q1, wide, n1, _ = verify_matches(b, vec, wide, RELABEL_WIDE * label_tol)
+    if n1 <= nok:
+        return q, match
+    fresh = -np.ones(n, dtype=np.int64)
+    label_rest(b, q1, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, label_tol, fresh, smag, mwin)
+    q2, fresh, n2, _ = verify_matches(b, vec, fresh, label_tol)
+    if n2 > nok and drop_ambiguous(b, q2, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, label_tol, fresh) \
+            + drop_shared(b, q2, vec, label_tol, fresh) > 0:
+        q2, fresh, n2, _ = verify_matches(b, vec, fresh, label_tol)
+    if n2 > nok:
+        return q2, fresh
+    return q, match
 
 
 @njit(cache=True)
