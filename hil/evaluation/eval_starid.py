@@ -75,6 +75,7 @@ class TrialConfig:
     orientations: int = 3
     xi: int = 4
     peer: str = ""
+    p_false_max: float = 1e-6
 
     @property
     def total_pos_noise(self) -> float:
@@ -127,6 +128,9 @@ def configure(parser) -> None:
                         help="extended grid: catalog pattern orientations per candidate (1 = plain rule; "
                              "default %(default)s)")
     parser.add_argument("--xi", type=int, default=d.xi, help="grid: minimum shared cells ξ (default %(default)s)")
+    parser.add_argument("--p-false-max", type=float, default=d.p_false_max, metavar="P",
+                        help="pyramid: largest expected false-match count it accepts, in (0, 1) (default "
+                             "%(default)g; larger trades safety for sparse fields, see docs/RELIABILITY.md)")
     parser.add_argument("--peer", nargs="?", const="tetra3rs", default="", choices=PEERS,
                         help="pyramid: also solve every field with this peer (tetra3rs when given alone, or "
                              "cedar-solve) in the same worker, after ours (default: none)")
@@ -149,7 +153,8 @@ def config_from_args(args) -> TrialConfig:
     cfg = TrialConfig(args.method, args.preset, args.fov_deg, args.pixels, args.catalog, args.mag_limit,
                       args.per_field, args.position_noise_px, args.mag_noise, args.catalog_position_noise_px,
                       args.catalog_mag_noise, args.false_stars, args.update_period_s, args.rate_dps,
-                      args.gyro_bias_dph, args.gyro_random_dph, args.orientations, args.xi, args.peer)
+                      args.gyro_bias_dph, args.gyro_random_dph, args.orientations, args.xi, args.peer,
+                      args.p_false_max)
     validate(cfg)
     return cfg
 
@@ -163,6 +168,8 @@ def validate(cfg: TrialConfig) -> None:
             raise ConfigError(f"{name} must be a finite number ≥ 0, got {getattr(cfg, name)!r}")
     if cfg.false_stars < 0 or cfg.update_period_s <= 0 or cfg.orientations < 1 or cfg.xi < 1:
         raise ConfigError("false stars ≥ 0, update period > 0, orientations ≥ 1 and xi ≥ 1 are required")
+    if not 0.0 < cfg.p_false_max < 1.0:
+        raise ConfigError(f"--p-false-max must be in (0, 1), got {cfg.p_false_max!r}")
     if cfg.fov_deg and not (0 < cfg.fov_deg < 60 and cfg.pixels > 1):
         raise ConfigError(f"--fov-deg must be in (0, 60) with --pixels > 1, got {cfg.fov_deg}, {cfg.pixels}")
 
@@ -212,7 +219,7 @@ def setup(cfg: TrialConfig) -> dict:
         # labels next to a star the index leaves out (fainter than its limit, or the fainter
         # of a close double) are dropped: the sensor sees such stars now and then
         out["ident"] = Pyramid(index, cam, sigma_px=sigma, fast_index=fast, sigma_mag=sigma_mag,
-                               faint=faint_stars(deep, index))
+                               faint=faint_stars(deep, index), p_false_max=cfg.p_false_max)
         if cfg.peer:
             from .starid_peers import load_peer
 

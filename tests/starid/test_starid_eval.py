@@ -30,6 +30,16 @@ def test_sweep_fig16_plot(tmp_path, capsys):
 def test_bad_arguments_exit_2():
     assert main(["eval", "-q", "starid", "--position-noise-px", "-1", "--trials", "5"]) == 2
     assert main(["eval", "-q", "starid", "--trials", "0"]) == 2
+    for bad in ("0", "1", "nan", "-1e-3"):
+        assert main(["eval", "-q", "starid", "--method", "pyramid", f"--p-false-max={bad}", "--trials", "5"]) == 2
+
+
+def test_p_false_max_reaches_pyramid():
+    from gyrostar.hil.evaluation import eval_starid as E
+
+    cfg = E.TrialConfig(method="pyramid", preset="qian2015", p_false_max=1e-4)
+    assert E.setup(cfg)["ident"].p_false_max == 1e-4
+    assert E.setup(E.TrialConfig(method="pyramid", preset="qian2015"))["ident"].p_false_max == 1e-6
 
 
 def test_peer_tetra3rs_same_fields(capsys):
