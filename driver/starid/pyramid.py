@@ -628,9 +628,9 @@ def label_rest(b, q, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, tol, m
 @njit(cache=True)
 def relabel_wide(b, q, match, nok, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, label_tol, smag, mwin):
     """The accepted attitude's labels made again from scratch (in the neighbourhood the bound
-    accepted): unambiguous labels within ``RELABEL_WIDE`` × ``label_tol`` of it, the attitude
-    they give, then labels within ``label_tol`` of that one (verified, unambiguous both ways).
-    They replace ``match`` when they name more stars. A pyramid with one wrong member — a
+    accepted): unambiguous labels within ``RELABEL_WIDE`` × ``label_tol`` of it (four at
+    least), the attitude they give, then labels within ``label_tol`` of that one (verified,
+    unambiguous both ways). They replace ``match`` when they name more stars. A pyramid with one wrong member — a
     neighbour of the right star, when the spot's magnitude was off and shut the right star
     out — fits its tolerances but bends the attitude by a few hundred arcseconds, so most
     spots go unnamed and one may be misnamed; the wider first pass finds the rest of the
@@ -642,10 +642,10 @@ def relabel_wide(b, q, match, nok, vec, vmag, vstart, vstars, vvec, vh, vg, fov_
     for i in range(n):
         if wide[i] >= 0:
             n_wide += 1
-    if n_wide <= nok:
+    if n_wide < 4:
         return q, match
     q1, wide, n1, _ = verify_matches(b, vec, wide, RELABEL_WIDE * label_tol)
-    if n1 <= nok:
+    if n1 < 4:
         return q, match
     fresh = -np.ones(n, dtype=np.int64)
     label_rest(b, q1, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, label_tol, fresh, smag, mwin)

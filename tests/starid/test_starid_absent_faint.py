@@ -152,6 +152,20 @@ def test_a_pyramid_with_one_wrong_member_is_relabelled_from_scratch(qian):
     assert r.ok and w == 0 and c >= 8 and r.ids.tolist()[6] == 39362
 
 
+def test_a_bent_pyramid_is_relabelled_even_when_its_wide_pass_names_no_more(qian):
+    """qian2015, `--trials 10000 --seed 22`, chunk 2 field 220: spot 2 (HIP 91286, V 6.59,
+    its centroid 4–5 px off) entered the pyramid as HIP 91297 (V 6.90, 263″ away, the star of
+    spot 5). The bent attitude named 10 of 16 spots; the wide pass around it names 10 as well
+    (the pair's two spots are ambiguous there), but the attitude those 10 give names 13, all
+    right (8 after the per-star check), and leaves spot 2 unnamed."""
+    cfg, s = qian
+    f = _chunk_frames(cfg, s, 22, 10000, 2)[220]
+    assert f.truth.tolist()[2] == 91286 and f.truth.tolist()[5] == 91297
+    r = s["ident"].identify(f.uv, mag=f.mag)
+    c, w = score(r.ids, f.truth, f.alt)
+    assert r.ok and w == 0 and c >= 8 and r.ids.tolist()[2] == -1
+
+
 def test_drop_shared_unlabels_a_star_with_two_spots_in_reach():
     q = np.array([0.0, 0.0, 0.0, 1.0])                 # body = ICRS
     vec = np.array([[0.0, 0.0, 1.0], [0.01, 0.0, 1.0], [0.0, 0.02, 1.0]])
