@@ -401,7 +401,7 @@ def iwcog_variance(spans, values, bg, u, v, offsets, sigma_w, sigma_bg, e_per_dn
 
 
 @njit(cache=True, inline="always")
-def _erf_pdf(z, inv_s, k_pdf):
+def erf_pdf(z, inv_s, k_pdf):
     """(erf(z/(√2σ)), k_pdf·exp(−z²/2σ²)) with one exponential for both (``inv_s`` = 1/(√2σ)):
     erf by Abramowitz & Stegun 7.1.26, |error| ≤ 1.5e-7 (a pixel integral off by ≤ 1.5e-7
     of the flux, five orders below its photon noise)."""
@@ -498,12 +498,12 @@ def smear_fit(spans, values, bg, u0, v0, offsets, sigma_psf, noise_var, e_per_dn
             cu = u + grp[j, 0]
             cv = v + grp[j, 1]
             for c in range(nc + 1):
-                e_col[c], p_col[c] = _erf_pdf(c0 + c - 0.5 - cu, inv_s, k_pdf)
+                e_col[c], p_col[c] = erf_pdf(c0 + c - 0.5 - cu, inv_s, k_pdf)
             for c in range(nc):
                 ex[j, c] = 0.5 * (e_col[c + 1] - e_col[c])
                 dx[j, c] = p_col[c] - p_col[c + 1]
             for r in range(nr + 1):
-                e_row[r], p_row[r] = _erf_pdf(r0 + r - 0.5 - cv, inv_s, k_pdf)
+                e_row[r], p_row[r] = erf_pdf(r0 + r - 0.5 - cv, inv_s, k_pdf)
             for r in range(nr):
                 ey[j, r] = 0.5 * (e_row[r + 1] - e_row[r])
                 dy[j, r] = p_row[r] - p_row[r + 1]

@@ -59,7 +59,7 @@ def _fmt(v) -> str:
     return "lost" if v != v else f"{v:.3f}"
 
 
-def _after(seconds) -> str:
+def after_text(seconds) -> str:
     """'after N s', or 'never' for a convergence that did not happen (nan/None)."""
     return "never" if seconds is None or seconds != seconds else f"after {seconds:g} s"
 
@@ -75,7 +75,7 @@ def _human(r: dict) -> str:
     lines.append(f"  C EKF 400 Hz output just before each image RMS x {_fmt(g[0])} y {_fmt(g[1])} px")
     b = r["bias_error_dps"]
     lines.append(f"  drift error (final) [{b[0]:+.4f}, {b[1]:+.4f}, {b[2]:+.4f}] °/s "
-                 f"(true {r['bias_true_dps']}); x,y within 10 % " + _after(r["bias_xy_within_10pct_after_s"]))
+                 f"(true {r['bias_true_dps']}); x,y within 10 % " + after_text(r["bias_xy_within_10pct_after_s"]))
     lines.append(f"  CRLB {r['crlb_px']:.3f} px; EKF / CRLB = {r['ekf_to_crlb']:.2f}")
     return "\n".join(lines)
 

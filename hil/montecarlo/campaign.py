@@ -40,7 +40,7 @@ class TlsFiles:
     key: str
 
 
-def _is_loopback(address: str) -> bool:
+def is_loopback(address: str) -> bool:
     from distributed.comm.addressing import get_address_host
 
     host = get_address_host(address if "://" in address else f"tcp://{address}")
@@ -76,7 +76,7 @@ class Cluster:
                                     require_encryption=True)
                 if not scheduler.startswith("tls://"):
                     scheduler = "tls://" + scheduler.split("://", 1)[-1]
-            elif not _is_loopback(scheduler):
+            elif not is_loopback(scheduler):
                 raise ConfigError(f"--scheduler {scheduler}: a scheduler beyond loopback is used only over TLS "
                                   "(give --tls-ca, --tls-cert and --tls-key; see docs/MONTECARLO.md)")
             try:

@@ -41,7 +41,7 @@ def schedule(first_s: float = FIRST_S, fault_s: float = FAULT_S, gap_s: float = 
     return out
 
 
-def _cum(x: np.ndarray) -> np.ndarray:
+def cumulative(x: np.ndarray) -> np.ndarray:
     """A counter that restarts (a new head client after reconnect) made cumulative."""
     d = np.diff(x, prepend=x[:1])
     return np.cumsum(np.where(d < 0, x, d))
@@ -60,8 +60,8 @@ def analyse(res: dict, faults) -> dict:
     err = cross_boresight_error_arcsec(tr, truth)
     good = tr["frames"]
     failed = tr["frames_failed"]
-    corrupt = _cum(tr["link_corrupt"])
-    retries = _cum(tr["link_retries"])
+    corrupt = cumulative(tr["link_corrupt"])
+    retries = cumulative(tr["link_retries"])
     step = np.diff(err, prepend=np.nan)
     out = []
     for (name, ev), counts in zip(faults, res["byte_faults"]):

@@ -1,11 +1,11 @@
 """Human output never says 'nan' for 'never'; summaries of runs that never tracked say so."""
 
-from gyrostar.hil.evaluation.eval_centroid import _after
+from gyrostar.hil.evaluation.eval_centroid import after_text
 from gyrostar.hil.runner import human_summary
 
 
 def test_never_is_printed_as_never():
-    assert _after(float("nan")) == "never" and _after(None) == "never" and _after(2.5) == "after 2.5 s"
+    assert after_text(float("nan")) == "never" and after_text(None) == "never" and after_text(2.5) == "after 2.5 s"
 
 
 def test_run_summary_of_a_run_that_never_tracked():

@@ -8,7 +8,7 @@ import pytest
 from gyrostar.errors import ConfigError, DeviceError
 from gyrostar.hil.eval_loop import run_seeds
 from gyrostar.hil.montecarlo import campaign
-from gyrostar.hil.montecarlo.campaign import Cluster, _is_loopback, results_sha256, run_campaign
+from gyrostar.hil.montecarlo.campaign import Cluster, is_loopback, results_sha256, run_campaign
 
 
 @pytest.mark.slow
@@ -29,7 +29,7 @@ def test_results_do_not_depend_on_the_worker_count():
                                           ("tcp://[::1]:8786", True), ("tcp://10.0.0.5:8786", False),
                                           ("tls://scheduler.example:8786", False)])
 def test_loopback_rule(address, loop):
-    assert _is_loopback(address) is loop
+    assert is_loopback(address) is loop
 
 
 def test_remote_scheduler_without_tls_is_refused():

@@ -5,12 +5,12 @@ the gyro with a valid attitude, gets a good frame back within 2 frames, counts b
 import numpy as np
 import pytest
 from gyrostar.hil.reliability.campaign import FaultEvent, run_campaign
-from gyrostar.hil.reliability.linkfaults import _cum, analyse
+from gyrostar.hil.reliability.linkfaults import analyse, cumulative
 from gyrostar.loop.record import MODE_ACQUIRE
 
 
 def test_cum_counter_survives_client_restart():
-    assert list(_cum(np.array([0, 2, 5, 0, 1, 4]))) == [0, 2, 5, 5, 6, 9]
+    assert list(cumulative(np.array([0, 2, 5, 0, 1, 4]))) == [0, 2, 5, 5, 6, 9]
 
 
 def test_fault_events_are_checked():
