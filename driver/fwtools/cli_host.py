@@ -10,7 +10,8 @@ def configure(parser) -> None:
     parser.add_argument("--width", type=int, default=1024, help="sensor columns (default 1024)")
     parser.add_argument("--height", type=int, default=1024, help="sensor rows (default 1024)")
     parser.add_argument("--planes", type=int, choices=(1, 2), default=2, help="1 = light, 2 = light + dark")
-    parser.add_argument("--link", help="also make this path a symlink to the pty")
+    parser.add_argument("--link", help="also make this path a symlink to the pty (a new path, or a stale link of an "
+                                       "earlier run; removed on exit)")
 
 
 def run(args) -> int:
@@ -28,6 +29,12 @@ def run(args) -> int:
     if sensor.is_dir() or not sensor.parent.is_dir():
         raise ConfigError(f"--sensor {sensor}: " + ("is a folder: give the pixel file's path" if sensor.is_dir()
                                                      else f"folder {sensor.parent} does not exist"))
+    if args.link:
+        link = Path(args.link)
+        if link.exists() and not link.is_symlink():
+            raise ConfigError(f"--link {link} exists and is not a symlink: not replaced (give a new path)")
+        if not link.parent.is_dir():
+            raise ConfigError(f"--link {link}: folder {link.parent} does not exist")
     for flag, value in (("--width", args.width), ("--height", args.height)):
         if not 1 <= value <= 65535:       # what the host program takes (u16)
             raise ConfigError(f"{flag} must be 1 … 65535 pixels, got {value}")

@@ -6,11 +6,12 @@ HELP = "ping a camera head over a pyserial URL; print round-trip times, GET_INFO
 
 
 def configure(parser) -> None:
+    from ..cli.argtypes import positive_float
     from ..cli.main import add_json
 
     parser.add_argument("url", help="serial port or pyserial URL (e.g. /dev/pts/3, socket://127.0.0.1:4000)")
     parser.add_argument("-n", "--count", type=int, default=20, help="pings (default 20)")
-    parser.add_argument("--timeout", type=float, default=1.0, help="reply timeout per request (s)")
+    parser.add_argument("--timeout", type=positive_float, default=1.0, help="reply timeout per request (s)")
     add_json(parser)
 
 

@@ -11,13 +11,14 @@ HELP = "ask a camera head for its lost-in-space spot list (FIND_SPOTS); print sp
 
 
 def configure(parser) -> None:
+    from ..cli.argtypes import positive_float
     from ..cli.main import add_json
 
     parser.add_argument("url", help="serial port or pyserial URL (e.g. /dev/pts/3, socket://127.0.0.1:4000)")
     parser.add_argument("--sigma", type=float, default=6.0, help="threshold above the background, in σ (default 6)")
     parser.add_argument("--max-spots", type=int, default=64, help="spots the head sends, 1..64 (default 64)")
     parser.add_argument("--box", type=int, default=7, help="window side around each spot, odd px 3..15 (default 7)")
-    parser.add_argument("--timeout", type=float, default=2.0, help="reply timeout per request (s)")
+    parser.add_argument("--timeout", type=positive_float, default=2.0, help="reply timeout per request (s)")
     add_json(parser)
 
 

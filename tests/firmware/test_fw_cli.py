@@ -49,6 +49,34 @@ def test_fw_ping_bad_url_is_a_device_error():
     assert "cannot open serial link" in proc.stderr
 
 
+@pytest.mark.parametrize("value", ["0", "-1", "nan", "inf"])
+def test_fw_ping_timeout_must_be_a_positive_number(value):
+    proc = _gyrostar("fw", "ping", "/nonexistent/tty", "-n", "1", f"--timeout={value}")
+    assert proc.returncode == 2 and "--timeout" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_fw_host_link_never_replaces_a_file(tmp_path):
+    """``--link`` replaces a stale symlink only: a file (or folder) at the path is refused, exit 2,
+    and kept — by the CLI and by the host program itself."""
+    build.build("host")
+    keep = tmp_path / "precious.txt"
+    keep.write_text("data")
+    (tmp_path / "dir").mkdir()
+    for link in (keep, tmp_path / "dir"):
+        proc = _gyrostar("fw", "host", "--sensor", str(tmp_path / "s.gspx"), "--width", "64", "--height", "64",
+                         "--link", str(link))
+        assert proc.returncode == 2 and "not a symlink" in proc.stderr and "Traceback" not in proc.stderr
+    direct = subprocess.run([str(build.host_binary_path()), "--sensor", str(tmp_path / "s.gspx"), "--width", "64",
+                             "--height", "64", "--link", str(keep)], capture_output=True, text=True, timeout=30)
+    assert direct.returncode == 2 and "not a symlink" in direct.stderr
+    assert keep.read_text() == "data" and (tmp_path / "dir").is_dir()
+    bad = tmp_path / "not-a-pixel-file"
+    bad.write_text("x" * 100)
+    direct = subprocess.run([str(build.host_binary_path()), "--sensor", str(bad), "--width", "64", "--height", "64"],
+                            capture_output=True, text=True, timeout=30)
+    assert direct.returncode == 2 and "not a gyrostar pixel file" in direct.stderr
+
+
 def _children(pid: int) -> list[int]:
     out = []
     for d in os.listdir("/proc"):

@@ -4,7 +4,9 @@
  *                 [--expose-socket PATH [--expose-wait-ms N]] [--exit-with-parent]
  *
  * Prints "gyrostar-head: pty <slave path>" on stdout once the UART is up; with --link
- * it also makes PATH a symlink to the pty (removed on exit). SIGINT/SIGTERM exit cleanly.
+ * it also makes PATH a symlink to the pty (removed on exit; an existing PATH that is not a
+ * symlink is refused). SIGINT/SIGTERM exit cleanly. Exit 0; 2 for bad arguments or files
+ * (usage, sensor file, link path); 3 when the pty cannot be opened.
  * --exit-with-parent: exit when the launching process dies (checked every 0.5 s idle), so a
  * killed test or flatsat runner never leaves a host program behind.
  * --expose-socket: announce each exposure start to the simulator's sensor listening on that
@@ -18,6 +20,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -94,18 +97,28 @@ int main(int argc, char **argv)
     }
     if (!sensor)
         return usage("--sensor FILE is required");
+    struct stat st;
+    if (link && lstat(link, &st) == 0 && !S_ISLNK(st.st_mode)) {
+        /* only a stale link of an earlier run is replaced, never a file or folder */
+        fprintf(stderr, "gyrostar-head: --link %s exists and is not a symlink: not replaced\n", link);
+        return 2;
+    }
     char err[256];
     if (gs_posix_sensor_open(&g_port, sensor, width, height, (uint8_t)planes, err, sizeof err) ||
-        (expose && gs_posix_expose_open(&g_port, expose, 1000u * expose_wait_ms, err, sizeof err)) ||
-        gs_posix_uart_open(&g_port, err, sizeof err)) {
+        (expose && gs_posix_expose_open(&g_port, expose, 1000u * expose_wait_ms, err, sizeof err))) {
         fprintf(stderr, "gyrostar-head: %s\n", err);
-        return 1;
+        return 2; /* the files it was given: a usage error */
+    }
+    if (gs_posix_uart_open(&g_port, err, sizeof err)) {
+        fprintf(stderr, "gyrostar-head: %s\n", err);
+        return 3; /* the pty: a device error */
     }
     if (link) {
-        unlink(link); /* a stale link from an earlier run */
+        unlink(link); /* a stale link from an earlier run (checked above: a symlink or nothing) */
         if (symlink(g_port.slave_path, link) != 0) {
             fprintf(stderr, "gyrostar-head: cannot create link %s: %s\n", link, strerror(errno));
-            return 1;
+            gs_posix_sensor_close(&g_port);
+            return 2;
         }
     }
     struct sigaction sa;
