@@ -15,13 +15,14 @@ HELP = "paper 000 centroid simulations sim1..sim4: fixed window, gyro window, EK
 def configure(parser) -> None:
     from ...cli.argtypes import seed as seed_type
     from ...cli.main import add_json
+    from .plot_target import png_file
 
     parser.add_argument("--scenario", choices=("sim1", "sim2", "sim3", "sim4"), default="sim2",
                         help="paper 000 simulation (default sim2)")
     parser.add_argument("--max-rate-dps", type=float, default=None,
                         help="sim1: rate at the end of the 8 s ramp (°/s, paper: 8)")
     parser.add_argument("--seed", type=seed_type, default=0, help="noise seed")
-    parser.add_argument("--plot", metavar="PATH", default=None, help="write a PNG figure")
+    parser.add_argument("--plot", metavar="FILE.png", type=png_file, default=None, help="write a PNG figure")
     parser.add_argument("--centroid", choices=("fit", "iwcog", "cog"), default="fit",
                         help="centroid estimator feeding the EKF: smeared-PSF fit (default), weighted CoG, CoG")
     parser.add_argument("--model", choices=("pinhole", "first_order"), default="pinhole",

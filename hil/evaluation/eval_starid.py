@@ -50,6 +50,8 @@ SWEEPS = ("fig10", "fig11", "fig12", "fig13", "fig14", "fig15", "fig16")
 DPH = math.pi / 180.0 / 3600.0
 FAST_PER_FIELD = 10  # navigation stars per field of Pyramid's first (thinned) tier
 MAG_SIGMA_FLOOR = 0.2    # mag: the narrowest photometric window Pyramid is given (the paper-001 camera)
+FOV_RANGE_DEG = (1.0, 40.0)      # --fov-deg: a square field's diagonal must stay inside the index's 60° pairs
+MAG_LIMIT_RANGE = (2.0, 10.0)    # --mag-limit, V
 
 
 @dataclasses.dataclass(frozen=True)
@@ -90,16 +92,17 @@ def configure(parser) -> None:
     from ...cli.argtypes import positive_float
     from ...cli.argtypes import seed as seed_type
     from ...cli.main import add_json
+    from .plot_target import png_file_or_folder
 
     d = TrialConfig()
     parser.add_argument("--method", choices=METHODS, default=d.method,
                         help="identifier under test (default %(default)s)")
     parser.add_argument("--preset", default=d.preset, help="camera preset: qian2015, xing2012 (default %(default)s)")
     parser.add_argument("--fov-deg", type=float, default=0.0,
-                        help="square camera of this full field, deg, instead of the preset (with --pixels; "
+                        help="square camera of this full field, deg (1 … 40), instead of the preset (with --pixels; "
                              "default 0: the preset's)")
-    parser.add_argument("--pixels", type=int, default=d.pixels,
-                        help="pixels across, with --fov-deg (default %(default)s)")
+    parser.add_argument("--pixels", type=int, default=None,
+                        help=f"pixels across, with --fov-deg (default {d.pixels})")
     parser.add_argument("--catalog", choices=("hip2", "gaia"), default=d.catalog,
                         help="star catalog (default %(default)s)")
     parser.add_argument("--mag-limit", type=float, default=d.mag_limit,
@@ -144,13 +147,23 @@ def configure(parser) -> None:
     parser.add_argument("--workers", type=int, default=2, help="LocalCluster worker processes (default %(default)s)")
     parser.add_argument("--sweep", choices=SWEEPS + ("all",), default=None,
                         help="reproduce a figure of paper 001 (trials per point = --trials; default: none)")
-    parser.add_argument("--plot", default=None,
-                        help="write the sweep's figure(s) as PNG (file or folder; default: none)")
+    parser.add_argument("--plot", type=png_file_or_folder, default=None, metavar="PATH",
+                        help="with --sweep: write the sweep's figure(s) as PNG (a .png name for one figure, or a "
+                             "folder; default: none)")
     add_json(parser)
 
 
 def config_from_args(args) -> TrialConfig:
-    cfg = TrialConfig(args.method, args.preset, args.fov_deg, args.pixels, args.catalog, args.mag_limit,
+    if args.pixels is not None and not args.fov_deg:
+        raise ConfigError("--pixels sets the sensor of a --fov-deg camera; a preset has its own (give --fov-deg too)")
+    if args.peer and args.method != "pyramid":
+        raise ConfigError(f"--peer compares lost-in-space solvers: it needs --method pyramid (got {args.method})")
+    if args.plot and not args.sweep:
+        raise ConfigError("--plot writes the figures of a --sweep (give --sweep figNN or all)")
+    if args.plot and args.plot.lower().endswith(".png") and args.sweep == "all":
+        raise ConfigError("--plot FILE.png holds one figure and --sweep all makes several: give a folder")
+    pixels = TrialConfig.pixels if args.pixels is None else args.pixels
+    cfg = TrialConfig(args.method, args.preset, args.fov_deg, pixels, args.catalog, args.mag_limit,
                       args.per_field, args.position_noise_px, args.mag_noise, args.catalog_position_noise_px,
                       args.catalog_mag_noise, args.false_stars, args.update_period_s, args.rate_dps,
                       args.gyro_bias_dph, args.gyro_random_dph, args.orientations, args.xi, args.peer,
@@ -170,8 +183,16 @@ def validate(cfg: TrialConfig) -> None:
         raise ConfigError("false stars ≥ 0, update period > 0, orientations ≥ 1 and xi ≥ 1 are required")
     if not 0.0 < cfg.p_false_max < 1.0:
         raise ConfigError(f"--p-false-max must be in (0, 1), got {cfg.p_false_max!r}")
-    if cfg.fov_deg and not (0 < cfg.fov_deg < 60 and cfg.pixels > 1):
-        raise ConfigError(f"--fov-deg must be in (0, 60) with --pixels > 1, got {cfg.fov_deg}, {cfg.pixels}")
+    if not (math.isfinite(cfg.mag_limit) and MAG_LIMIT_RANGE[0] <= cfg.mag_limit <= MAG_LIMIT_RANGE[1]):
+        lo, hi = MAG_LIMIT_RANGE
+        raise ConfigError(f"--mag-limit must be in [{lo:g}, {hi:g}], got {cfg.mag_limit!r}")
+    if cfg.fov_deg and not (FOV_RANGE_DEG[0] <= cfg.fov_deg <= FOV_RANGE_DEG[1] and 16 <= cfg.pixels <= 16384):
+        raise ConfigError(f"--fov-deg must be in [{FOV_RANGE_DEG[0]:g}, {FOV_RANGE_DEG[1]:g}] with --pixels in "
+                          f"[16, 16384], got {cfg.fov_deg}, {cfg.pixels}")
+    try:
+        trial_camera(cfg)
+    except ConfigError as exc:
+        raise ConfigError(f"--preset: {exc}") from None
 
 
 # ---------------------------------------------------------------- worker side
@@ -300,7 +321,12 @@ def run_chunk(cfg: TrialConfig, seed: int, n: int) -> dict:
         trials.append((frame, q_pred, gyro_err))
     for frame, q_pred, gyro_err in trials:
         t0, c0 = time.perf_counter(), time.thread_time()
-        r = ident.identify(frame.uv, q_pred) if tracking else ident.identify(frame.uv, mag=frame.mag)
+        if tracking:
+            r = ident.identify(frame.uv, q_pred)
+        elif cfg.method == "pyramid":
+            r = ident.identify(frame.uv, mag=frame.mag)   # measured magnitudes: its search and per-star check
+        else:
+            r = ident.identify(frame.uv)                  # the grid baseline matches positions only
         dt, dc = time.perf_counter() - t0, time.thread_time() - c0
         c, w = score(r.ids, frame.truth, frame.alt)
         res["success"].append(c >= 2 and w == 0)
@@ -428,9 +454,9 @@ class Runner:
             raise NotAvailableError(f"dask.distributed is needed for the Monte Carlo: {exc}") from exc
         import logging
 
-        for name in ("distributed", "distributed.scheduler", "distributed.nanny", "distributed.core",
-                     "distributed.worker", "distributed.http.proxy"):
-            logging.getLogger(name).setLevel(logging.ERROR)
+        from ..dask_quiet import quiet_worker_plugin, silence_logs
+
+        silence_logs()
         self.cluster = None
         if scheduler:
             try:
@@ -441,9 +467,12 @@ class Runner:
                 raise DeviceError(f"--scheduler {scheduler}: no Dask scheduler answered within "
                                   f"{connect_timeout_s:g} s ({type(exc).__name__})") from exc
         else:
-            self.cluster = LocalCluster(n_workers=max(1, workers), threads_per_worker=1, processes=True,
-                                        dashboard_address=None, silence_logs=logging.ERROR)
+            if workers < 1:
+                raise ConfigError(f"--workers must be ≥ 1, got {workers}")
+            self.cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                        dashboard_address=None, silence_logs=logging.CRITICAL)
             self.client = Client(self.cluster)
+            self.client.register_plugin(quiet_worker_plugin())
 
     def run(self, cfg: TrialConfig, trials: int, seed: int, advance=None) -> dict:
         from dask.distributed import as_completed
@@ -460,11 +489,15 @@ class Runner:
             futures.append(self.client.submit(run_chunk, cfg, int(ss.generate_state(1)[0]), n,
                                               key=f"starid-{hash(cfg) & 0xffffffff:x}-{seed}-{k}"))
         chunks = []
-        for fut in as_completed(futures):
-            chunk = fut.result()
-            chunks.append(chunk)
-            if advance:
-                advance(int(chunk["success"].size))
+        try:
+            for fut in as_completed(futures):
+                chunk = fut.result()
+                chunks.append(chunk)
+                if advance:
+                    advance(int(chunk["success"].size))
+        finally:
+            for f in futures:
+                f.cancel()
         return summarize(chunks)
 
     def close(self) -> None:

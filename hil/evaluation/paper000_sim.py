@@ -61,6 +61,7 @@ from ...errors import ConfigError
 DEG = math.pi / 180.0
 SCENARIOS = ("sim1", "sim2", "sim3", "sim4")
 CENTROIDS = ("fit", "iwcog", "cog")
+GYRO_NOISE_MAX_DPS_RTHZ = 1.0   # °/s/√Hz: --gyro-noise-dps-rthz above it is no gyro (MEMS ~0.01)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -100,6 +101,10 @@ class Paper000Config:
             raise ConfigError("model must be 'pinhole' or 'first_order'")
         if not 2 <= self.window_k <= 32 or not 2 <= self.fixed_k <= 64:
             raise ConfigError("window sizes must be 2..32 (trajectory) and 2..64 (fixed) px")
+        g = self.gyro_noise_dps_rthz
+        if g is not None and not (math.isfinite(g) and 0.0 <= g <= GYRO_NOISE_MAX_DPS_RTHZ):
+            raise ConfigError(f"--gyro-noise-dps-rthz must be in [0, {GYRO_NOISE_MAX_DPS_RTHZ:g}] °/s/√Hz "
+                              f"(a MEMS gyro: ~0.01), got {g!r}")
 
 
 def _profile(cfg: Paper000Config):

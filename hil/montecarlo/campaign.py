@@ -61,10 +61,10 @@ class Cluster:
             from dask.distributed import Client, LocalCluster
         except ImportError as exc:
             raise NotAvailableError(f"dask.distributed is needed for the Monte Carlo: {exc}") from exc
-        for name in ("distributed", "distributed.scheduler", "distributed.nanny", "distributed.core",
-                     "distributed.worker", "distributed.http.proxy", "distributed.comm"):
-            logging.getLogger(name).setLevel(logging.CRITICAL)
+        from ..dask_quiet import silence_logs
         from .worker import preload_plugin
+
+        silence_logs()
 
         self.cluster = None
         if scheduler:

@@ -53,13 +53,11 @@ def preload_plugin(config_path: str | None = None):
         name = "gyrostar-montecarlo-preload"
 
         def setup(self, worker=None):
-            import signal
-            import threading
+            from ..dask_quiet import ignore_sigint
 
             # Ctrl-C in a terminal reaches the whole process group: the campaign's own process
             # stops the runs and closes the cluster; a worker ignores it (no traceback of its own)
-            if threading.current_thread() is threading.main_thread():
-                signal.signal(signal.SIGINT, signal.SIG_IGN)
+            ignore_sigint()
             preload(config_path)
 
     return Preload()
