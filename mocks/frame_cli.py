@@ -19,6 +19,7 @@ from gyrostar.cli.main import add_json
 from gyrostar.errors import ConfigError
 
 HELP = "render one simulated star-camera frame (FITS with truth header, plus PNG)"
+MAX_RATE_DPS = 2000.0   # deg/s: the BMI088's widest range
 
 
 def _triple(text: str) -> tuple[float, float, float]:
@@ -28,6 +29,8 @@ def _triple(text: str) -> tuple[float, float, float]:
         vals = ()
     if len(vals) != 3 or not all(math.isfinite(v) for v in vals):
         raise ConfigError(f"--rate-dps takes three comma-separated numbers X,Y,Z (deg/s), got '{text}'")
+    if math.hypot(*vals) > MAX_RATE_DPS:
+        raise ConfigError(f"--rate-dps {text}: above {MAX_RATE_DPS:g} deg/s (a gyro's widest range)")
     return vals
 
 
@@ -43,6 +46,7 @@ def configure(parser) -> None:
     parser.add_argument("--catalog", default="hip2", help="catalog: hip2 or gaia")
     parser.add_argument("--mag-limit", type=float, default=8.5, help="faintest V rendered")
     parser.add_argument("--no-noise", action="store_true", help="expected signal only, no noise")
+    parser.add_argument("--force", action="store_true", help="replace an existing FITS file and its PNG")
     add_json(parser)
 
 
@@ -78,6 +82,10 @@ def run(args) -> int:
         raise ConfigError(f"--out must name a .fits file, got {out}")
     if not out.parent.is_dir():
         raise ConfigError(f"--out {out}: folder {out.parent} does not exist")
+    for path in (out, out.with_suffix(".png")):
+        if path.exists() and not (args.force and path.is_file()):
+            raise ConfigError(f"--out {out}: {path} exists" + ("" if path.is_file() else " and is not a file")
+                              + (" (--force replaces it)" if path.is_file() else ""))
     rate = np.radians(_triple(args.rate_dps))
     preset = load_preset(args.preset)
     if (args.ra_deg is None) != (args.dec_deg is None):

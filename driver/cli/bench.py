@@ -43,13 +43,13 @@ def _load(path):
 
 def run(args) -> int:
     suites = discover()
-    if args.list:
-        emit(args, {"suites": list(suites)}, "\n".join(suites) or "(no suites)")
-        return 0
     chosen = args.suites or list(suites)
     unknown = [s for s in chosen if s not in suites]
     if unknown:
         raise ConfigError(f"unknown bench suite(s) {unknown}; known: {list(suites)}")
+    if args.list:
+        emit(args, {"suites": list(suites)}, "\n".join(suites) or "(no suites)")
+        return 0
     from rich.table import Table
 
     result = {}

@@ -50,3 +50,19 @@ def test_sim_frame_bad_rate():
     proc = subprocess.run([sys.executable, "-m", "gyrostar", "sim", "frame", "--rate-dps", "1,2", "--out",
                            "/tmp/x.fits"], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2 and "rate-dps" in proc.stderr
+
+
+def test_sim_frame_keeps_an_existing_frame_without_force(tmp_path):
+    """A second frame to the same path is refused (exit 2) and the first kept; ``--force`` replaces it."""
+    out = tmp_path / "f.fits"
+    base = [sys.executable, "-m", "gyrostar", "sim", "frame", "--ra-deg", "10", "--dec-deg", "20", "--out", str(out),
+            "--mag-limit", "6.0"]
+    assert subprocess.run(base, capture_output=True, text=True, timeout=300).returncode == 0
+    first = out.read_bytes()
+    proc = subprocess.run(base + ["--seed", "5"], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 2 and "--force" in proc.stderr and out.read_bytes() == first
+    proc = subprocess.run(base + ["--seed", "5", "--force"], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0 and out.read_bytes() != first
+    proc = subprocess.run(base[:-4] + ["--out", str(tmp_path / "g.fits"), "--rate-dps", "1e9,0,0"],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and "rate-dps" in proc.stderr and not (tmp_path / "g.fits").exists()
