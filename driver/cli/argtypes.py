@@ -65,3 +65,74 @@ def positive_float_list(text: str) -> list[float]:
     if not text.strip() or any(not s for s in items):
         raise argparse.ArgumentTypeError(f"expects comma-separated numbers > 0, got {text!r}")
     return [positive_float(s) for s in items]
+
+
+def _interval(lo: float, hi: float, lo_open: bool, hi_open: bool) -> str:
+    return f"{'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
+
+
+def float_in(lo: float, hi: float, lo_open: bool = False, hi_open: bool = False, unit: str = ""):
+    """An argparse type: a finite number in [``lo``, ``hi``] (an open end excludes its bound),
+    ``unit`` named in the message."""
+    where = _interval(lo, hi, lo_open, hi_open) + (f" {unit}" if unit else "")
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expects a number, got {text!r}") from None
+        inside = lo < value if lo_open else lo <= value
+        inside = inside and (value < hi if hi_open else value <= hi)
+        if not math.isfinite(value) or not inside:
+            raise argparse.ArgumentTypeError(f"must be a finite number in {where}, got {text!r}")
+        return value
+
+    parse.__name__ = f"number in {where}"
+    return parse
+
+
+def int_in(lo: int, hi: int):
+    """An argparse type: an integer in [``lo``, ``hi``]."""
+    at_least = int_at_least(lo)
+
+    def parse(text: str) -> int:
+        value = at_least(text)
+        if value > hi:
+            raise argparse.ArgumentTypeError(f"must be at most {hi}, got {text!r}")
+        return value
+
+    parse.__name__ = f"integer in [{lo}, {hi}]"
+    return parse
+
+
+def float_list_in(lo: float, hi: float, lo_open: bool = False, counts: tuple[int, ...] | None = None,
+                  max_count: int = 64, unit: str = ""):
+    """An argparse type: comma-separated finite numbers, each as :func:`float_in` checks it;
+    as many as one of ``counts`` when given, else 1 … ``max_count``."""
+    item = float_in(lo, hi, lo_open=lo_open, unit=unit)
+
+    def parse(text: str) -> list[float]:
+        items = [s.strip() for s in text.split(",")]
+        if not text.strip() or any(not s for s in items):
+            raise argparse.ArgumentTypeError(f"expects comma-separated numbers, got {text!r}")
+        if counts is not None and len(items) not in counts:
+            raise argparse.ArgumentTypeError(
+                f"expects {' or '.join(str(c) for c in counts)} comma-separated numbers, got {text!r}")
+        if len(items) > max_count:
+            raise argparse.ArgumentTypeError(f"expects at most {max_count} numbers, got {len(items)} in {text!r}")
+        return [item(s) for s in items]
+
+    parse.__name__ = "comma-separated numbers"
+    return parse
+
+
+def existing_file(text: str):
+    """An argparse type: the path of a file that exists (a folder or a missing path is refused)."""
+    from pathlib import Path
+
+    path = Path(text)
+    if not path.exists():
+        raise argparse.ArgumentTypeError(f"{text} does not exist")
+    if not path.is_file():
+        raise argparse.ArgumentTypeError(f"{text} is not a file")
+    return path

@@ -32,21 +32,39 @@ DEFAULT_SET = ["scale_factor_sigma_ppm=0", "misalignment_sigma_mrad=0"]
 TRUE_MOUNT_DEG = (0.3, -0.5, 90.2)  # rotation vector of the simulated gyro → camera mounting, degrees
 
 
+MAX_DURATION_S = 7200.0   # --duration: 2 h of slew (12× the default)
+MAX_CAMERA_HZ = 100.0     # --camera-hz: one 10 ms exposure after another (the xing2012 preset)
+MAX_RATE_DPS = 2000.0     # --amplitudes: the BMI088's largest range
+
+
 def configure(parser) -> None:
     from ...calibration.report import add_common_args
+    from ...cli.argtypes import existing_file, float_in, float_list_in, int_in
+    from .gyro_sim import override
 
     add_common_args(parser, "slew log .npz: t, rate (gyro) and t_cam, q_cam (tracker)")
-    parser.add_argument("--gyro-cal", default=None, help="calibration TOML whose [gyro_scale] is applied first")
-    parser.add_argument("--lag", type=int, default=2, help="camera frames per comparison window (default 2)")
-    parser.add_argument("--max-offset-ms", type=float, default=50.0, help="time-offset search range, ms")
+    parser.add_argument("--gyro-cal", type=existing_file, default=None,
+                        help="calibration TOML whose [gyro_scale] is applied first")
+    parser.add_argument("--lag", type=int_in(1, 1000), default=2,
+                        help="camera frames per comparison window, 1 to 1000 (default 2)")
+    parser.add_argument("--max-offset-ms", type=float_in(0.0, 1000.0, lo_open=True, unit="ms"), default=50.0,
+                        help="time-offset search range ±, ms, in (0, 1000] (default 50)")
     parser.add_argument("--gyro-params", default="bmi088", help="--simulate: gyro error-model parameter set")
-    parser.add_argument("--set", action="append", default=None, metavar="KEY=VALUE",
+    parser.add_argument("--set", action="append", type=override, default=None, metavar="KEY=VALUE",
                         help="--simulate: gyro parameter override (repeatable; default: "
                              + " ".join(DEFAULT_SET) + ")")
-    parser.add_argument("--duration", type=float, default=1200.0, help="--simulate: slew length, s (default 1200)")
-    parser.add_argument("--camera-hz", type=float, default=10.0, help="--simulate: attitude rate, Hz (default 10)")
-    parser.add_argument("--amplitudes", default="20,16,12", help="--simulate: slew rate amplitudes, deg/s")
-    parser.add_argument("--clock-offset-ms", type=float, default=2.5, help="--simulate: gyro stamp lateness, ms")
+    parser.add_argument("--duration", type=float_in(1.0, MAX_DURATION_S, unit="s"), default=1200.0,
+                        help=f"--simulate: slew length, s, 1 to {MAX_DURATION_S:g} (default 1200)")
+    parser.add_argument("--camera-hz", type=float_in(0.0, MAX_CAMERA_HZ, lo_open=True, unit="Hz"), default=10.0,
+                        help=f"--simulate: attitude rate, Hz, at most {MAX_CAMERA_HZ:g} (one 10 ms exposure after "
+                             "another; default 10)")
+    parser.add_argument("--amplitudes", type=float_list_in(0.0, MAX_RATE_DPS, lo_open=True, counts=(1, 3),
+                                                           unit="deg/s"),
+                        default=[20.0, 16.0, 12.0],
+                        help=f"--simulate: slew rate amplitudes, deg/s, one for all axes or x,y,z, each in "
+                             f"(0, {MAX_RATE_DPS:g}] (default 20,16,12)")
+    parser.add_argument("--clock-offset-ms", type=float_in(-1000.0, 1000.0, unit="ms"), default=2.5,
+                        help="--simulate: gyro stamp lateness, ms, within ±1000 (default 2.5)")
 
 
 def mount_rotation() -> np.ndarray:
@@ -73,13 +91,19 @@ def simulate(args):
     from . import gyro_sim
     from .slew_sim import simulate_attitudes, slew_profile
 
-    amps = [float(x) for x in args.amplitudes.split(",")]
-    profile = slew_profile(amps)
+    p = gyro_sim.params(args.gyro_params, DEFAULT_SET if args.set is None else args.set)
+    gyro_sim.check_length(p, args.duration, "--duration")
     n_frames = int(args.duration * args.camera_hz)
+    need = 13 * args.lag + 3                # fit_alignment: at least 12 windows of --lag frames
+    if n_frames < need:
+        from ...errors import ConfigError
+
+        raise ConfigError(f"--duration {args.duration:g} s at --camera-hz {args.camera_hz:g} gives {n_frames} "
+                          f"attitudes; --lag {args.lag} needs at least {need}")
+    profile = slew_profile(args.amplitudes)
     with progress(args, "simulating tracker attitudes", n_frames) as step:
         sl = simulate_attitudes(args.duration, args.camera_hz, args.seed, profile=profile, progress_step=step)
     r_true = mount_rotation()
-    p = gyro_sim.params(args.gyro_params, DEFAULT_SET if args.set is None else args.set)
     t, rate, gt = gyro_sim.measure_profile(profile, args.duration, p, args.seed, body_to_sensor=r_true.T)
     clock = args.clock_offset_ms * 1e-3
     t_g = t - clock
@@ -96,6 +120,11 @@ def run(args) -> int:
     from ...errors import ConfigError
 
     source = report.check_source(args)
+    gs = None
+    if args.gyro_cal:                      # checked before anything is simulated or loaded
+        gs = calfile.load(args.gyro_cal).gyro_scale
+        if gs is None:
+            raise ConfigError(f"--gyro-cal {args.gyro_cal} has no [gyro_scale] table")
     folder = report.report_dir(args, "alignment")
     truth = None
     extra_in = {}
@@ -107,10 +136,7 @@ def run(args) -> int:
 
         target = calfile.load(args.toml) if args.toml and Path(args.toml).exists() else None
         t_g, rate, t_cam, q_cam, extra_in["attitudes"] = load_slew_input(args.input, target)
-    if args.gyro_cal:
-        gs = calfile.load(args.gyro_cal).gyro_scale
-        if gs is None:
-            raise ConfigError(f"{args.gyro_cal} has no [gyro_scale] table")
+    if gs is not None:
         rate = (np.asarray(rate) - np.asarray(gs.bias_rps)) @ np.asarray(gs.correction).T
     arw, arw_from = gyro_arw(target)
     fit = fit_alignment(t_g, rate, t_cam, q_cam, lag=args.lag, max_offset=args.max_offset_ms * 1e-3, arw=arw)

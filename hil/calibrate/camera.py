@@ -34,23 +34,43 @@ TRUE_OFFSETS = {"dcx_px": 3.2, "dcy_px": -2.1, "f_scale": 1.0008, "k1": 0.3, "k2
                 "p1": 2.0e-4, "p2": -1.0e-4}
 
 
+MAX_FIELDS = 20000        # --fields: 20000 simulate and fit in ≈ 3.5 min, 0.8 GB peak (10× the default)
+MAX_OUTLIER_FRACTION = 0.5  # --outliers: the fit's median-based σ and rejection break down at half the stars
+
+
+def fix_names(text: str) -> str:
+    """argparse type of ``--fix``: comma-separated names of :data:`~gyrostar.calibration.intrinsics.NAMES`
+    (or '' for none), checked at parse time."""
+    import argparse
+
+    from ...calibration.intrinsics import NAMES
+
+    unknown = sorted({n.strip() for n in text.split(",") if n.strip()} - set(NAMES))
+    if unknown:
+        raise argparse.ArgumentTypeError(f"unknown parameter(s) {unknown} (known: {', '.join(NAMES)})")
+    return text
+
+
 def configure(parser) -> None:
     from ...calibration.report import add_common_args
-    from ...cli.argtypes import positive_int
+    from ...cli.argtypes import float_in, int_in
 
     add_common_args(parser, "identified-star table (.npz: field, uv, ref; or .csv: field,u,v,ra_deg,dec_deg)")
     parser.add_argument("--camera", default="xing2012", help="nominal camera preset (default xing2012)")
-    parser.add_argument("--fix", default=None, metavar="NAMES",
+    parser.add_argument("--fix", type=fix_names, default=None, metavar="NAMES",
                         help="parameters held at their nominal value; default k3,p1,p2 for an INPUT file (in a "
                              "narrow field the tangential terms trade with the principal point), none with "
                              "--simulate (its camera has tangential terms); '' fits all of "
                              "f_px,cx_px,cy_px,k1,k2,k3,p1,p2")
-    parser.add_argument("--fields", type=positive_int, default=2000, help="--simulate: star fields (default 2000)")
-    parser.add_argument("--mag-limit", type=float, default=7.0, help="--simulate: faintest V used (default 7.0)")
-    parser.add_argument("--centroid-noise", type=float, default=0.02,
-                        help="--simulate: centroid noise per axis, px (default 0.02)")
-    parser.add_argument("--outliers", type=float, default=0.01,
-                        help="--simulate: fraction of misidentified stars (default 0.01)")
+    parser.add_argument("--fields", type=int_in(1, MAX_FIELDS), default=2000,
+                        help=f"--simulate: star fields, 1 to {MAX_FIELDS} (default 2000)")
+    parser.add_argument("--mag-limit", type=float_in(3.0, 12.0), default=7.0,
+                        help="--simulate: faintest V used, 3 to 12 (default 7.0)")
+    parser.add_argument("--centroid-noise", type=float_in(0.0, 1.0, unit="px"), default=0.02,
+                        help="--simulate: centroid noise per axis, px, 0 to 1 (default 0.02)")
+    parser.add_argument("--outliers", type=float_in(0.0, MAX_OUTLIER_FRACTION, hi_open=True), default=0.01,
+                        help="--simulate: fraction of misidentified stars, in [0, 0.5): the fit's median-based "
+                             "rejection needs most stars right (default 0.01)")
 
 
 def load_table(path):
@@ -127,6 +147,11 @@ def simulate(args, nominal):
                 uvl.append(truth.uv[sel])
                 refl.append(cat.vectors[[index[int(i)] for i in truth.ids[sel]]])
             step()
+    if not fl:
+        from ...errors import ConfigError
+
+        raise ConfigError(f"--mag-limit {args.mag_limit:g}: none of the {args.fields} --fields holds 4 stars; "
+                          "give a fainter limit or more fields")
     field, uv_true, ref = np.concatenate(fl), np.concatenate(uvl), np.concatenate(refl)
     uv = uv_true + args.centroid_noise * rng.standard_normal(uv_true.shape)
     bad = rng.random(len(uv)) < args.outliers  # misidentified: the centroid of another star
@@ -139,7 +164,6 @@ def run(args) -> int:
     from ...calibration import calfile, report
     from ...calibration.intrinsics import NAMES, fit, model_difference
     from ...camera import camera_preset
-    from ...errors import ConfigError
 
     source = report.check_source(args)
     nominal = camera_preset(args.camera)
@@ -154,9 +178,7 @@ def run(args) -> int:
     f0 = nominal.focal_length_px
     before = fit(stars, theta0, free=np.zeros(8, bool), reject_k=5.0)
     fix = args.fix if args.fix is not None else ("" if source == "simulate" else "k3,p1,p2")
-    fixed = {n.strip() for n in fix.split(",") if n.strip()}
-    if fixed - set(NAMES):
-        raise ConfigError(f"--fix: unknown parameter(s) {sorted(fixed - set(NAMES))} (known: {', '.join(NAMES)})")
+    fixed = {n.strip() for n in fix.split(",") if n.strip()}     # names checked at parse time (fix_names)
     free = np.array([n not in fixed for n in NAMES])
     res = fit(stars, theta0, free=free, prior_k2=1.0 / (f0 * r_corner**5), prior_k3=1.0 / (f0 * r_corner**7))
     params = res.params(w, h)

@@ -24,24 +24,31 @@ import numpy as np
 HELP = "dark frames at several exposures -> dark-current map, hot pixels, read noise (FITS)"
 
 
+MAX_EXPOSURE_S = 100.0    # --exposures: the simulator's detector limit
+MAX_FRAMES = 64           # --frames: per exposure (8 exposures × 64 frames of 1024² px: ≈ 1.5 min, 2.2 GB peak)
+
+
 def configure(parser) -> None:
     from ...calibration.report import add_common_args
-    from ...cli.argtypes import int_at_least, positive_float_list
+    from ...cli.argtypes import float_in, float_list_in, int_in
 
     add_common_args(parser, "folder of FITS dark frames (EXPTIME header) or .npz (frames, exposure)", live=True)
     parser.add_argument("--preset", default="xing2012", help="--simulate: simulator preset (default xing2012)")
-    parser.add_argument("--exposures", type=positive_float_list, default=[0.005, 0.03, 0.055, 0.08],
-                        help="--simulate: exposure times, s, comma separated")
-    parser.add_argument("--frames", type=int_at_least(2), default=8,
-                        help="--simulate: frames per exposure, at least 2 (default 8)")
-    parser.add_argument("--k-sigma", type=float, default=8.0,
-                        help="hot pixel: dark current above median + K robust sigma (default 8)")
-    parser.add_argument("--hot-factor", type=float, default=5.0,
-                        help="hot pixel: and above this multiple of the median dark current (default 5)")
-    parser.add_argument("--temperature", type=float, default=None, help="sensor temperature, C (recorded)")
+    parser.add_argument("--exposures", type=float_list_in(0.0, MAX_EXPOSURE_S, lo_open=True, max_count=8, unit="s"),
+                        default=[0.005, 0.03, 0.055, 0.08],
+                        help=f"--simulate: exposure times, s, comma separated, at most 8, each in "
+                             f"(0, {MAX_EXPOSURE_S:g}]")
+    parser.add_argument("--frames", type=int_in(2, MAX_FRAMES), default=8,
+                        help=f"--simulate: frames per exposure, 2 to {MAX_FRAMES} (default 8)")
+    parser.add_argument("--k-sigma", type=float_in(1.0, 1e6), default=8.0,
+                        help="hot pixel: dark current above median + K robust sigma, K ≥ 1 (default 8)")
+    parser.add_argument("--hot-factor", type=float_in(0.0, 1e6), default=5.0,
+                        help="hot pixel: and above this multiple of the median dark current, ≥ 0 (default 5)")
+    parser.add_argument("--temperature", type=float_in(-100.0, 150.0, unit="C"), default=None,
+                        help="sensor temperature, C, -100 to 150 (recorded)")
     parser.add_argument("--port", default=None, help="--live: camera-head serial port or pyserial URL")
-    parser.add_argument("--head-timeout", type=float, default=2.0,
-                        help="--live: seconds to wait for each head reply before a retry (default 2)")
+    parser.add_argument("--head-timeout", type=float_in(0.0, 60.0, lo_open=True, unit="s"), default=2.0,
+                        help="--live: seconds to wait for each head reply before a retry, at most 60 (default 2)")
 
 
 def capture_stacks(client, exposures: list[float], n_frames: int, step=None, keep: dict | None = None):

@@ -28,22 +28,36 @@ HELP = "gyro scale factors and misalignment from rate-table runs or star-tracker
 DEG = np.pi / 180.0
 
 
+MAX_RATE_DPS = 2000.0     # --rates: the BMI088's largest range
+MAX_RUN_S = 600.0         # --run-seconds: 10 min per table run (the default schedule is then 3.3 h)
+MAX_SLEW_S = 7200.0       # --duration: 2 h of slew at 20 attitudes/s
+
+
 def configure(parser) -> None:
     from ...calibration.report import add_common_args
+    from ...cli.argtypes import existing_file, float_in, float_list_in
+    from .gyro_sim import override
 
     add_common_args(parser, "gyro log .npz: t, rate (N×3 rad/s), run and table_rate for rate-table runs; or t, "
                             "rate, t_cam and q_cam (gyrostar replay LOG --export calib) for slews")
     parser.add_argument("--method", choices=("rate-table", "slew"), default=None,
                         help="default: slew when INPUT has no 'run' array (a flatsat run's export), else rate-table")
-    parser.add_argument("--trim", type=float, default=0.5, help="rate table: seconds dropped at each run end")
-    parser.add_argument("--alignment", default=None,
+    parser.add_argument("--trim", type=float_in(0.0, 60.0, unit="s"), default=0.5,
+                        help="rate table: seconds dropped at each run end, 0 to 60 (default 0.5)")
+    parser.add_argument("--alignment", type=existing_file, default=None,
                         help="slew: calibration TOML whose [alignment] is applied (default: the --out file's, if any)")
     parser.add_argument("--gyro-params", default="bmi088", help="--simulate: gyro error-model parameter set")
-    parser.add_argument("--set", action="append", default=None, metavar="KEY=VALUE",
+    parser.add_argument("--set", action="append", type=override, default=None, metavar="KEY=VALUE",
                         help="--simulate: override a gyro parameter (repeatable)")
-    parser.add_argument("--rates", default="10,30,60", help="--simulate: table rates, deg/s (both signs, each axis)")
-    parser.add_argument("--run-seconds", type=float, default=20.0, help="--simulate: seconds per table run")
-    parser.add_argument("--duration", type=float, default=300.0, help="--simulate slew: seconds")
+    parser.add_argument("--rates", type=float_list_in(0.0, MAX_RATE_DPS, lo_open=True, max_count=10, unit="deg/s"),
+                        default=[10.0, 30.0, 60.0],
+                        help=f"--simulate: table rates, deg/s (both signs, each axis), at most 10, each in "
+                             f"(0, {MAX_RATE_DPS:g}] (default 10,30,60)")
+    parser.add_argument("--run-seconds", type=float_in(1.0, MAX_RUN_S, unit="s"), default=20.0,
+                        help=f"--simulate: seconds per table run, 1 to {MAX_RUN_S:g}, more than twice --trim "
+                             "(default 20)")
+    parser.add_argument("--duration", type=float_in(10.0, MAX_SLEW_S, unit="s"), default=300.0,
+                        help=f"--simulate slew: seconds, 10 to {MAX_SLEW_S:g} (default 300)")
 
 
 def rate_table_schedule(rates_dps, run_s: float, gap_s: float = 2.0):
@@ -118,12 +132,12 @@ def run(args) -> int:
     note = None
     if args.method == "rate-table":
         if source == "simulate":
-            try:
-                rates = [float(x) for x in args.rates.split(",")]
-            except ValueError:
-                raise ConfigError(f"--rates must be comma-separated deg/s, got {args.rates!r}") from None
-            table, profile, length = rate_table_schedule(rates, args.run_seconds)
+            if 2.0 * args.trim >= args.run_seconds:
+                raise ConfigError(f"--trim {args.trim:g} s at both ends leaves nothing of --run-seconds "
+                                  f"{args.run_seconds:g}: give --run-seconds > 2 × --trim")
+            table, profile, length = rate_table_schedule(args.rates, args.run_seconds)
             p = gyro_sim.params(args.gyro_params, args.set)
+            gyro_sim.check_length(p, length, "--rates × --run-seconds")
             t, rate, truth = gyro_sim.measure_profile(profile, length, p, args.seed)
             run_id = run_ids(t - truth["delay_s"], len(table), args.run_seconds)
         else:
@@ -134,8 +148,9 @@ def run(args) -> int:
         if source == "simulate":
             from .slew_sim import simulate_attitudes
 
-            sl = simulate_attitudes(args.duration, 20.0, args.seed)
             p = gyro_sim.params(args.gyro_params, args.set)
+            gyro_sim.check_length(p, args.duration, "--duration")
+            sl = simulate_attitudes(args.duration, 20.0, args.seed)
             t, rate, truth = gyro_sim.measure_profile(sl.profile, args.duration, p, args.seed)
             t_g = t - truth["delay_s"]  # the alignment calibration's time offset, applied
             t_cam, q_cam = sl.t_cam, sl.q_cam
@@ -167,7 +182,7 @@ def run(args) -> int:
     table_out.add("bias_dps", fit.bias / DEG, "deg/s", None if truth is None else truth["bias"] / DEG)
     table_out.rows["scale_factor_ppm"]["sigma"] = (np.diag(fit.sensitivity_sigma) * 1e6).tolist()
     extra = {"method": args.method, "residual_rms": fit.residual_rms, "sensitivity": fit.sensitivity,
-             "alignment_removed": args.alignment, "attitudes": note}
+             "alignment_removed": None if args.alignment is None else str(args.alignment), "attitudes": note}
     checks = None
     if ts is not None:
         sf_err = (np.diag(fit.sensitivity) - np.diag(ts)) * 1e6

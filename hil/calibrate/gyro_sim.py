@@ -40,6 +40,44 @@ def params(name: str, overrides: list[str] | None = None):
     return gyro_params(name, **kw)
 
 
+MAX_RATE_HZ = 6400.0                       # odr_hz / internal_hz overrides: a MEMS gyro's fastest clock
+MAX_INTERNAL_SAMPLES = int(12 * 3600 * 1600)  # 12 h at the BMI088's 1600 Hz: ≈ 3.5 GB peak while simulating
+
+
+def override(text: str) -> str:
+    """argparse type of ``--set``: ``KEY=VALUE`` with KEY a numeric gyro parameter and VALUE a
+    finite number (≥ 0 except ``bias_dps``; rates ≤ :data:`MAX_RATE_HZ`), checked at parse time."""
+    import argparse
+    import dataclasses
+
+    from ...mocks.gyro_truth import GyroErrorParams
+
+    key, sep, val = text.partition("=")
+    key = key.strip()
+    known = [f.name for f in dataclasses.fields(GyroErrorParams) if f.name != "name"]
+    if not sep or key not in known:
+        raise argparse.ArgumentTypeError(f"expects KEY=VALUE with KEY one of {', '.join(known)}, got {text!r}")
+    try:
+        value = float(val)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{key}: value must be a number, got {val.strip()!r}") from None
+    if not math.isfinite(value) or (key != "bias_dps" and value < 0):
+        raise argparse.ArgumentTypeError(f"{key}: value must be a finite number"
+                                         f"{'' if key == 'bias_dps' else ' >= 0'}, got {val.strip()!r}")
+    if key in ("odr_hz", "internal_hz") and not 0 < value <= MAX_RATE_HZ:
+        raise argparse.ArgumentTypeError(f"{key} must be in (0, {MAX_RATE_HZ:g}] Hz, got {val.strip()!r}")
+    return text
+
+
+def check_length(p, seconds: float, flags: str) -> None:
+    """Refuse (before anything is simulated) a record of ``seconds`` whose internal-rate samples
+    exceed :data:`MAX_INTERNAL_SAMPLES`; ``flags`` names the arguments that set its length."""
+    n = seconds * p.internal_hz
+    if n > MAX_INTERNAL_SAMPLES:
+        raise ConfigError(f"{flags}: {seconds / 3600:.3g} h of gyro record at internal_hz {p.internal_hz:g} Hz is "
+                          f"{n:.3g} samples, more than the {MAX_INTERNAL_SAMPLES:.3g} the simulation holds in memory")
+
+
 def filter_delay_s(p) -> float:
     """Low-frequency group delay (s) of the set's Butterworth at its internal rate (0 if none)."""
     if p.filter_hz <= 0:

@@ -28,20 +28,24 @@ import numpy as np
 HELP = "gyro bias and Allan-deviation noise terms (ARW, bias instability, RRW) from a static log"
 
 RAD2DEG = 180.0 / np.pi
+MAX_HOURS = 12.0   # --hours: a night on the bench; ≈ 3.5 GB peak (gyro_sim.MAX_INTERNAL_SAMPLES)
 
 
 def configure(parser) -> None:
     from ...calibration.gyro_log import add_live_args
     from ...calibration.report import add_common_args
-    from ...cli.argtypes import positive_float
+    from ...cli.argtypes import float_in, positive_float
+    from .gyro_sim import override
 
     add_common_args(parser, "static gyro log (.npz with t [s], rate [rad/s, N×3], optional temperature [C])", live=True)
     add_live_args(parser)
     parser.add_argument("--gyro-params", default="bmi088", help="--simulate: gyro error-model parameter set")
-    parser.add_argument("--set", action="append", default=None, metavar="KEY=VALUE",
+    parser.add_argument("--set", action="append", type=override, default=None, metavar="KEY=VALUE",
                         help="--simulate: override a gyro parameter (repeatable; default "
                              "bias_instability_dph=20 bias_tau_s=10, see the module docstring)")
-    parser.add_argument("--hours", type=positive_float, default=3.0, help="--simulate: record length, h (default 3)")
+    parser.add_argument("--hours", type=float_in(0.001, MAX_HOURS, unit="h"), default=3.0,
+                        help=f"--simulate: record length, h, 0.001 to {MAX_HOURS:g} (default 3; the simulation holds "
+                             "the whole record, ≈ 0.3 GB per hour at the BMI088's 1600 Hz internal rate)")
     parser.add_argument("--bias-model", choices=("auto", "flicker", "markov"), default="auto",
                         help="bias-instability term: flicker floor, Gauss-Markov, or the better fit")
     parser.add_argument("--tau-min", type=positive_float, default=0.1,
@@ -103,6 +107,7 @@ def simulate(args):
     from . import gyro_sim
 
     p = gyro_sim.params(args.gyro_params, DEFAULT_SET if args.set is None else args.set)
+    gyro_sim.check_length(p, args.hours * 3600.0, "--hours")
     rec, truth = gyro_sim.static_record(p, args.hours, args.seed)
     truth["sound_hours"] = gyro_sim.sound_static_hours(p)
     return rec, truth
