@@ -105,6 +105,8 @@ def report_dir(args, name: str) -> Path:
 
     if args.report is not None:
         path = Path(args.report)
+        if path.exists() and not path.is_dir():
+            raise ConfigError(f"--report {path} exists and is not a folder")
     else:
         stamp = _dt.datetime.now(_dt.UTC).strftime("%Y%m%dT%H%M%S")
         path = runs_dir() / "calibrate" / f"{name}-{stamp}"

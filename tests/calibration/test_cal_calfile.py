@@ -63,3 +63,10 @@ def test_hot_pixel_mask(tmp_path):
     assert mask.sum() == 2 and mask[2, 5] and mask[7, 0]
     with pytest.raises(ConfigError):
         calfile.hot_pixel_mask(calfile.load(path), 4, 4)
+
+
+def test_report_that_is_a_file_is_refused_and_kept(tmp_path):
+    keep = tmp_path / "existing.txt"
+    keep.write_text("keep")
+    assert main(["calibrate", "dark", "--simulate", "--report", str(keep)]) == 2
+    assert keep.read_text() == "keep"
