@@ -38,3 +38,28 @@ def quiet_worker_plugin():
             ignore_sigint()
 
     return Quiet()
+
+
+def distributed():
+    """``dask.distributed`` (the module), or :class:`~gyrostar.errors.NotAvailableError`."""
+    try:
+        import dask.distributed as dd
+    except ImportError as exc:
+        from ..errors import NotAvailableError
+
+        raise NotAvailableError(f"dask.distributed is needed for the Monte Carlo: {exc}") from exc
+    return dd
+
+
+def local_client(workers: int, dashboard_address: str | None = None):
+    """``(cluster, client)``: a quiet ``LocalCluster`` of ``workers`` one-thread processes
+    (:class:`~gyrostar.errors.ConfigError` for fewer than one)."""
+    from ..errors import ConfigError
+
+    if workers < 1:
+        raise ConfigError(f"--workers must be ≥ 1, got {workers}")
+    dd = distributed()
+    silence_logs()
+    cluster = dd.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                              dashboard_address=dashboard_address, silence_logs=logging.CRITICAL)
+    return cluster, dd.Client(cluster)

@@ -41,7 +41,7 @@ import time
 
 import numpy as np
 
-from ...errors import ConfigError, NotAvailableError
+from ...errors import ConfigError
 from .starid_peers import PEERS
 
 HELP = "star identification Monte Carlo (paper 001 Figs 10–16): pyramid, grid, extended grid/triangle"
@@ -448,30 +448,20 @@ class Runner:
     """Submits trial chunks to a Dask cluster (local unless an address is given)."""
 
     def __init__(self, scheduler: str | None, workers: int, connect_timeout_s: float = 5.0):
-        try:
-            from dask.distributed import Client, LocalCluster
-        except ImportError as exc:
-            raise NotAvailableError(f"dask.distributed is needed for the Monte Carlo: {exc}") from exc
-        import logging
+        from ..dask_quiet import distributed, local_client, quiet_worker_plugin, silence_logs
 
-        from ..dask_quiet import quiet_worker_plugin, silence_logs
-
-        silence_logs()
         self.cluster = None
         if scheduler:
+            silence_logs()
             try:
-                self.client = Client(scheduler, timeout=connect_timeout_s)
+                self.client = distributed().Client(scheduler, timeout=connect_timeout_s)
             except (OSError, TimeoutError, ValueError) as exc:
                 from ...errors import DeviceError
 
                 raise DeviceError(f"--scheduler {scheduler}: no Dask scheduler answered within "
                                   f"{connect_timeout_s:g} s ({type(exc).__name__})") from exc
         else:
-            if workers < 1:
-                raise ConfigError(f"--workers must be ≥ 1, got {workers}")
-            self.cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                        dashboard_address=None, silence_logs=logging.CRITICAL)
-            self.client = Client(self.cluster)
+            self.cluster, self.client = local_client(workers)
             self.client.register_plugin(quiet_worker_plugin())
 
     def run(self, cfg: TrialConfig, trials: int, seed: int, advance=None) -> dict:

@@ -17,7 +17,6 @@ from __future__ import annotations
 import hashlib
 import ipaddress
 import json
-import logging
 import math
 from dataclasses import dataclass
 
@@ -57,14 +56,8 @@ class Cluster:
 
     def __init__(self, workers: int = 2, scheduler: str | None = None, tls: TlsFiles | None = None,
                  config_path: str | None = None):
-        try:
-            from dask.distributed import Client, LocalCluster
-        except ImportError as exc:
-            raise NotAvailableError(f"dask.distributed is needed for the Monte Carlo: {exc}") from exc
-        from ..dask_quiet import silence_logs
+        from ..dask_quiet import distributed, local_client, silence_logs
         from .worker import preload_plugin
-
-        silence_logs()
 
         self.cluster = None
         if scheduler:
@@ -79,17 +72,14 @@ class Cluster:
             elif not is_loopback(scheduler):
                 raise ConfigError(f"--scheduler {scheduler}: a scheduler beyond loopback is used only over TLS "
                                   "(give --tls-ca, --tls-cert and --tls-key; see docs/MONTECARLO.md)")
+            silence_logs()
             try:
-                self.client = Client(scheduler, security=security, timeout=CONNECT_TIMEOUT_S)
+                self.client = distributed().Client(scheduler, security=security, timeout=CONNECT_TIMEOUT_S)
             except (OSError, TimeoutError) as exc:
                 raise DeviceError(f"--scheduler {scheduler}: no Dask scheduler answered within "
                                   f"{CONNECT_TIMEOUT_S:.0f} s ({type(exc).__name__})") from None
         else:
-            if workers < 1:
-                raise ConfigError(f"--workers must be ≥ 1, got {workers}")
-            self.cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                        dashboard_address=":0", silence_logs=logging.CRITICAL)
-            self.client = Client(self.cluster)
+            self.cluster, self.client = local_client(workers, dashboard_address=":0")
         self.client.register_plugin(preload_plugin(config_path))
         self.config_path = config_path
 
