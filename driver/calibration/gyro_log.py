@@ -64,11 +64,33 @@ def load(path: Path) -> GyroRecord:
     return GyroRecord(z["t"], z["rate"], z.get("temperature"), z.get("run"))
 
 
+LIVE_MAX_S = 12 * 3600.0     # s: a --live record at 400 Hz stays under ~1 GB
+
+
 def add_live_args(parser) -> None:
-    parser.add_argument("--i2c-bus", type=int, default=1, help="--live: Linux I2C bus number (default 1)")
-    parser.add_argument("--address", type=lambda s: int(s, 0), default=0x68, help="--live: I2C address (0x68)")
-    parser.add_argument("--range-dps", type=float, default=125.0, help="--live: gyro range, deg/s (default 125)")
-    parser.add_argument("--duration", type=float, default=600.0, help="--live: record length, s (default 600)")
+    from ..cli.argtypes import float_in, int_in
+    from ..gyro.bmi088 import RANGES_DPS
+
+    parser.add_argument("--i2c-bus", type=int_in(0, 255), default=1, help="--live: Linux I2C bus number (default 1)")
+    parser.add_argument("--address", type=_i2c_address, default=0x68,
+                        help="--live: I2C address, 0x08 … 0x77 (default 0x68)")
+    parser.add_argument("--range-dps", type=int, choices=sorted(RANGES_DPS), default=125,
+                        help="--live: gyro range, deg/s (default 125)")
+    parser.add_argument("--duration", type=float_in(10.0, LIVE_MAX_S, unit="s"), default=600.0,
+                        help=f"--live: record length, s (10 … {LIVE_MAX_S:g}; default 600)")
+
+
+def _i2c_address(text: str) -> int:
+    """A 7-bit I2C device address (0x08 … 0x77, the range not reserved), decimal or 0x hex."""
+    import argparse
+
+    try:
+        value = int(text, 0)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expects an address such as 0x68, got {text!r}") from None
+    if not 0x08 <= value <= 0x77:
+        raise argparse.ArgumentTypeError(f"must be 0x08 … 0x77, got {text!r}")
+    return value
 
 
 def record(gyro, clock, duration_s: float, range_dps: float = 125.0, step=None) -> GyroRecord:

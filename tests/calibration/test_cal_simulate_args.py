@@ -77,3 +77,25 @@ def test_bad_simulate_argument_is_refused_naming_the_flag(args, flag, tmp_path, 
     assert flag in lines[0]
     assert "Traceback" not in err and "internal error" not in err
     assert not (tmp_path / "report").exists() or not any((tmp_path / "report").iterdir())
+
+
+LIVE_CASES = [
+    (["--duration", "1e9"], "--duration"),
+    (["--duration", "nan"], "--duration"),
+    (["--range-dps", "300"], "--range-dps"),
+    (["--address", "0x99"], "--address"),
+    (["--address", "foo"], "--address"),
+    (["--i2c-bus", "-1"], "--i2c-bus"),
+]
+
+
+@pytest.mark.parametrize(("args", "flag"), LIVE_CASES, ids=[" ".join(a) for a, _ in LIVE_CASES])
+def test_bad_live_argument_is_refused_naming_the_flag(args, flag, tmp_path, capsys):
+    """``calibrate gyro-static --live``: the record length is bounded (memory), the range is one
+    the BMI088 has, the address a 7-bit one — refused before any device is opened."""
+    try:
+        code = main(["calibrate", "gyro-static", "--live", *args, "--report", str(tmp_path / "report")])
+    except SystemExit as exc:
+        code = exc.code
+    err = capsys.readouterr().err
+    assert code == USAGE and flag in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
