@@ -40,7 +40,7 @@ MAX_RATE_DPS = 2000.0     # --amplitudes: the BMI088's largest range
 def configure(parser) -> None:
     from ...calibration.report import add_common_args
     from ...cli.argtypes import existing_file, float_in, float_list_in, int_in
-    from .gyro_sim import override
+    from .gyro_sim import gyro_param_sets, override
 
     add_common_args(parser, "slew log .npz: t, rate (gyro) and t_cam, q_cam (tracker)")
     parser.add_argument("--gyro-cal", type=existing_file, default=None,
@@ -49,7 +49,8 @@ def configure(parser) -> None:
                         help="camera frames per comparison window, 1 to 1000 (default 2)")
     parser.add_argument("--max-offset-ms", type=float_in(0.0, 1000.0, lo_open=True, unit="ms"), default=50.0,
                         help="time-offset search range ±, ms, in (0, 1000] (default 50)")
-    parser.add_argument("--gyro-params", default="bmi088", help="--simulate: gyro error-model parameter set")
+    parser.add_argument("--gyro-params", default="bmi088", choices=gyro_param_sets(),
+                        help="--simulate: gyro error-model parameter set (default bmi088)")
     parser.add_argument("--set", action="append", type=override, default=None, metavar="KEY=VALUE",
                         help="--simulate: gyro parameter override (repeatable; default: "
                              + " ".join(DEFAULT_SET) + ")")

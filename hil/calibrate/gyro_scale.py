@@ -36,7 +36,7 @@ MAX_SLEW_S = 7200.0       # --duration: 2 h of slew at 20 attitudes/s
 def configure(parser) -> None:
     from ...calibration.report import add_common_args
     from ...cli.argtypes import existing_file, float_in, float_list_in
-    from .gyro_sim import override
+    from .gyro_sim import gyro_param_sets, override
 
     add_common_args(parser, "gyro log .npz: t, rate (N×3 rad/s), run and table_rate for rate-table runs; or t, "
                             "rate, t_cam and q_cam (gyrostar replay LOG --export calib) for slews")
@@ -46,7 +46,8 @@ def configure(parser) -> None:
                         help="rate table: seconds dropped at each run end, 0 to 60 (default 0.5)")
     parser.add_argument("--alignment", type=existing_file, default=None,
                         help="slew: calibration TOML whose [alignment] is applied (default: the --out file's, if any)")
-    parser.add_argument("--gyro-params", default="bmi088", help="--simulate: gyro error-model parameter set")
+    parser.add_argument("--gyro-params", default="bmi088", choices=gyro_param_sets(),
+                        help="--simulate: gyro error-model parameter set (default bmi088)")
     parser.add_argument("--set", action="append", type=override, default=None, metavar="KEY=VALUE",
                         help="--simulate: override a gyro parameter (repeatable)")
     parser.add_argument("--rates", type=float_list_in(0.0, MAX_RATE_DPS, lo_open=True, max_count=10, unit="deg/s"),

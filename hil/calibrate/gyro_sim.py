@@ -138,3 +138,10 @@ def sound_static_hours(p) -> float:
     arw2 = (p.noise_density_dps_rthz * DEG) ** 2 / 2.0 / (1.89 * tc)
     r = arw2 / gm
     return float(400.0 * tc * (1.0 + r) ** 2 / 3600.0)
+
+
+def gyro_param_sets() -> tuple[str, ...]:
+    """Names of the simulator's gyro error-model parameter sets (``--gyro-params`` choices)."""
+    from ...mocks.gyro_truth import GYRO_PARAMS
+
+    return tuple(GYRO_PARAMS)

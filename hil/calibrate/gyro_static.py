@@ -35,11 +35,12 @@ def configure(parser) -> None:
     from ...calibration.gyro_log import add_live_args
     from ...calibration.report import add_common_args
     from ...cli.argtypes import float_in, positive_float
-    from .gyro_sim import override
+    from .gyro_sim import gyro_param_sets, override
 
     add_common_args(parser, "static gyro log (.npz with t [s], rate [rad/s, N×3], optional temperature [C])", live=True)
     add_live_args(parser)
-    parser.add_argument("--gyro-params", default="bmi088", help="--simulate: gyro error-model parameter set")
+    parser.add_argument("--gyro-params", default="bmi088", choices=gyro_param_sets(),
+                        help="--simulate: gyro error-model parameter set (default bmi088)")
     parser.add_argument("--set", action="append", type=override, default=None, metavar="KEY=VALUE",
                         help="--simulate: override a gyro parameter (repeatable; default "
                              "bias_instability_dph=20 bias_tau_s=10, see the module docstring)")

@@ -58,6 +58,9 @@ CASES = [
     (["camera", "--fields", "100000000"], "--fields"),
     (["camera", "--mag-limit", "nan"], "--mag-limit"),
     (["camera", "--fix", "bogus"], "--fix"),
+    (["gyro-static", "--gyro-params", "foo"], "--gyro-params"),
+    (["alignment", "--gyro-params", "foo"], "--gyro-params"),
+    (["gyro-scale", "--gyro-params", "foo"], "--gyro-params"),
 ]
 
 
