@@ -475,9 +475,8 @@ def _search(b, vec, vmag, is_nav, pt, pa, pb, kv, km, kq, vstart, vstars, vvec, 
                     # unambiguous both ways again at the refined attitude (the labels were given at
                     # the pyramid's own): a spot with two indexed stars in reach, or a star with two
                     # spots in reach, keeps no label — a close pair's members swap under the noise
-                    if drop_ambiguous(b, q, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, label_tol, out) \
-                            + drop_shared(b, q, vec, label_tol, out) > 0:
-                        q, out, nok, _ = verify_matches(b, vec, out, label_tol)
+                    q, out, nok = drop_unclear(b, q, out, nok, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius,
+                                               label_tol)
                     # every further label: a random spot near a star of the right magnitude
                     for s in range(n):
                         if out[s] >= 0 and s != i and s != j and s != k and s != br:
@@ -626,6 +625,18 @@ def label_rest(b, q, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, tol, m
 
 
 @njit(cache=True)
+def drop_unclear(b, q, match, nok, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, label_tol):
+    """Labels unambiguous both ways at attitude ``q``: a spot with two indexed stars in reach
+    (:func:`~gyrostar.starid.verify.drop_ambiguous`) or a star with two spots in reach
+    (:func:`~gyrostar.starid.verify.drop_shared`) keeps none; the attitude solved again when
+    any went. Returns ``(q, match, nok)``."""
+    if drop_ambiguous(b, q, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, label_tol, match) \
+            + drop_shared(b, q, vec, label_tol, match) > 0:
+        q, match, nok, _ = verify_matches(b, vec, match, label_tol)
+    return q, match, nok
+
+
+@njit(cache=True)
 def relabel_wide(b, q, match, nok, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, label_tol, smag, mwin):
     """The accepted attitude's labels made again from scratch (in the neighbourhood the bound
     accepted): unambiguous labels within ``RELABEL_WIDE`` × ``label_tol`` of it (four at
@@ -650,9 +661,8 @@ def relabel_wide(b, q, match, nok, vec, vmag, vstart, vstars, vvec, vh, vg, fov_
     fresh = -np.ones(n, dtype=np.int64)
     label_rest(b, q1, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, label_tol, fresh, smag, mwin)
     q2, fresh, n2, _ = verify_matches(b, vec, fresh, label_tol)
-    if n2 > nok and drop_ambiguous(b, q2, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, label_tol, fresh) \
-            + drop_shared(b, q2, vec, label_tol, fresh) > 0:
-        q2, fresh, n2, _ = verify_matches(b, vec, fresh, label_tol)
+    if n2 > nok:
+        q2, fresh, n2 = drop_unclear(b, q2, fresh, n2, vec, vmag, vstart, vstars, vvec, vh, vg, fov_radius, label_tol)
     if n2 > nok:
         return q2, fresh
     return q, match

@@ -48,19 +48,17 @@ def run_sweeps(args, base, runner) -> dict:
     out: dict = {"figures": {}, "plots": []}
     with progress(args, "starid sweeps", sum(points[f] for f in figs)) as adv:
         for fig in figs:
-            if fig == "fig10":
-                b = dataclasses.replace(base, mag_noise=0.2)
-                out["figures"][fig] = {"title": "success vs position noise (MN 0.2)", "xlabel": "position noise (px)",
-                                       "ylabel": "success rate", "x": list(PN_POINTS), "series": {
-                    "extended grid": _series(runner, b, n, seed, "pos_noise_px", PN_POINTS, "success_rate", adv),
-                    "extended triangle": _series(runner, b, n, seed, "pos_noise_px", PN_POINTS, "success_rate", adv,
-                                                 method="extended-triangle")}}
-            elif fig == "fig11":
-                b = dataclasses.replace(base, pos_noise_px=0.3)
-                out["figures"][fig] = {"title": "success vs magnitude noise (PN 0.3 px)", "xlabel": "magnitude noise",
-                                       "ylabel": "success rate", "x": list(MN_POINTS), "series": {
-                    "extended grid": _series(runner, b, n, seed, "mag_noise", MN_POINTS, "success_rate", adv),
-                    "extended triangle": _series(runner, b, n, seed, "mag_noise", MN_POINTS, "success_rate", adv,
+            if fig in ("fig10", "fig11"):
+                key, pts, fixed, title, xlabel = (
+                    ("pos_noise_px", PN_POINTS, {"mag_noise": 0.2}, "success vs position noise (MN 0.2)",
+                     "position noise (px)") if fig == "fig10" else
+                    ("mag_noise", MN_POINTS, {"pos_noise_px": 0.3}, "success vs magnitude noise (PN 0.3 px)",
+                     "magnitude noise"))
+                b = dataclasses.replace(base, **fixed)
+                out["figures"][fig] = {"title": title, "xlabel": xlabel, "ylabel": "success rate", "x": list(pts),
+                                       "series": {
+                    "extended grid": _series(runner, b, n, seed, key, pts, "success_rate", adv),
+                    "extended triangle": _series(runner, b, n, seed, key, pts, "success_rate", adv,
                                                  method="extended-triangle")}}
             elif fig == "fig12":
                 out["figures"][fig] = {"title": "extended grid success vs position noise (T = 1 s)",
