@@ -184,7 +184,9 @@ def loop_params(cfg: hc.FlatsatConfig, e_per_dn: float | None = None, scen: hc.S
         # 3σ of its per-part draw (what a calibration's uncertainty would give)
         bias_prior = 3.0 * max(max(abs(v) for v in gp.bias_dps), gp.bias_sigma_dps, 0.002) * DEG
     p = LoopParams(frame_hz=lc.frame_hz, exposure_s=cfg.head.exposure_ms * 1e-3, window_k=lc.window_k,
-                   max_stars=lc.max_stars, min_stars=lc.min_stars, coast_timeout_s=lc.coast_timeout_s,
+                   max_stars=lc.max_stars, min_stars=lc.min_stars,
+                   coast_timeout_s=scen.coast_timeout_s if scen is not None and scen.coast_timeout_s > 0
+                   else lc.coast_timeout_s,
                    acquire_every_s=lc.acquire_every_s, mag_limit=lc.mag_limit, confirm_images=lc.confirm_images,
                    wrong_id_rejects=lc.wrong_id_rejects, neighbour_sep_px=lc.neighbour_sep_px,
                    reconnect_every_s=lc.reconnect_every_s, head_timeouts_lost=lc.head_timeouts_lost, gyro_arw=arw,

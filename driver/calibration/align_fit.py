@@ -14,7 +14,8 @@ bias. Over windows of ``lag`` camera frames the camera rotation vector
 
 Steps (:func:`fit_alignment`): the window increments against a general linear map ``M``
 (the rotation and the gyro's scale/cross-axis errors, so these do not leak into δt) and the
-bias, by linear least squares for each δt; δt from the profile likelihood (each camera axis
+bias, by weighted least squares for each δt (each window weighted by its noise: the camera's
+and the gyro's walk over its span); δt from the profile likelihood (each camera axis
 its own noise: the roll axis of a star tracker is several times noisier than the
 cross-boresight axes); ``R`` the rotation factor of ``M``.
 
@@ -35,6 +36,8 @@ from .scale_fit import NotDetermined, attitude_increments, check_determined
 
 ROTATION_SIGMA_MAX = np.radians(0.5)   # rad, 1-σ per axis: a slew about two axes gives arcminutes or better
 OFFSET_SIGMA_MAX = 5e-3                # s, 1-σ of δt
+MAX_WINDOW_ANGLE = np.radians(170.0)   # rad: a window turning more has no unique rotation vector
+MAX_ACCEL = np.radians(100.0)          # rad/s²: frames exposed under a harder angular acceleration are left out
 SLEW_HINT = "slew back and forth about at least two axes at several °/s"
 
 
@@ -95,14 +98,21 @@ def coarse_offset(gi: GyroIntegral, t_c: np.ndarray, phi1: np.ndarray, max_offse
 
 def fit_alignment(t_g: np.ndarray, w_g: np.ndarray, t_c: np.ndarray, q_c: np.ndarray, lag: int = 10,
                   max_offset: float = 0.05, coarse_step: float = 0.5e-3, iterations: int = 15,
-                  arw: float | None = None) -> AlignFit:
+                  arw: float | None = None, max_accel: float = MAX_ACCEL) -> AlignFit:
     """Estimate ``R``, ``δt`` and ``b`` (see module docstring).
 
     The window increments are fitted with a general linear map ``M`` (camera ← gyro: rotation,
     and the gyro's scale-factor and cross-axis errors) rather than a rotation: with a rotation
     alone, a 3300 ppm scale error on a 4 °/s slew is a rate error the fit can only explain by
     shifting δt (several ms on the ``miscal`` ramps). For a given δt, ``M`` and ``M b`` follow by
-    linear least squares per camera axis; δt minimises the profile likelihood Σ_a log RSS_a (each
+    weighted least squares per camera axis, each window weighted by its noise — the camera's
+    (estimated from the residuals) plus, with ``arw``, the gyro's N²·T over the window, so a
+    window across a fast slew between two rests counts for what it is; windows turning
+    more than :data:`MAX_WINDOW_ANGLE` (a rotation vector near 180° is ambiguous) are left
+    out, and so are frames exposed while the gyro's rate changed faster than ``max_accel``
+    (rad/s², over ±5 ms: the start of a fast slew — the exposure-averaged star position leaves
+    the mid-exposure one by α·T²/24, and the gyro's low-pass lag is not a pure delay there;
+    rate reversals of a few °/s² stay). δt minimises the profile likelihood Σ_a log RSS_a (each
     camera axis its own noise: roll is noisier), first on a ``coarse_step`` grid over
     ±``max_offset``, then by a bounded scalar search. ``R`` is the rotation factor of ``M``
     (polar decomposition), ``b = M⁻¹(M b)``. ``iterations`` is kept for callers; unused.
@@ -122,9 +132,17 @@ def fit_alignment(t_g: np.ndarray, w_g: np.ndarray, t_c: np.ndarray, q_c: np.nda
     gi = GyroIntegral(t_g, w_g)
     inside = (t_c - max_offset > gi.t[0]) & (t_c + max_offset < gi.t[-1])
     t_c, q_c = t_c[inside], q_c[inside]
+    ta, tb = np.clip(t_c - 5e-3, gi.t[0], gi.t[-1]), np.clip(t_c + 5e-3, gi.t[0], gi.t[-1])
+    calm = np.linalg.norm(gi.rate(tb) - gi.rate(ta), axis=1) <= max_accel * np.maximum(tb - ta, 1e-9)
+    t_c, q_c = t_c[calm], q_c[calm]
+    if len(t_c) < 3 * lag + 3:
+        raise ConfigError(f"only {len(t_c)} camera epochs inside the gyro's span and under "
+                          f"{np.degrees(max_accel):g} °/s² of angular acceleration; need {3 * lag + 3}")
     phi1 = attitude_increments(q_c)
     d0 = coarse_offset(gi, t_c, phi1, max_offset, coarse_step)
     idx = np.arange(0, len(t_c) - lag, lag)
+    turn = np.linalg.norm(gi.at(t_c[idx + lag] - d0) - gi.at(t_c[idx] - d0), axis=1)
+    idx = idx[turn < MAX_WINDOW_ANGLE]
     t0, t1 = t_c[idx], t_c[idx + lag]
     phi = _increments(q_c, idx, lag)
     span = t1 - t0
@@ -132,15 +150,33 @@ def fit_alignment(t_g: np.ndarray, w_g: np.ndarray, t_c: np.ndarray, q_c: np.nda
     if n < 12:
         raise ConfigError(f"only {n} windows of {lag} frames: too few for the gyro map and the time offset")
 
+    # each window's noise per camera axis: the camera's (two attitudes, c_a) and the gyro's
+    # angle random walk over its span (N²·T); a window across a fast slew between two rests
+    # spans seconds, the others a few frames. Weighted least squares with these variances
+    # (c_a from the residuals); without ``arw`` every window weighs the same (c_a alone)
+    g = (arw * arw if arw else 0.0) * span
+    wts = np.ones((3, n))
+
     def regress(dt):
         x = np.column_stack([gi.at(t1 - dt) - gi.at(t0 - dt), -span])
-        coef, *_ = np.linalg.lstsq(x, phi, rcond=None)      # φ ≈ x @ coef: coef[:3] = Mᵀ, coef[3] = M b
+        coef = np.empty((4, 3))
+        for a in range(3):                                  # φ_a ≈ x @ coef[:, a]: coef[:3] = Mᵀ, coef[3] = M b
+            sw = np.sqrt(wts[a])
+            coef[:, a] = np.linalg.lstsq(x * sw[:, None], phi[:, a] * sw, rcond=None)[0]
         res = phi - x @ coef
         return coef, res, x
 
+    def noise_weights(res):
+        floor = 0.01 * float(np.mean(g)) if arw else 1.0
+        c = np.maximum(np.mean(res ** 2 - g[:, None], axis=0), floor)
+        return 1.0 / (c[:, None] + g[None, :])
+
+    for _ in range(2):
+        wts = noise_weights(regress(d0)[1])
+
     def nll(dt):
         _, res, _ = regress(dt)
-        return 0.5 * n * float(np.sum(np.log(np.maximum((res ** 2).sum(axis=0), 1e-300))))
+        return 0.5 * n * float(np.sum(np.log(np.maximum((wts.T * res ** 2).sum(axis=0), 1e-300))))
 
     grid = np.arange(-max_offset, max_offset + coarse_step / 2, coarse_step)
     costs = np.array([nll(d) for d in grid])
@@ -156,17 +192,23 @@ def fit_alignment(t_g: np.ndarray, w_g: np.ndarray, t_c: np.ndarray, q_c: np.nda
     u, _, vt = np.linalg.svd(m)
     rot = u @ np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))]) @ vt
     bias = np.linalg.solve(m, coef[3])
-    # rotation angles from the antisymmetric part of M: θ_x = (M₂₁ − M₁₂)/2, …; rows independent
-    xtx_inv = np.linalg.inv(x.T @ x)
-    var_row = (res ** 2).sum(axis=0) / max(n - 4, 1)
-    var_m = var_row[:, None] * np.diag(xtx_inv)[None, :3]        # var of M[a, j]
+    # rotation angles from the antisymmetric part of M: θ_x = (M₂₁ − M₁₂)/2, …; rows independent.
+    # var of M[a, j] from row a's weighted fit, scaled by its χ²/dof
+    var_m = np.empty((3, 3))
+    var_g = np.empty((3, 3))
+    for a in range(3):
+        xw = x * wts[a][:, None]
+        inv = np.linalg.inv(x.T @ xw)
+        chi2 = float(np.sum(wts[a] * res[:, a] ** 2)) / max(n - 4, 1)
+        var_m[a] = chi2 * np.diag(inv)[:3]
+        var_g[a] = np.diag(inv @ (xw.T @ (xw * g[:, None])) @ inv)[:3]   # the gyro's share (sandwich)
     rot_sigma = 0.5 * np.sqrt(np.array([var_m[2, 1] + var_m[1, 2], var_m[0, 2] + var_m[2, 0],
                                         var_m[1, 0] + var_m[0, 1]]))
     _check(rot_sigma, dt_sigma, m, var_m)
     rot_sigma_gyro = None
     if arw is not None and arw > 0:
-        var_g = arw * arw * float(np.mean(span)) * np.diag(xtx_inv)[:3]   # var of M[a, j], any row a
-        rot_sigma_gyro = 0.5 * np.sqrt(np.array([var_g[1] + var_g[2], var_g[2] + var_g[0], var_g[0] + var_g[1]]))
+        rot_sigma_gyro = 0.5 * np.sqrt(np.array([var_g[2, 1] + var_g[1, 2], var_g[0, 2] + var_g[2, 0],
+                                                 var_g[1, 0] + var_g[0, 1]]))
     return AlignFit(rot, dt_off, bias, rot_sigma, dt_sigma, np.sqrt((res ** 2).mean(axis=0)), d0, n, m,
                     rot_sigma_gyro)
 

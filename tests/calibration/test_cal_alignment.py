@@ -5,10 +5,11 @@ import json
 
 import numpy as np
 import pytest
-from gyrostar.attitude import quat_propagate
+from gyrostar.attitude import dcm_to_quat, quat_propagate, quat_to_dcm
 from gyrostar.calibration.align_fit import fit_alignment, rotation_angle, wahba_svd
 from gyrostar.calibration.intrinsics import rotvec_dcm
 from gyrostar.cli.main import main
+from gyrostar.errors import ConfigError
 
 ARCSEC = np.pi / 180 / 3600
 
@@ -105,3 +106,79 @@ def test_alignment_simulated_meets_acceptance(tmp_path, capsys):
     assert abs(par["time_offset_ms"]["error"]) < 0.5
     assert out["filter_delay_ms"] > 1.0  # the gyro's filter lag is part of the offset found
     assert code == 0
+
+
+def _rest_to_rest(turns_deg, rate_dps=200.0, soft_dps=20.0, soft_s=0.4, ramp_s=0.2, rest_s=1.3, fs=2000.0):
+    """Body rate (n, 3) rad/s at ``fs`` Hz for slews about single axes (``turns_deg``: (k, 3),
+    one non-zero entry each) from rest to rest, ``rest_s`` between: up to ``soft_dps`` in
+    ``soft_s`` (gently: the frames there are measured), on to ``rate_dps`` in ``ramp_s``,
+    cruise, back to rest in ``ramp_s``; returns (t, rate, at_rest)."""
+    pieces, rest = [], []
+    for turn in np.asarray(turns_deg, float):
+        n_rest = int(rest_s * fs)
+        pieces.append(np.zeros((n_rest, 3)))
+        rest.append(np.ones(n_rest, bool))
+        ang = float(np.abs(turn).sum())
+        cruise = (ang - soft_dps * soft_s / 2 - (soft_dps + rate_dps) * ramp_s / 2 - rate_dps * ramp_s / 2) / rate_dps
+        knots_t = np.cumsum([0.0, soft_s, ramp_s, cruise, ramp_s])
+        t = np.arange(int(knots_t[-1] * fs)) / fs
+        prof = np.interp(t, knots_t, [0.0, soft_dps, rate_dps, rate_dps, 0.0])
+        pieces.append(np.radians(prof)[:, None] * np.sign(turn)[None, :])
+        rest.append(np.zeros(len(t), bool))
+    pieces.append(np.zeros((int(rest_s * fs), 3)))
+    rest.append(np.ones(int(rest_s * fs), bool))
+    w = np.concatenate(pieces)
+    return np.arange(len(w)) / fs, w, np.concatenate(rest)
+
+
+def test_rest_to_rest_slews_weigh_each_window_by_its_noise():
+    """Fast slews between rests, the camera seen only below 20 °/s (as the loop measures):
+    the windows across a slew span seconds and carry the gyro's N²·T, the others
+    a few frames; frames under the hard accelerations are left out (the gentle start of each
+    slew keeps the time offset observable). The fit's 1-σ of the rotation then matches its scatter over noise draws
+    (as a whole: across a 150° turn the camera's noisy roll at one end lands on a
+    cross-boresight axis at the other, which the per-axis noise model does not follow), and
+    a turn of more than 180° (no unique rotation vector) is left out rather than bending the
+    map."""
+    arw, fs = 1.7277e-4, 2000.0
+    turns = [[150, 0, 0], [0, 150, 0], [0, 0, 150], [-150, 0, 0], [0, -150, 0], [0, 0, -150]] * 3 + [[200, 0, 0]]
+    t, w, rest = _rest_to_rest(turns, fs=fs)
+    q = np.empty((len(t), 4))
+    q[0] = [0, 0, 0, 1]
+    for i in range(1, len(t)):
+        q[i] = quat_propagate(q[i - 1], 0.5 * (w[i] + w[i - 1]), 1 / fs)
+    r = rotvec_dcm(np.radians([[0.212, -0.15, 0.15]]))[0]
+    tg = np.arange(0.05, t[-1] - 0.05, 1 / 400.0)
+    rate = np.column_stack([np.interp(tg, t, w[:, a]) for a in range(3)]) @ r      # gyro axes
+    k = np.arange(0, len(t), 20)                                                     # 100 Hz, where the loop
+    k = k[np.linalg.norm(w[k], axis=1) < np.radians(20.0)]                           # measures (< 20 °/s)
+    k = k[(t[k] > 0.1) & (t[k] < t[-1] - 0.1)]
+    rng = np.random.default_rng(11)
+    cam_sigma = np.array([5.0, 5.0, 30.0]) * ARCSEC                                  # cross-boresight, roll
+    errs, fits = [], []
+    for _ in range(20):
+        noise = rotvec_dcm(rng.normal(0.0, 1.0, (len(k), 3)) * cam_sigma)
+        qn = np.array([dcm_to_quat(nz @ quat_to_dcm(qq)) for nz, qq in zip(noise, q[k])])
+        wg = rate + rng.normal(0.0, arw * np.sqrt(400.0), rate.shape)
+        fit = fit_alignment(tg, wg, t[k], qn, lag=2, max_offset=4e-3, arw=arw)
+        d = fit.rotation @ r.T
+        errs.append(0.5 * np.array([d[2, 1] - d[1, 2], d[0, 2] - d[2, 0], d[1, 0] - d[0, 1]]))
+        fits.append(fit)
+    scatter = np.sqrt(np.mean(np.sum(np.square(errs), axis=1)))        # RMS of the error's norm
+    sigma = np.sqrt(np.mean([np.sum(f.rotation_sigma ** 2) for f in fits]))
+    limit = np.sqrt(np.sum(fits[0].rotation_sigma_gyro ** 2))
+    assert scatter / ARCSEC < 12.0                               # 18 slews of 150°: a few arcsec per axis
+    assert 0.7 < scatter / sigma < 1.4                           # 20 draws of 3 axes: ±10 % 1-σ on the RMS
+    assert 0.5 < limit / sigma < 1.0                             # the gyro's share, the camera's the rest
+    # the frames on the hard ramps (1000 °/s², under 20 °/s at the end of each slew) are out:
+    # 2 per slew at 100 Hz over 0.02 s, in windows of 2 frames
+    every = fit_alignment(tg, wg, t[k], qn, lag=2, max_offset=4e-3, arw=arw, max_accel=np.inf)
+    assert every.n_windows - fits[-1].n_windows >= len(turns) // 2
+
+
+def test_camera_epochs_all_under_hard_acceleration_are_refused_naming_it(sine_slew):
+    t, q, omega = sine_slew(2000.0, 20.0)
+    tg = np.arange(0.2, 19.8, 1 / 400.0)
+    k = np.arange(100, len(t) - 100, 20)
+    with pytest.raises(ConfigError, match="°/s² of angular acceleration"):
+        fit_alignment(tg, omega(tg), t[k], q[k], lag=5, max_accel=np.radians(0.1))

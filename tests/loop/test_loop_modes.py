@@ -75,3 +75,15 @@ def test_thresholds_come_from_the_config():
     cfg.loop.confirm_images, cfg.loop.coast_timeout_s, cfg.loop.min_stars = 7, 2.5, 3
     mp = loop_params(cfg).mode_params()
     assert (mp.confirm_images, mp.coast_timeout_s, mp.min_stars) == (7, 2.5, 3)
+
+
+def test_a_scenario_may_set_its_own_coast_timeout():
+    """A manoeuvre of fast slews (the built-in ``miscal``) sets a short coast timeout so the
+    loop re-acquires after each; a scenario without one keeps the config's."""
+    from gyrostar.hil import config as hc
+    from gyrostar.hil.flatsat import loop_params
+
+    cfg = hc.load_flatsat()
+    cfg.loop.coast_timeout_s = 2.5
+    assert loop_params(cfg, scen=hc.load_scenario("miscal")).mode_params().coast_timeout_s == 0.3
+    assert loop_params(cfg, scen=hc.load_scenario("demo")).mode_params().coast_timeout_s == 2.5
