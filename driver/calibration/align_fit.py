@@ -38,7 +38,8 @@ ROTATION_SIGMA_MAX = np.radians(0.5)   # rad, 1-σ per axis: a slew about two ax
 OFFSET_SIGMA_MAX = 5e-3                # s, 1-σ of δt
 MAX_WINDOW_ANGLE = np.radians(170.0)   # rad: a window turning more has no unique rotation vector
 MAX_ACCEL = np.radians(100.0)          # rad/s²: frames exposed under a harder angular acceleration are left out
-SLEW_HINT = "slew back and forth about at least two axes at several °/s"
+SLEW_HINT = ("slew back and forth about at least two axes at several °/s; for the rotation to arcseconds, fast "
+             "rest-to-rest slews about each axis (the miscal scenario, docs/FLATSAT.md §8)")
 
 
 @dataclass
