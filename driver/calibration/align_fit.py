@@ -154,7 +154,7 @@ def fit_alignment(t_g: np.ndarray, w_g: np.ndarray, t_c: np.ndarray, q_c: np.nda
     # each window's noise per camera axis: the camera's (two attitudes, c_a) and the gyro's
     # angle random walk over its span (N²·T); a window across a fast slew between two rests
     # spans seconds, the others a few frames. Weighted least squares with these variances
-    # (c_a from the residuals); without ``arw`` every window weighs the same (c_a alone)
+    # (c_a from the residuals); without ``arw`` every window weighs the same
     g = (arw * arw if arw else 0.0) * span
     wts = np.ones((3, n))
 
@@ -168,12 +168,12 @@ def fit_alignment(t_g: np.ndarray, w_g: np.ndarray, t_c: np.ndarray, q_c: np.nda
         return coef, res, x
 
     def noise_weights(res):
-        floor = 0.01 * float(np.mean(g)) if arw else 1.0
-        c = np.maximum(np.mean(res ** 2 - g[:, None], axis=0), floor)
+        c = np.maximum(np.mean(res ** 2 - g[:, None], axis=0), 0.01 * float(np.mean(g)))
         return 1.0 / (c[:, None] + g[None, :])
 
-    for _ in range(2):
-        wts = noise_weights(regress(d0)[1])
+    if arw:
+        for _ in range(2):
+            wts = noise_weights(regress(d0)[1])
 
     def nll(dt):
         _, res, _ = regress(dt)
@@ -203,15 +203,16 @@ def fit_alignment(t_g: np.ndarray, w_g: np.ndarray, t_c: np.ndarray, q_c: np.nda
         chi2 = float(np.sum(wts[a] * res[:, a] ** 2)) / max(n - 4, 1)
         var_m[a] = chi2 * np.diag(inv)[:3]
         var_g[a] = np.diag(inv @ (xw.T @ (xw * g[:, None])) @ inv)[:3]   # the gyro's share (sandwich)
-    rot_sigma = 0.5 * np.sqrt(np.array([var_m[2, 1] + var_m[1, 2], var_m[0, 2] + var_m[2, 0],
-                                        var_m[1, 0] + var_m[0, 1]]))
+    rot_sigma = _rotation_sigma(var_m)
     _check(rot_sigma, dt_sigma, m, var_m)
-    rot_sigma_gyro = None
-    if arw is not None and arw > 0:
-        rot_sigma_gyro = 0.5 * np.sqrt(np.array([var_g[2, 1] + var_g[1, 2], var_g[0, 2] + var_g[2, 0],
-                                                 var_g[1, 0] + var_g[0, 1]]))
+    rot_sigma_gyro = _rotation_sigma(var_g) if arw else None
     return AlignFit(rot, dt_off, bias, rot_sigma, dt_sigma, np.sqrt((res ** 2).mean(axis=0)), d0, n, m,
                     rot_sigma_gyro)
+
+
+def _rotation_sigma(var: np.ndarray) -> np.ndarray:
+    """1-σ of the rotation angles θ_x = (M₂₁ − M₁₂)/2, … from the variances of M's elements (rad)."""
+    return 0.5 * np.sqrt(np.array([var[2, 1] + var[1, 2], var[0, 2] + var[2, 0], var[1, 0] + var[0, 1]]))
 
 
 def _check(rot_sigma: np.ndarray, dt_sigma: float, m: np.ndarray, var_m: np.ndarray) -> None:
