@@ -89,11 +89,12 @@ class HeadTap:
 
 def measure(spans: np.ndarray, values: np.ndarray, omega=None, camera=None, exposure_s: float = 0.0,
             psf_sigma_px: float = 0.85, e_per_dn: float = 5.0) -> np.ndarray:
-    """(n, 3) [window_id, u, v] of every window with a spot: thresholded CoG, refined by the
+    """(n, 4) [window_id, u, v, σ] of every window with a spot: thresholded CoG, refined by the
     fit of the PSF smeared along the spot's path over the exposure (from the body rate
     ``omega`` rad/s, camera axes) when given — a CoG is pulled towards the window's centre
     when the window clips the spot, and the windows were placed through the run's camera
-    model, the very model being calibrated."""
+    model, the very model being calibrated. σ (px per axis) is the fit's CRLB, the RMS of its
+    two axes; NaN for a plain CoG."""
     from ..core.centroid import cog, smear_fit, window_background, window_spans_of
 
     rows = []
@@ -108,14 +109,17 @@ def measure(spans: np.ndarray, values: np.ndarray, omega=None, camera=None, expo
         u, v, flux, npix = cog(sp, wv, bg, bg + THRESH_SIGMA * noise)
         if npix < 3 or not np.isfinite(u):
             continue
+        sigma = np.nan
         if omega is not None and camera is not None:
             off = smear_offsets(u, v, omega, camera, exposure_s)
-            fu, fv, _, _, _, _ = smear_fit(sp, wv, bg, u, v, off, psf_sigma_px, noise * noise, e_per_dn, 20, 1e-4)
+            fu, fv, _, var_u, var_v, _ = smear_fit(sp, wv, bg, u, v, off, psf_sigma_px, noise * noise, e_per_dn,
+                                                    20, 1e-4)
             if not (np.isfinite(fu) and np.isfinite(fv) and abs(fu - u) < 2.0 and abs(fv - v) < 2.0):
                 continue                   # a spot the model does not describe: not a calibration point
             u, v = fu, fv
-        rows.append((wid, u, v))
-    return np.array(rows, float).reshape(-1, 3)
+            sigma = float(np.sqrt(0.5 * (var_u + var_v)))
+        rows.append((wid, u, v, sigma))
+    return np.array(rows, float).reshape(-1, 4)
 
 
 def smear_offsets(u: float, v: float, omega: np.ndarray, camera, exposure_s: float) -> np.ndarray:
@@ -171,7 +175,7 @@ def export_calib(path: str | Path, out: str | Path) -> dict:
     cfg = gconfig.from_dict(meta["config"], hc.FlatsatConfig, source="log META")
     cat = load_catalog(cfg.sim.catalog, max(cfg.loop.mag_limit, cfg.sim.mag_limit))
     pos = {int(i): k for k, i in enumerate(cat.ids)}
-    fields, uvs, refs, sids, t_cam = [], [], [], [], []
+    fields, uvs, refs, sids, sigmas, t_cam = [], [], [], [], [], []
     t_g = np.concatenate(gtap.t) if gtap.t else np.zeros(0)
     rate = np.concatenate(gtap.rate) if gtap.rate else np.zeros((0, 3))
     exposure_s = cfg.head.exposure_ms * 1e-3
@@ -186,7 +190,7 @@ def export_calib(path: str | Path, out: str | Path) -> dict:
         rec = outputs[k]
         if rec["mode"] != 1:          # TRACK only: identities are those of an attitude that holds
             continue
-        ids = identify(spots[:, 1:], rec)
+        ids = identify(spots[:, 1:3], rec)
         sel = [i for i in range(len(ids)) if ids[i] >= 0 and int(ids[i]) in pos]
         if len(sel) < 3:
             continue
@@ -194,15 +198,18 @@ def export_calib(path: str | Path, out: str | Path) -> dict:
         t_cam.append(t_mid)
         for i in sel:
             fields.append(f)
-            uvs.append(spots[i, 1:])
+            uvs.append(spots[i, 1:3])
+            sigmas.append(spots[i, 3])
             refs.append(cat.vectors[pos[int(ids[i])]])
             sids.append(int(ids[i]))
     field = np.array(fields, np.int64)
     uv = np.array(uvs, float).reshape(-1, 2)
     ref = np.array(refs, float).reshape(-1, 3)
     t_cam = np.array(t_cam, float)
-    ok, q_cam = field_attitudes(field, uv, ref, loop.camera, len(t_cam))
+    uv_sigma = np.array(sigmas, float)
+    ok, q_cam = field_attitudes(field, uv, ref, loop.camera, len(t_cam), uv_sigma=uv_sigma)
     np.savez_compressed(out, t=t_g, rate=rate, field=field, uv=uv, ref=ref, star_id=np.array(sids, np.int64),
+                        uv_sigma=uv_sigma,
                         t_cam=t_cam, q_cam=q_cam, camera=loop.camera.as_array(),
                         meta=np.array(json.dumps({"log": str(path), "scenario": meta.get("scenario", {}).get("name"),
                                                   "calibration": (meta.get("calibration") or {}).get("sha256")})))

@@ -331,6 +331,7 @@ class Scenario:
     mag_limit: float = 0.0             # overrides sim.mag_limit when > 0
     camera_sigma_px: float = 0.0       # overrides loop.camera_sigma_px when > 0 and no [camera] calibration is loaded
     coast_timeout_s: float = 0.0       # overrides loop.coast_timeout_s when > 0 (s): fast slews, re-acquire after each
+    acquire_every_s: float = 0.0       # overrides loop.acquire_every_s when > 0 (s): re-acquire soon after a fast slew
     truth: TrueDevices = field(default_factory=TrueDevices)   # simulated devices off their nominal models
     gyro_overrides: dict[str, float] = field(default_factory=dict)  # fields of the gyro error set replaced
     false_spots: list[tuple[float, float, float]] = field(default_factory=list)  # [col, row, vmag] glints
@@ -344,6 +345,8 @@ class Scenario:
             raise ValueError(f"duration_s = {self.duration_s} must be positive")
         if not 0.0 <= self.coast_timeout_s <= 60.0:
             raise ValueError(f"coast_timeout_s = {self.coast_timeout_s} must be in [0, 60] s (0: the config's)")
+        if not 0.0 <= self.acquire_every_s <= 60.0:
+            raise ValueError(f"acquire_every_s = {self.acquire_every_s} must be in [0, 60] s (0: the config's)")
         if not 0.0 <= self.min_track_fraction <= 1.0:
             raise ValueError(f"min_track_fraction = {self.min_track_fraction} must be in [0, 1]")
         if self.max_error_arcsec_1sigma < 0:

@@ -187,7 +187,8 @@ def loop_params(cfg: hc.FlatsatConfig, e_per_dn: float | None = None, scen: hc.S
                    max_stars=lc.max_stars, min_stars=lc.min_stars,
                    coast_timeout_s=scen.coast_timeout_s if scen is not None and scen.coast_timeout_s > 0
                    else lc.coast_timeout_s,
-                   acquire_every_s=lc.acquire_every_s, mag_limit=lc.mag_limit, confirm_images=lc.confirm_images,
+                   acquire_every_s=scen.acquire_every_s if scen is not None and scen.acquire_every_s > 0
+                   else lc.acquire_every_s, mag_limit=lc.mag_limit, confirm_images=lc.confirm_images,
                    wrong_id_rejects=lc.wrong_id_rejects, neighbour_sep_px=lc.neighbour_sep_px,
                    reconnect_every_s=lc.reconnect_every_s, head_timeouts_lost=lc.head_timeouts_lost, gyro_arw=arw,
                    gyro_delay_s=delay, gyro_lowpass_hz=lowpass, gyro_rate_error=rate_error,

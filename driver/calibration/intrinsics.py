@@ -9,7 +9,13 @@ Solver: Gauss–Newton with analytic Jacobians; each field's 3 attitude correcti
 eliminated by the Schur complement, so the normal equations are 8×8 whatever the number
 of fields. Robustness: Huber weights (threshold ``huber_k`` × robust σ from the MAD of the
 residual norms) and, after convergence, rejection of residuals above ``reject_k`` × σ
-(misidentified stars), then a refit. Weak zero-mean priors on k2 and k3 (σ set by
+(misidentified stars), then a refit. When the table gives each observation's centroid σ
+(``sigma``: the smeared-PSF fit's CRLB, which ``--export calib`` writes) every observation is
+weighted by ``1/σ_eff²`` with ``σ_eff² = σ² + OBS_FLOOR_PX² + n·CLUSTER_FLOOR_PX²`` (n: the
+observations of the same star in the same half-pixel cell — a star held at one pixel keeps
+its fixed-pattern, blend and pixel-phase error in every frame, so a rest of a hundred frames
+counts as about one measurement, not a hundred); the robust weights and the rejection then
+act on residuals in units of σ_eff. Weak zero-mean priors on k2 and k3 (σ set by
 ``prior_k2``/``prior_k3``) keep the terms a narrow field cannot see bounded; where the data
 determine them the priors are negligible.
 
@@ -26,6 +32,9 @@ import numpy as np
 from ..errors import ConfigError
 
 NAMES = ("f_px", "cx_px", "cy_px", "k1", "k2", "k3", "p1", "p2")
+OBS_FLOOR_PX = 0.02       # px per axis: least error of one centroid (pixel response, blends, the PSF model)
+CLUSTER_FLOOR_PX = 0.015  # px per axis: the error a star keeps at one pixel (measured at rest: 0.012-0.017 px)
+CLUSTER_CELL_PX = 0.5     # px: observations of a star in one cell this size share that error
 
 
 @dataclass
@@ -33,12 +42,14 @@ class StarFields:
     """Identified stars: ``field`` (N,) int (any ids; renumbered 0..F-1 in order), ``uv`` (N, 2)
     px, ``ref`` (N, 3) ICRS; ``star`` (N,) int, optional: the catalogue star of each
     observation (a tracked star seen in many fields keeps its own centroid error: with it the
-    fit's σ counts stars, not observations — see :func:`fit`)."""
+    fit's σ counts stars, not observations — see :func:`fit`); ``sigma`` (N,) px, optional: each
+    centroid's 1σ per axis (NaN: unknown, the median is used)."""
 
     field: np.ndarray
     uv: np.ndarray
     ref: np.ndarray
     star: np.ndarray | None = None
+    sigma: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.field = np.asarray(self.field, dtype=np.int64)
@@ -61,6 +72,29 @@ class StarFields:
             self.star = np.asarray(self.star, dtype=np.int64)
             if self.star.shape != (n,):
                 raise ConfigError(f"star table: star ids {self.star.shape} must be ({n},)")
+        if self.sigma is not None:
+            sg = np.asarray(self.sigma, dtype=float)
+            if sg.shape != (n,):
+                raise ConfigError(f"star table: centroid sigmas {sg.shape} must be ({n},)")
+            ok = np.isfinite(sg) & (sg > 0)
+            if not ok.any():
+                raise ConfigError("star table: no centroid sigma is finite and positive")
+            self.sigma = np.where(ok, sg, np.median(sg[ok]))
+
+    def weight_sigma(self, obs_floor: float = OBS_FLOOR_PX, cluster_floor: float = CLUSTER_FLOOR_PX) -> np.ndarray:
+        """σ_eff (N,) px of every observation for the fit's weights (ones without ``sigma``):
+        its own σ, the floor of one centroid, and the error it shares with the observations of
+        the same star in the same ``CLUSTER_CELL_PX`` cell (with star ids only)."""
+        n = len(self.field)
+        if self.sigma is None:
+            return np.ones(n)
+        var = self.sigma ** 2 + obs_floor ** 2
+        if self.star is not None and cluster_floor > 0:
+            cell = np.floor(self.uv / CLUSTER_CELL_PX).astype(np.int64)
+            key = np.column_stack([self.star, cell])
+            _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+            var = var + cnt[inv.ravel()] * cluster_floor ** 2
+        return np.sqrt(var)
 
     @property
     def n_fields(self) -> int:
@@ -174,6 +208,7 @@ def fit(stars: StarFields, theta0: np.ndarray, free: np.ndarray | None = None, a
     nf = stars.n_fields
     fid = stars.field
     inlier = np.ones(len(fid), bool)
+    osig = stars.weight_sigma()          # px; ones when the table has no centroid σ
     prior = np.zeros(8)
     prior[4], prior[5] = 1.0 / prior_k2**2, 1.0 / prior_k3**2
     iterations = 0
@@ -184,9 +219,9 @@ def fit(stars: StarFields, theta0: np.ndarray, free: np.ndarray | None = None, a
             pred, jt, js = project(theta, s, jac=True)
             res = stars.uv - pred
             ja = np.einsum("nab,nbc->nac", js, _cross_mat(s))
-            norm = np.linalg.norm(res, axis=1)
+            norm = np.linalg.norm(res, axis=1) / osig
             sig = 1.4826 * np.median(norm[inlier]) / np.sqrt(np.log(4.0)) + 1e-12  # Rayleigh median → σ
-            w = np.where(norm <= huber_k * sig, 1.0, huber_k * sig / np.maximum(norm, 1e-300)) * inlier
+            w = np.where(norm <= huber_k * sig, 1.0, huber_k * sig / np.maximum(norm, 1e-300)) * inlier / osig ** 2
             jt = jt[:, :, free]
             u = np.einsum("n,nai,naj->ij", w, jt, jt) + np.diag(prior[free])
             bt = np.einsum("n,nai,na->i", w, jt, res) - prior[free] * theta[free]
@@ -210,7 +245,7 @@ def fit(stars: StarFields, theta0: np.ndarray, free: np.ndarray | None = None, a
                 break
         if stage == 0 and reject_k > 0:
             s = np.einsum("nij,nj->ni", att[fid], stars.ref)
-            norm = np.linalg.norm(stars.uv - project(theta, s), axis=1)
+            norm = np.linalg.norm(stars.uv - project(theta, s), axis=1) / osig
             sig = 1.4826 * np.median(norm) / np.sqrt(np.log(4.0))
             inlier = norm <= reject_k * sig
         else:
@@ -218,7 +253,7 @@ def fit(stars: StarFields, theta0: np.ndarray, free: np.ndarray | None = None, a
     s = np.einsum("nij,nj->ni", att[fid], stars.ref)
     res = stars.uv - project(theta, s)
     dof = max(2 * inlier.sum() - free.sum() - 3 * nf, 1)
-    s2 = float((res[inlier] ** 2).sum() / dof)
+    s2 = float(((res[inlier] / osig[inlier, None]) ** 2).sum() / dof)   # px² without σ, else ~1
     sigma = np.zeros(8)
     sigma_iid = np.zeros(8)
     if free.any():

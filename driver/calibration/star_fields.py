@@ -8,7 +8,9 @@ array          shape      meaning
 ``t``          (N,)       gyro sample time stamps, s (host clock, the gyro's own stamps)
 ``rate``       (N, 3)     gyro rates, rad/s, gyro axes, as read (no calibration applied)
 ``field``      (M,)       field (frame) number of each identified star, 0..K−1
-``uv``         (M, 2)     measured centroid [column, row], px (thresholded CoG)
+``uv``         (M, 2)     measured centroid [column, row], px (thresholded CoG refined by
+                          the smeared-PSF fit)
+``uv_sigma``   (M,)       the centroid's 1σ per axis, px (the fit's CRLB; NaN: a plain CoG)
 ``ref``        (M, 3)     the star's catalog unit vector, ICRS
 ``star_id``    (M,)       catalog id
 ``t_cam``      (K,)       exposure mid-time of each field, s (host clock)
@@ -17,7 +19,8 @@ array          shape      meaning
 ``camera``     (10,)      ``CameraModel.as_array()`` used for ``q_cam``
 =============  =========  ==========================================================
 
-``camera`` reads ``field``, ``uv``, ``ref``; ``alignment`` and ``gyro-scale --method slew`` read
+``camera`` reads ``field``, ``uv``, ``ref`` (and ``star_id``, ``uv_sigma`` for its weights);
+``alignment`` and ``gyro-scale --method slew`` read
 ``t``, ``rate``, ``t_cam``, ``q_cam`` — recomputed by :func:`field_attitudes` through the
 calibrated camera when the target calibration file already holds a [camera] table.
 """
@@ -30,8 +33,11 @@ ARCSEC = np.pi / 180.0 / 3600.0
 
 
 def field_attitudes(field: np.ndarray, uv: np.ndarray, ref: np.ndarray, camera, n_fields: int | None = None,
-                    sigma_px: float = 0.1, min_stars: int = 3) -> tuple[np.ndarray, np.ndarray]:
-    """QUEST attitude (ICRS → camera) of every field with ≥ ``min_stars`` stars.
+                    sigma_px: float = 0.1, min_stars: int = 3, uv_sigma=None) -> tuple[np.ndarray, np.ndarray]:
+    """QUEST attitude (ICRS → camera) of every field with ≥ ``min_stars`` stars, each star
+    weighted by ``1/σ²``: ``uv_sigma`` (M,) px per observation (NaN: ``sigma_px``) with the
+    floor of one centroid (:data:`~gyrostar.calibration.intrinsics.OBS_FLOOR_PX`) added, or
+    ``sigma_px`` for every star.
 
     Returns ``(ok (K,) bool, q (K, 4))``; rows of fields without enough stars are zero."""
     from ..core.quest import quest
@@ -44,14 +50,22 @@ def field_attitudes(field: np.ndarray, uv: np.ndarray, ref: np.ndarray, camera, 
         return ok, q
     body = camera.unproject(np.asarray(uv, np.float64))
     ref = np.ascontiguousarray(ref, np.float64)
-    w_star = 1.0 / (sigma_px / camera.focal_length_px) ** 2
+    if uv_sigma is None:
+        sig = np.full(len(field), sigma_px)
+    else:
+        from .intrinsics import OBS_FLOOR_PX
+
+        sig = np.asarray(uv_sigma, float)
+        sig = np.sqrt(np.where(np.isfinite(sig) & (sig > 0), sig, sigma_px) ** 2 + OBS_FLOOR_PX ** 2)
+    w_obs = 1.0 / (sig / camera.focal_length_px) ** 2
     order = np.argsort(field, kind="stable")
     bounds = np.searchsorted(field[order], np.arange(k + 1))
     for f in range(k):
         idx = order[bounds[f]:bounds[f + 1]]
         if len(idx) < min_stars:
             continue
-        q[f], _ = quest(np.ascontiguousarray(body[idx]), np.ascontiguousarray(ref[idx]), np.full(len(idx), w_star))
+        q[f], _ = quest(np.ascontiguousarray(body[idx]), np.ascontiguousarray(ref[idx]),
+                        np.ascontiguousarray(w_obs[idx]))
         ok[f] = True
     return ok, q
 
@@ -66,7 +80,7 @@ def load_slew_input(path, cal=None, min_stars: int = 3):
 
     z = read_npz(path, ("t", "rate", "t_cam", "q_cam"))
     t, rate, t_cam, q_cam = z["t"], z["rate"], z["t_cam"], z["q_cam"]
-    stars = {k: z[k] for k in ("field", "uv", "ref", "camera") if k in z}
+    stars = {k: z[k] for k in ("field", "uv", "ref", "camera", "uv_sigma") if k in z}
     note = "attitudes as exported"
     if cal is not None and cal.camera is not None and {"field", "uv", "ref", "camera"} <= set(stars):
         from ..camera import CameraModel
@@ -75,7 +89,8 @@ def load_slew_input(path, cal=None, min_stars: int = 3):
         c = stars["camera"]
         nominal = CameraModel(float(c[0]) * 1e-5, 1e-5, int(c[8]), int(c[9]), float(c[1]), float(c[2]))
         cam = camera_model(cal, nominal)
-        ok, q = field_attitudes(stars["field"], stars["uv"], stars["ref"], cam, len(t_cam), min_stars=min_stars)
+        ok, q = field_attitudes(stars["field"], stars["uv"], stars["ref"], cam, len(t_cam), min_stars=min_stars,
+                                uv_sigma=stars.get("uv_sigma"))
         t_cam, q_cam = t_cam[ok], q[ok]
         note = "attitudes recomputed through the calibrated [camera]"
     keep = np.linalg.norm(q_cam, axis=1) > 0.5

@@ -21,7 +21,12 @@ thousands of star observations at 0.02 px for the 8.8° xing2012 camera. When th
 each observation's star (``star_id``, as ``--export calib`` writes), the reported σ treats a
 star's observations as one cluster (a tracked star keeps its own centroid error from field to
 field: fixed pattern, pixel phase), so it counts the stars, not the observations; the σ as if
-every observation were independent is reported beside it (``sigma_iid``).
+every observation were independent is reported beside it (``sigma_iid``). When the table gives
+each centroid's σ (``uv_sigma``, the CRLB of the smeared-PSF fit, as ``--export calib``
+writes) each observation is weighted by it, with a floor per observation and one per star
+position (:func:`gyrostar.calibration.intrinsics.fit`): a V 3 star's centroid is ten times
+as precise as a V 6.3 one's, and a star held at one pixel through a rest of a hundred frames
+keeps most of its error in all of them.
 """
 
 from __future__ import annotations
@@ -87,8 +92,10 @@ def load_table(path):
 
         z = read_npz(path, ("field", "uv", "ref"))
         star = z.get("star_id")            # --export calib names each observation's star
+        sigma = z.get("uv_sigma")          # ... and gives each centroid's σ (the fit's weights)
         return StarFields(z["field"], z["uv"], z["ref"],
-                          star=star if star is not None and star.shape == z["field"].shape else None)
+                          star=star if star is not None and star.shape == z["field"].shape else None,
+                          sigma=sigma if sigma is not None and sigma.shape == z["field"].shape else None)
     if path.suffix == ".csv":
         try:
             tab = np.genfromtxt(path, delimiter=",", names=True)
@@ -192,6 +199,8 @@ def run(args) -> int:
     extra = {"sigma_basis": (f"per star ({len(np.unique(stars.star))} stars; their observations' errors "
                              "correlated)") if stars.star is not None else "independent observations",
              "sigma_iid": {n: float(res.sigma_iid[i]) for i, n in enumerate(NAMES)},
+             "weights": ("each centroid's σ (CRLB) with floors per observation and per star position"
+                         if stars.sigma is not None else "uniform (the table gives no centroid σ)"),
              "fixed": sorted(fixed), "n_fields": int(stars.n_fields), "n_stars": int(len(stars.field)),
              "n_rejected": int((~res.inlier).sum()), "residual_rms_before_px": before.rms_px,
              "residual_rms_after_px": res.rms_px}

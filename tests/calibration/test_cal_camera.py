@@ -152,3 +152,59 @@ def test_per_star_sigma_counts_stars_not_observations():
         r = fit(stars, theta, free=free)
         ratio.append(r.sigma[1:3] / r.sigma_iid[1:3])
     assert 0.75 < np.mean(ratio) < 1.25
+
+
+def test_weight_sigma_floors_and_clusters():
+    """σ_eff by hand: σ² + the floor of one centroid + n × the error shared by the n
+    observations of one star in one half-pixel cell; no σ given: all ones."""
+    from gyrostar.calibration.intrinsics import CLUSTER_FLOOR_PX, OBS_FLOOR_PX, StarFields
+    from gyrostar.errors import ConfigError
+
+    uv = np.array([[100.1, 200.1], [100.2, 200.2], [100.3, 200.3], [300.0, 50.0], [100.1, 200.1], [10.0, 10.0]])
+    ref = np.tile([0.0, 0.0, 1.0], (6, 1))
+    field = np.array([0, 0, 0, 1, 1, 1])
+    star = np.array([7, 7, 7, 7, 8, 9])
+    sigma = np.array([0.05, 0.05, np.nan, 0.1, 0.05, 0.2])
+    st = StarFields(field, uv, ref, star=star, sigma=sigma)
+    assert st.sigma[2] == pytest.approx(0.05)                # NaN → the median of the others
+    got = st.weight_sigma()
+    f2, c2 = OBS_FLOOR_PX ** 2, CLUSTER_FLOOR_PX ** 2
+    want = np.sqrt(np.array([0.05 ** 2 + f2 + 3 * c2, 0.05 ** 2 + f2 + 3 * c2, 0.05 ** 2 + f2 + 3 * c2,
+                             0.1 ** 2 + f2 + c2, 0.05 ** 2 + f2 + c2, 0.2 ** 2 + f2 + c2]))
+    assert np.allclose(got, want)
+    assert np.allclose(StarFields(field, uv, ref, star=star).weight_sigma(), 1.0)
+    with pytest.raises(ConfigError, match="sigmas"):
+        StarFields(field, uv, ref, sigma=np.ones(5))
+    with pytest.raises(ConfigError, match="finite"):
+        StarFields(field, uv, ref, sigma=np.full(6, np.nan))
+
+
+def test_centroid_sigmas_weight_the_fit():
+    """Bright and faint stars (σ 0.02 and 0.25 px): weighting each centroid by its σ brings
+    the principal point's scatter over seeds well below the unweighted fit's, and the
+    weighted fit's σ covers it."""
+    from gyrostar.calibration.intrinsics import StarFields, fit, project, rotvec_dcm
+
+    free = np.array([1, 1, 1, 1, 0, 0, 0, 0], bool)
+    theta = np.array([6640.0, 515.5, 508.5, 0.3, 0.0, 0.0, 0.0, 0.0])
+    err_w, err_u, sig_w = [], [], []
+    for seed in range(8):
+        rng = np.random.default_rng(100 + seed)
+        n_fields, n_stars = 300, 12
+        xy = rng.uniform(-0.07, 0.07, (n_fields * n_stars, 2))      # new sky in every field
+        ref = np.column_stack([xy, np.ones(len(xy))])
+        ref /= np.linalg.norm(ref, axis=1)[:, None]
+        field = np.repeat(np.arange(n_fields), n_stars)
+        att = rotvec_dcm(rng.normal(0.0, 2e-3, (n_fields, 3)))
+        sig = np.where(rng.random(len(field)) < 0.3, 0.02, 0.25)
+        uv = project(theta, np.einsum("nij,nj->ni", att[field], ref)) + sig[:, None] * rng.normal(size=(len(field), 2))
+        start = theta + np.array([2.0, 1.0, -1.0, 0.01, 0, 0, 0, 0])
+        rw = fit(StarFields(field, uv, ref, sigma=sig), start, free=free)
+        ru = fit(StarFields(field, uv, ref), start, free=free)
+        err_w.append(rw.theta[1:3] - theta[1:3])
+        err_u.append(ru.theta[1:3] - theta[1:3])
+        sig_w.append(rw.sigma[1:3])
+    err_w, err_u, sig_w = np.array(err_w), np.array(err_u), np.array(sig_w)
+    rms_w, rms_u = np.sqrt(np.mean(err_w ** 2)), np.sqrt(np.mean(err_u ** 2))
+    assert rms_w < 0.6 * rms_u, (rms_w, rms_u)
+    assert 0.6 < rms_w / np.mean(sig_w) < 1.6, (rms_w, np.mean(sig_w))

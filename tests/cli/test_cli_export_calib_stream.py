@@ -7,6 +7,7 @@ import json
 import numpy as np
 from cli_helpers import gyrostar
 from gyrostar.attitude import quat_to_dcm
+from gyrostar.calibration.intrinsics import OBS_FLOOR_PX
 from gyrostar.calibration.star_fields import field_attitudes
 from gyrostar.camera import camera_preset
 
@@ -25,13 +26,20 @@ def test_export_calib_of_a_streamed_run(tmp_path):
     assert k >= 0.3 * summary["frames"] and len(z["field"]) >= 3 * k
     cam = camera_preset("xing2012")                 # the default flatsat's nominal camera
     assert np.allclose(cam.as_array(), z["camera"])
-    ok, q = field_attitudes(z["field"], z["uv"], z["ref"], cam, k)
+    sig = z["uv_sigma"]                              # each centroid's CRLB, px per axis
+    assert sig.shape == z["field"].shape and np.isfinite(sig).mean() > 0.95
+    ok, q = field_attitudes(z["field"], z["uv"], z["ref"], cam, k, uv_sigma=sig)
     assert ok.mean() > 0.9
-    res = []
+    res, norm = [], []
     for f in np.flatnonzero(ok):
         sel = z["field"] == f
         uv, valid = cam.project(z["ref"][sel] @ quat_to_dcm(q[f]).T)
-        res.append(np.hypot(*(uv[valid] - z["uv"][sel][valid]).T))
+        d = uv[valid] - z["uv"][sel][valid]
+        res.append(np.hypot(*d.T))
+        norm.append(d / np.sqrt(sig[sel][valid] ** 2 + OBS_FLOOR_PX ** 2)[:, None])
     res = np.concatenate(res)
     # a window set paired with another frame's pixels would put stars pixels off
     assert np.percentile(res, 99) < 0.5, np.percentile(res, [50, 99, 100])
+    # the σ it states is the scatter it has (the default flatsat's camera is the nominal one)
+    z_rms = np.sqrt(np.mean(np.concatenate(norm) ** 2))
+    assert 0.6 < z_rms < 1.5, z_rms

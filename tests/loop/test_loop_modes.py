@@ -87,3 +87,16 @@ def test_a_scenario_may_set_its_own_coast_timeout():
     cfg.loop.coast_timeout_s = 2.5
     assert loop_params(cfg, scen=hc.load_scenario("miscal")).mode_params().coast_timeout_s == 0.3
     assert loop_params(cfg, scen=hc.load_scenario("demo")).mode_params().coast_timeout_s == 2.5
+
+
+def test_a_scenario_may_set_its_own_acquisition_cadence():
+    """``miscal`` tries a lost-in-space image every 0.1 s (re-acquiring soon after each fast
+    slew); a scenario without the key keeps the config's."""
+    from gyrostar.hil import config as hc
+    from gyrostar.hil.flatsat import loop_params
+
+    cfg = hc.load_flatsat()
+    cfg.loop.acquire_every_s = 0.7
+    assert loop_params(cfg, scen=hc.load_scenario("miscal")).acquire_every_s == 0.1
+    assert loop_params(cfg, scen=hc.load_scenario("demo")).acquire_every_s == 0.7
+    assert loop_params(cfg).acquire_every_s == 0.7

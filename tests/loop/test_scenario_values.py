@@ -24,6 +24,8 @@ def _scenario(extra: str) -> str:
     ("max_error_arcsec_1sigma = -1.0\n", "max_error_arcsec_1sigma = -1.0 must be ≥ 0"),
     ("coast_timeout_s = 61.0\n", "coast_timeout_s = 61.0 must be in [0, 60] s"),
     ("coast_timeout_s = -1.0\n", "coast_timeout_s = -1.0 must be in [0, 60] s"),
+    ("acquire_every_s = 61.0\n", "acquire_every_s = 61.0 must be in [0, 60] s"),
+    ("acquire_every_s = -0.1\n", "acquire_every_s = -0.1 must be in [0, 60] s"),
 ])
 def test_out_of_range_scenario_value_names_the_key(extra, expected):
     with pytest.raises(ConfigError) as err:
