@@ -22,6 +22,10 @@ def _files(d):
     (d / "array.npy").rename(d / "plain.npz")
     np.savez(d / "no_rate.npz", t=np.arange(10.0))
     np.savez(d / "empty_arrays.npz", t=np.zeros(0), rate=np.zeros((0, 3)))
+    stars = {"field": np.repeat(np.arange(4), 3), "uv": np.full((12, 2), 500.0),
+             "ref": np.tile([0.0, 0.0, 1.0], (12, 1))}
+    np.savez(d / "sigma_nan.npz", uv_sigma=np.full(12, np.nan), **stars)
+    np.savez(d / "sigma_short.npz", uv_sigma=np.full(11, 0.1), **stars)
     (d / "cells.csv").write_text("field,u,v,ra_deg,dec_deg\n0,1.5,2.5,10.0,20.0\n0,x!,2.5,10.0,20.0\n")
     (d / "fits").mkdir()
     (d / "fits" / "dark1.fits").write_bytes(b"SIMPLE  =                    T" + b"\x00garbage" * 50)
@@ -132,6 +136,10 @@ CASES = [
      ["INPUT", "line 3", "'u'"]),
     ("cal-camera-fields-0", ["calibrate", "camera", "--simulate", "--fields", "0"], USAGE, ["--fields"]),
     ("cal-camera-empty-npz", ["calibrate", "camera", "{d}/empty.npz"], USAGE, ["INPUT"]),
+    ("cal-camera-sigma-nan", ["calibrate", "camera", "{d}/sigma_nan.npz"], USAGE,
+     ["INPUT", "sigma_nan.npz", "sigma"]),
+    ("cal-camera-sigma-short", ["calibrate", "camera", "{d}/sigma_short.npz"], USAGE,
+     ["INPUT", "sigma_short.npz", "uv_sigma", "(11,)"]),
     ("cal-dark-corrupt-fits", ["calibrate", "dark", "{d}/fits"], USAGE,
      ["INPUT", "dark1.fits"]),
     ("cal-dark-frames-0", ["calibrate", "dark", "--simulate", "--frames", "0"], USAGE, ["--frames"]),
