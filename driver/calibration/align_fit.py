@@ -110,7 +110,9 @@ def fit_alignment(t_g: np.ndarray, w_g: np.ndarray, t_c: np.ndarray, q_c: np.nda
     (estimated from the residuals) plus, with ``arw``, the gyro's N²·T over the window, so a
     window across a fast slew between two rests counts for what it is; windows turning
     more than :data:`MAX_WINDOW_ANGLE` (a rotation vector near 180° is ambiguous) are left
-    out, and so are frames exposed while the gyro's rate changed faster than ``max_accel``
+    out, and so are windows that do not turn about one fixed axis (two fast slews about
+different axes in one window: their rotation is not the sum of the gyro's integrals) and
+frames exposed while the gyro's rate changed faster than ``max_accel``
     (rad/s², over ±5 ms: the start of a fast slew — the exposure-averaged star position leaves
     the mid-exposure one by α·T²/24, and the gyro's low-pass lag is not a pure delay there;
     rate reversals of a few °/s² stay). δt minimises the profile likelihood Σ_a log RSS_a (each
@@ -143,7 +145,7 @@ def fit_alignment(t_g: np.ndarray, w_g: np.ndarray, t_c: np.ndarray, q_c: np.nda
     d0 = coarse_offset(gi, t_c, phi1, max_offset, coarse_step)
     idx = np.arange(0, len(t_c) - lag, lag)
     turn = np.linalg.norm(gi.at(t_c[idx + lag] - d0) - gi.at(t_c[idx] - d0), axis=1)
-    idx = idx[turn < MAX_WINDOW_ANGLE]
+    idx = idx[(turn < MAX_WINDOW_ANGLE) & gi.one_axis(t_c[idx] - d0, t_c[idx + lag] - d0)]
     t0, t1 = t_c[idx], t_c[idx + lag]
     phi = _increments(q_c, idx, lag)
     span = t1 - t0

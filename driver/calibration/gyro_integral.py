@@ -1,8 +1,9 @@
 """Integral of a sampled gyro rate at arbitrary times (piecewise-linear rate, exact).
 
 ``GyroIntegral(t, w).at(te)`` is ``∫_{t[0]}^{te} ω dt`` (rad, per axis) for the rate signal
-that is linear between samples; ``rate(te)`` is that signal. Times in seconds (any clock,
-increasing), rates (N, 3) rad/s.
+that is linear between samples; ``rate(te)`` is that signal; ``one_axis(t0, t1)`` says which
+windows turn about one fixed axis (where the integral is the rotation). Times in seconds (any
+clock, increasing), rates (N, 3) rad/s.
 """
 
 from __future__ import annotations
@@ -10,6 +11,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import ConfigError
+
+ONE_AXIS_MIN_TURN = np.radians(10.0)   # rad: windows turning less are taken as they are
+ONE_AXIS_RATIO = 0.99                  # net turn / path length of a turn about one fixed axis, at least
 
 
 class GyroIntegral:
@@ -27,6 +31,9 @@ class GyroIntegral:
         dt = np.diff(self.t)[:, None]
         self.cum = np.concatenate([np.zeros((1, 3)), np.cumsum(0.5 * (self.w[1:] + self.w[:-1]) * dt, axis=0)])
         self.slope = np.diff(self.w, axis=0) / dt
+        # path length ∫|ω| dt (rad), trapezoid on the samples: for the one-axis test
+        speed = np.linalg.norm(self.w, axis=1)
+        self.path = np.concatenate([[0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1]) * dt[:, 0])])
 
     def _index(self, te: np.ndarray) -> np.ndarray:
         if np.any(te < self.t[0]) or np.any(te > self.t[-1]):
@@ -46,3 +53,15 @@ class GyroIntegral:
         te = np.asarray(te, float)
         j = self._index(te)
         return self.w[j] + self.slope[j] * (te - self.t[j])[:, None]
+
+    def one_axis(self, t0: np.ndarray, t1: np.ndarray) -> np.ndarray:
+        """(K,) bool: the window ``t0[k]..t1[k]`` turns about one fixed axis, so its integral
+        ``at(t1) − at(t0)`` is its rotation vector — its net turn is at least
+        :data:`ONE_AXIS_RATIO` of its path length, or it turns less than
+        :data:`ONE_AXIS_MIN_TURN`. A window across two fast slews about different axes (a
+        rest too short for the camera to see) fails: rotations about different axes do not
+        add as vectors (two 148.5° slews about x and y: net 210° of a 297° path)."""
+        t0, t1 = np.asarray(t0, float), np.asarray(t1, float)
+        path = np.interp(t1, self.t, self.path) - np.interp(t0, self.t, self.path)
+        net = np.linalg.norm(self.at(t1) - self.at(t0), axis=1)
+        return (path < ONE_AXIS_MIN_TURN) | (net >= ONE_AXIS_RATIO * path)

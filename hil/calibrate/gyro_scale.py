@@ -100,14 +100,22 @@ def _from_rate_table(rec_t, rate, run, table, trim_s):
 
 
 def _from_slews(t_g, w_g, t_cam, q_cam, lag: int = 5):
-    from ...calibration.scale_fit import attitude_increments, fit_slews, integrate_gyro
+    """Windows of ``lag`` camera frames; those turning more than
+    :data:`~gyrostar.calibration.align_fit.MAX_WINDOW_ANGLE` (no unique rotation vector) or
+    not about one fixed axis (:meth:`~gyrostar.calibration.gyro_integral.GyroIntegral.one_axis`:
+    the increment is not the gyro's integral) are left out."""
+    from ...calibration.align_fit import MAX_WINDOW_ANGLE
+    from ...calibration.gyro_integral import GyroIntegral
+    from ...calibration.scale_fit import attitude_increments, fit_slews
 
     sel = (t_cam >= t_g[0]) & (t_cam <= t_g[-1])
     t_cam, q_cam = t_cam[sel], q_cam[sel]
     idx = np.arange(0, len(t_cam), lag)
     phi = attitude_increments(q_cam[idx])
-    g = integrate_gyro(t_g, w_g, t_cam[idx])
-    return fit_slews(phi, g, np.diff(t_cam[idx]))
+    gi = GyroIntegral(t_g, w_g)
+    g = np.diff(gi.at(t_cam[idx]), axis=0)
+    keep = (np.linalg.norm(g, axis=1) < MAX_WINDOW_ANGLE) & gi.one_axis(t_cam[idx][:-1], t_cam[idx][1:])
+    return fit_slews(phi[keep], g[keep], np.diff(t_cam[idx])[keep])
 
 
 def run(args) -> int:

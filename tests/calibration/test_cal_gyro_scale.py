@@ -86,3 +86,59 @@ def test_gyro_scale_from_slew_file_with_alignment(tmp_path, capsys, sine_slew):
     assert code == 0
     np.testing.assert_allclose(out["sensitivity"], S_TRUE, atol=5e-5)
     np.testing.assert_allclose(np.radians(out["parameters"]["bias_dps"]["value"]), B_TRUE, atol=1e-5)
+
+
+def _slews_with_a_blind_rest():
+    """Six 148.5° slews at 200 °/s about ±x, ±y, ±z with 0.5 s rests (camera frames at 100 Hz
+    in the rests only), except that the rest between the +y and +z slews has no frame; gyro
+    at 400 Hz with scale errors ``s``. Returns t_g, w_g, t_cam, q_cam, s."""
+    from gyrostar.attitude import quat_mult, rotvec_to_quat
+
+    rate, turn, rest = np.radians(200.0), np.radians(148.5), 0.5
+    plan = [(0.5, None)]
+    for axis in ((1, 0, 0), (0, 1, 0), (0, 0, 1), (-1, 0, 0), (0, -1, 0), (0, 0, -1)):
+        plan += [(turn / rate, np.array(axis, float) * rate), (rest, None)]
+    dt = 1.0 / 400.0
+    w_true, blind = [], []
+    t_edge = 0.0
+    for k, (seconds, w) in enumerate(plan):
+        n = int(round(seconds / dt))
+        w_true += [np.zeros(3) if w is None else w] * n
+        if k == 4:                                   # the rest after the +y slew: no camera frame
+            blind.append((t_edge, t_edge + seconds))
+        t_edge += n * dt
+    w_true = np.array(w_true)
+    t_g = np.arange(len(w_true) + 1) * dt
+    q = np.zeros((len(t_g), 4))
+    q[0] = [0.0, 0.0, 0.0, 1.0]
+    for i, w in enumerate(w_true):                   # body rate w over [t_i, t_i+1): ICRS → body
+        q[i + 1] = quat_mult(rotvec_to_quat(w * dt), q[i])
+    moving = np.concatenate([np.linalg.norm(w_true, axis=1) > 0, [False]])
+    s = np.diag([1.004, 0.997, 1.002])
+    w_g = np.vstack([w_true, w_true[-1:]]) @ s.T     # the gyro's rates: true rate through S
+    frames = [i for i in range(0, len(t_g), 4) if not moving[i] and not (i > 0 and moving[i - 1])
+              and not any(a <= t_g[i] <= b for a, b in blind)]
+    return t_g, w_g, t_g[frames], q[frames], s
+
+
+def test_slew_windows_across_two_slews_are_left_out():
+    """A rest the camera did not see puts two slews about different axes in one window, whose
+    rotation is not the gyro's integral (they do not commute): the slew fit leaves it out and
+    finds the scales; every window kept, the same data give scales far off."""
+    from gyrostar.calibration.scale_fit import NotDetermined, attitude_increments
+    from gyrostar.hil.calibrate.gyro_scale import _from_slews
+
+    t_g, w_g, t_cam, q_cam, s = _slews_with_a_blind_rest()
+    gi = GyroIntegral(t_g, w_g)
+    idx = np.arange(0, len(t_cam), 5)
+    keep = gi.one_axis(t_cam[idx][:-1], t_cam[idx][1:])
+    assert (~keep).sum() == 1                          # the window across the blind rest, only
+    fit = _from_slews(t_g, w_g, t_cam, q_cam)
+    assert np.allclose(fit.sensitivity, s, atol=2e-5), fit.sensitivity
+    phi = attitude_increments(q_cam[idx])
+    g = np.diff(gi.at(t_cam[idx]), axis=0)
+    try:
+        bad = fit_slews(phi, g, np.diff(t_cam[idx])).sensitivity
+    except (ConfigError, NotDetermined):
+        return                                        # refused as undetermined: also not the truth
+    assert np.abs(bad - s).max() > 1e-3, bad
