@@ -130,6 +130,12 @@ def test_slew_windows_across_two_slews_are_left_out():
 
     t_g, w_g, t_cam, q_cam, s = _slews_with_a_blind_rest()
     gi = GyroIntegral(t_g, w_g)
+    x_end = 0.5 + np.radians(148.5) / np.radians(200.0)       # the +x slew: 0.5 s .. x_end
+    y_start = x_end + 0.5
+    # the +x slew alone: one axis; the same window ending 10 ms (2°) into the +y slew: not —
+    # its net turn is still 0.9999 of its path, but it is 1.7° from the sum of the integrals
+    assert list(gi.one_axis(np.array([0.25, 0.25, 0.1]), np.array([y_start - 0.1, y_start + 0.01, 0.4]))) == \
+        [True, False, True]
     idx = np.arange(0, len(t_cam), 5)
     keep = gi.one_axis(t_cam[idx][:-1], t_cam[idx][1:])
     assert (~keep).sum() == 1                          # the window across the blind rest, only
