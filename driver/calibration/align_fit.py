@@ -111,8 +111,8 @@ def fit_alignment(t_g: np.ndarray, w_g: np.ndarray, t_c: np.ndarray, q_c: np.nda
     window across a fast slew between two rests counts for what it is; windows turning
     more than :data:`MAX_WINDOW_ANGLE` (a rotation vector near 180° is ambiguous) are left
     out, and so are windows that do not turn about one fixed axis (two fast slews about
-different axes in one window: their rotation is not the sum of the gyro's integrals) and
-frames exposed while the gyro's rate changed faster than ``max_accel``
+    different axes in one window: their rotation is not the sum of the gyro's integrals) and
+    frames exposed while the gyro's rate changed faster than ``max_accel``
     (rad/s², over ±5 ms: the start of a fast slew — the exposure-averaged star position leaves
     the mid-exposure one by α·T²/24, and the gyro's low-pass lag is not a pure delay there;
     rate reversals of a few °/s² stay). δt minimises the profile likelihood Σ_a log RSS_a (each
