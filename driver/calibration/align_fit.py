@@ -36,7 +36,6 @@ from .scale_fit import NotDetermined, attitude_increments, check_determined
 
 ROTATION_SIGMA_MAX = np.radians(0.5)   # rad, 1-σ per axis: a slew about two axes gives arcminutes or better
 OFFSET_SIGMA_MAX = 5e-3                # s, 1-σ of δt
-MAX_WINDOW_ANGLE = np.radians(170.0)   # rad: a window turning more has no unique rotation vector
 MAX_ACCEL = np.radians(100.0)          # rad/s²: frames exposed under a harder angular acceleration are left out
 SLEW_HINT = ("slew back and forth about at least two axes at several °/s; for the rotation to arcseconds, fast "
              "rest-to-rest slews about each axis (the miscal scenario, docs/FLATSAT.md §8)")
@@ -108,11 +107,12 @@ def fit_alignment(t_g: np.ndarray, w_g: np.ndarray, t_c: np.ndarray, q_c: np.nda
     shifting δt (several ms on the ``miscal`` ramps). For a given δt, ``M`` and ``M b`` follow by
     weighted least squares per camera axis, each window weighted by its noise — the camera's
     (estimated from the residuals) plus, with ``arw``, the gyro's N²·T over the window, so a
-    window across a fast slew between two rests counts for what it is; windows turning
-    more than :data:`MAX_WINDOW_ANGLE` (a rotation vector near 180° is ambiguous) are left
-    out, and so are windows that do not turn about one fixed axis (two fast slews about
-    different axes in one window: their rotation is not the sum of the gyro's integrals) and
-    frames exposed while the gyro's rate changed faster than ``max_accel``
+    window across a fast slew between two rests counts for what it is; windows whose gyro
+    integral is not their rotation vector are left out
+    (:meth:`~gyrostar.calibration.gyro_integral.GyroIntegral.rotation_windows`: turning more
+    than 170°, where a rotation vector is ambiguous, or not about one fixed axis, as two
+    fast slews about different axes in one window), and so are frames exposed while the
+    gyro's rate changed faster than ``max_accel``
     (rad/s², over ±5 ms: the start of a fast slew — the exposure-averaged star position leaves
     the mid-exposure one by α·T²/24, and the gyro's low-pass lag is not a pure delay there;
     rate reversals of a few °/s² stay). δt minimises the profile likelihood Σ_a log RSS_a (each
@@ -144,8 +144,7 @@ def fit_alignment(t_g: np.ndarray, w_g: np.ndarray, t_c: np.ndarray, q_c: np.nda
     phi1 = attitude_increments(q_c)
     d0 = coarse_offset(gi, t_c, phi1, max_offset, coarse_step)
     idx = np.arange(0, len(t_c) - lag, lag)
-    turn = np.linalg.norm(gi.at(t_c[idx + lag] - d0) - gi.at(t_c[idx] - d0), axis=1)
-    idx = idx[(turn < MAX_WINDOW_ANGLE) & gi.one_axis(t_c[idx] - d0, t_c[idx + lag] - d0)]
+    idx = idx[gi.rotation_windows(t_c[idx] - d0, t_c[idx + lag] - d0)]
     t0, t1 = t_c[idx], t_c[idx + lag]
     phi = _increments(q_c, idx, lag)
     span = t1 - t0

@@ -2,7 +2,8 @@
 
 ``GyroIntegral(t, w).at(te)`` is ``∫_{t[0]}^{te} ω dt`` (rad, per axis) for the rate signal
 that is linear between samples; ``rate(te)`` is that signal; ``one_axis(t0, t1)`` says which
-windows turn about one fixed axis (where the integral is the rotation). Times in seconds (any
+windows turn about one fixed axis, ``rotation_windows(t0, t1)`` which windows' integral is
+their rotation vector (one axis, less than :data:`MAX_WINDOW_ANGLE`). Times in seconds (any
 clock, increasing), rates (N, 3) rad/s.
 """
 
@@ -12,6 +13,7 @@ import numpy as np
 
 from ..errors import ConfigError
 
+MAX_WINDOW_ANGLE = np.radians(170.0)   # rad: a window turning more has no unique rotation vector
 ONE_AXIS_MIN_TURN = np.radians(10.0)   # rad: windows turning less are taken as they are
 ONE_AXIS_MAX_CROSS = np.radians(1.0)   # rad/s: rate off the window's own axis at any sample, at most
                                        # (the BMI088's noise is ~0.1 °/s per sample, its offset ~0.05 °/s)
@@ -70,3 +72,11 @@ class GyroIntegral:
             cross = w - np.outer(w @ axis, axis)
             ok[k] = not len(w) or float(np.sqrt((cross * cross).sum(axis=1)).max()) <= ONE_AXIS_MAX_CROSS
         return ok
+
+    def rotation_windows(self, t0: np.ndarray, t1: np.ndarray) -> np.ndarray:
+        """(K,) bool: the window's integral ``at(t1) − at(t0)`` is its rotation vector — it
+        turns about one fixed axis (:meth:`one_axis`) and by less than
+        :data:`MAX_WINDOW_ANGLE` (a rotation near 180° has no unique rotation vector). The
+        windows the slew fits (gyro scale, alignment) can use."""
+        turn = np.linalg.norm(self.at(np.asarray(t1, float)) - self.at(np.asarray(t0, float)), axis=1)
+        return (turn < MAX_WINDOW_ANGLE) & self.one_axis(t0, t1)

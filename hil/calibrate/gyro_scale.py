@@ -100,11 +100,9 @@ def _from_rate_table(rec_t, rate, run, table, trim_s):
 
 
 def _from_slews(t_g, w_g, t_cam, q_cam, lag: int = 5):
-    """Windows of ``lag`` camera frames; those turning more than
-    :data:`~gyrostar.calibration.align_fit.MAX_WINDOW_ANGLE` (no unique rotation vector) or
-    not about one fixed axis (:meth:`~gyrostar.calibration.gyro_integral.GyroIntegral.one_axis`:
-    the increment is not the gyro's integral) are left out."""
-    from ...calibration.align_fit import MAX_WINDOW_ANGLE
+    """Windows of ``lag`` camera frames, those whose gyro integral is not their rotation
+    vector left out (:meth:`~gyrostar.calibration.gyro_integral.GyroIntegral.rotation_windows`:
+    more than 170°, or not about one fixed axis)."""
     from ...calibration.gyro_integral import GyroIntegral
     from ...calibration.scale_fit import attitude_increments, fit_slews
 
@@ -114,7 +112,7 @@ def _from_slews(t_g, w_g, t_cam, q_cam, lag: int = 5):
     phi = attitude_increments(q_cam[idx])
     gi = GyroIntegral(t_g, w_g)
     g = np.diff(gi.at(t_cam[idx]), axis=0)
-    keep = (np.linalg.norm(g, axis=1) < MAX_WINDOW_ANGLE) & gi.one_axis(t_cam[idx][:-1], t_cam[idx][1:])
+    keep = gi.rotation_windows(t_cam[idx][:-1], t_cam[idx][1:])
     return fit_slews(phi[keep], g[keep], np.diff(t_cam[idx])[keep])
 
 
