@@ -332,6 +332,7 @@ class Scenario:
     camera_sigma_px: float = 0.0       # overrides loop.camera_sigma_px when > 0 and no [camera] calibration is loaded
     coast_timeout_s: float = 0.0       # overrides loop.coast_timeout_s when > 0 (s): fast slews, re-acquire after each
     acquire_every_s: float = 0.0       # overrides loop.acquire_every_s when > 0 (s): re-acquire soon after a fast slew
+    max_stars: int = 0                 # overrides loop.max_stars when > 0: a calibration run takes every star it can
     truth: TrueDevices = field(default_factory=TrueDevices)   # simulated devices off their nominal models
     gyro_overrides: dict[str, float] = field(default_factory=dict)  # fields of the gyro error set replaced
     false_spots: list[tuple[float, float, float]] = field(default_factory=list)  # [col, row, vmag] glints
@@ -347,6 +348,10 @@ class Scenario:
             raise ValueError(f"coast_timeout_s = {self.coast_timeout_s} must be in [0, 60] s (0: the config's)")
         if not 0.0 <= self.acquire_every_s <= 60.0:
             raise ValueError(f"acquire_every_s = {self.acquire_every_s} must be in [0, 60] s (0: the config's)")
+        from ..loop.record import MAX_STARS
+
+        if not 0 <= self.max_stars <= MAX_STARS:
+            raise ValueError(f"max_stars = {self.max_stars} must be in [0, {MAX_STARS}] (0: the config's)")
         if not 0.0 <= self.min_track_fraction <= 1.0:
             raise ValueError(f"min_track_fraction = {self.min_track_fraction} must be in [0, 1]")
         if self.max_error_arcsec_1sigma < 0:

@@ -183,8 +183,11 @@ def loop_params(cfg: hc.FlatsatConfig, e_per_dn: float | None = None, scen: hc.S
         # the offset the part may have, as a 1σ prior wide enough for it: 3x its fixed value or
         # 3σ of its per-part draw (what a calibration's uncertainty would give)
         bias_prior = 3.0 * max(max(abs(v) for v in gp.bias_dps), gp.bias_sigma_dps, 0.002) * DEG
+    max_stars = scen.max_stars if scen is not None and scen.max_stars > 0 else lc.max_stars
+    if max_stars < lc.min_stars:
+        raise ConfigError(f"scenario '{scen.name}': max_stars = {max_stars} is below loop.min_stars = {lc.min_stars}")
     p = LoopParams(frame_hz=lc.frame_hz, exposure_s=cfg.head.exposure_ms * 1e-3, window_k=lc.window_k,
-                   max_stars=lc.max_stars, min_stars=lc.min_stars,
+                   max_stars=max_stars, min_stars=lc.min_stars,
                    coast_timeout_s=scen.coast_timeout_s if scen is not None and scen.coast_timeout_s > 0
                    else lc.coast_timeout_s,
                    acquire_every_s=scen.acquire_every_s if scen is not None and scen.acquire_every_s > 0

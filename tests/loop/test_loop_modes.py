@@ -100,3 +100,22 @@ def test_a_scenario_may_set_its_own_acquisition_cadence():
     assert loop_params(cfg, scen=hc.load_scenario("miscal")).acquire_every_s == 0.1
     assert loop_params(cfg, scen=hc.load_scenario("demo")).acquire_every_s == 0.7
     assert loop_params(cfg).acquire_every_s == 0.7
+
+
+def test_a_scenario_may_track_more_stars_than_the_config():
+    """``miscal`` tracks the 16 stars an output record holds (the config's 12 elsewhere); a
+    scenario's count below the config's ``loop.min_stars`` is refused naming both keys."""
+    from gyrostar.errors import ConfigError
+    from gyrostar.hil import config as hc
+    from gyrostar.hil.flatsat import loop_params
+    from gyrostar.loop.record import MAX_STARS
+
+    cfg = hc.load_flatsat()
+    assert cfg.loop.max_stars == 12
+    assert loop_params(cfg, scen=hc.load_scenario("miscal")).max_stars == MAX_STARS == 16
+    assert loop_params(cfg, scen=hc.load_scenario("demo")).max_stars == 12
+    few = hc.load_scenario("demo")
+    few.max_stars = 1
+    cfg.loop.min_stars = 2
+    with pytest.raises(ConfigError, match=r"max_stars = 1 is below loop.min_stars = 2"):
+        loop_params(cfg, scen=few)

@@ -26,6 +26,8 @@ def _scenario(extra: str) -> str:
     ("coast_timeout_s = -1.0\n", "coast_timeout_s = -1.0 must be in [0, 60] s"),
     ("acquire_every_s = 61.0\n", "acquire_every_s = 61.0 must be in [0, 60] s"),
     ("acquire_every_s = -0.1\n", "acquire_every_s = -0.1 must be in [0, 60] s"),
+    ("max_stars = 17\n", "max_stars = 17 must be in [0, 16]"),
+    ("max_stars = -1\n", "max_stars = -1 must be in [0, 16]"),
 ])
 def test_out_of_range_scenario_value_names_the_key(extra, expected):
     with pytest.raises(ConfigError) as err:
