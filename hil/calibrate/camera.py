@@ -93,13 +93,12 @@ def load_table(path):
         z = read_npz(path, ("field", "uv", "ref"))
         star = z.get("star_id")            # --export calib names each observation's star
         sigma = z.get("uv_sigma")          # ... and gives each centroid's σ (the fit's weights)
-        if sigma is not None and sigma.shape != z["field"].shape:
-            raise ConfigError(f"INPUT {path}: uv_sigma has shape {sigma.shape}, field {z['field'].shape}: "
-                              "one σ per observation")
+        for name, col in (("star_id", star), ("uv_sigma", sigma)):
+            if col is not None and col.shape != z["field"].shape:
+                raise ConfigError(f"INPUT {path}: {name} has shape {col.shape}, field {z['field'].shape}: "
+                                  "one per observation")
         try:
-            return StarFields(z["field"], z["uv"], z["ref"],
-                              star=star if star is not None and star.shape == z["field"].shape else None,
-                              sigma=sigma)
+            return StarFields(z["field"], z["uv"], z["ref"], star=star, sigma=sigma)
         except ConfigError as exc:
             raise ConfigError(f"INPUT {path}: {exc}") from None
     if path.suffix == ".csv":

@@ -26,6 +26,7 @@ def _files(d):
              "ref": np.tile([0.0, 0.0, 1.0], (12, 1))}
     np.savez(d / "sigma_nan.npz", uv_sigma=np.full(12, np.nan), **stars)
     np.savez(d / "sigma_short.npz", uv_sigma=np.full(11, 0.1), **stars)
+    np.savez(d / "star_short.npz", star_id=np.arange(10), **stars)
     (d / "cells.csv").write_text("field,u,v,ra_deg,dec_deg\n0,1.5,2.5,10.0,20.0\n0,x!,2.5,10.0,20.0\n")
     (d / "fits").mkdir()
     (d / "fits" / "dark1.fits").write_bytes(b"SIMPLE  =                    T" + b"\x00garbage" * 50)
@@ -140,6 +141,8 @@ CASES = [
      ["INPUT", "sigma_nan.npz", "sigma"]),
     ("cal-camera-sigma-short", ["calibrate", "camera", "{d}/sigma_short.npz"], USAGE,
      ["INPUT", "sigma_short.npz", "uv_sigma", "(11,)"]),
+    ("cal-camera-star-short", ["calibrate", "camera", "{d}/star_short.npz"], USAGE,
+     ["INPUT", "star_short.npz", "star_id", "(10,)"]),
     ("cal-dark-corrupt-fits", ["calibrate", "dark", "{d}/fits"], USAGE,
      ["INPUT", "dark1.fits"]),
     ("cal-dark-frames-0", ["calibrate", "dark", "--simulate", "--frames", "0"], USAGE, ["--frames"]),
