@@ -35,9 +35,10 @@ ARCSEC = np.pi / 180.0 / 3600.0
 def field_attitudes(field: np.ndarray, uv: np.ndarray, ref: np.ndarray, camera, n_fields: int | None = None,
                     sigma_px: float = 0.1, min_stars: int = 3, uv_sigma=None) -> tuple[np.ndarray, np.ndarray]:
     """QUEST attitude (ICRS → camera) of every field with ≥ ``min_stars`` stars, each star
-    weighted by ``1/σ²``: ``uv_sigma`` (M,) px per observation (NaN: ``sigma_px``) with the
-    floor of one centroid (:data:`~gyrostar.calibration.intrinsics.OBS_FLOOR_PX`) added, or
-    ``sigma_px`` for every star.
+    weighted by ``1/σ²``: ``uv_sigma`` (M,) px per observation (NaN or ≤ 0: the median of the
+    usable ones, as the camera fit takes them; ``sigma_px`` when none is) with the floor of one
+    centroid (:data:`~gyrostar.calibration.intrinsics.OBS_FLOOR_PX`) added, or ``sigma_px`` for
+    every star.
 
     Returns ``(ok (K,) bool, q (K, 4))``; rows of fields without enough stars are zero."""
     from ..core.quest import quest
@@ -56,7 +57,9 @@ def field_attitudes(field: np.ndarray, uv: np.ndarray, ref: np.ndarray, camera, 
         from .intrinsics import OBS_FLOOR_PX
 
         sig = np.asarray(uv_sigma, float)
-        sig = np.sqrt(np.where(np.isfinite(sig) & (sig > 0), sig, sigma_px) ** 2 + OBS_FLOOR_PX ** 2)
+        good = np.isfinite(sig) & (sig > 0)
+        fill = float(np.median(sig[good])) if good.any() else sigma_px
+        sig = np.sqrt(np.where(good, sig, fill) ** 2 + OBS_FLOOR_PX ** 2)
     w_obs = 1.0 / (sig / camera.focal_length_px) ** 2
     order = np.argsort(field, kind="stable")
     bounds = np.searchsorted(field[order], np.arange(k + 1))

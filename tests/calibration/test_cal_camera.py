@@ -208,3 +208,34 @@ def test_centroid_sigmas_weight_the_fit():
     rms_w, rms_u = np.sqrt(np.mean(err_w ** 2)), np.sqrt(np.mean(err_u ** 2))
     assert rms_w < 0.6 * rms_u, (rms_w, rms_u)
     assert 0.6 < rms_w / np.mean(sig_w) < 1.6, (rms_w, np.mean(sig_w))
+
+
+def test_frame_attitudes_fill_unknown_sigmas_as_the_camera_fit_does():
+    """A centroid without σ (NaN: a plain CoG) weighs in a frame's QUEST attitude as the
+    median of the usable σ — the camera fit's rule — not a fixed 0.1 px: the attitude equals
+    the one with those σ written out, and differs from the 0.1 px fill."""
+    from gyrostar.attitude import quat_to_dcm
+    from gyrostar.calibration.intrinsics import rotvec_dcm
+    from gyrostar.calibration.star_fields import field_attitudes
+
+    cam = camera_preset("xing2012")
+    rng = np.random.default_rng(5)
+    n = 8
+    xy = rng.uniform(-0.06, 0.06, (n, 2))
+    ref = np.column_stack([xy, np.ones(n)])
+    ref /= np.linalg.norm(ref, axis=1)[:, None]
+    a_true = rotvec_dcm(np.array([[1e-3, -2e-3, 5e-3]]))[0]
+    sig = np.array([0.02, 0.02, 0.03, 0.3, 0.3, 0.3, np.nan, np.nan])
+    noise = np.where(np.isfinite(sig), sig, 0.02)
+    uv = project_many(cam.as_array(), np.ascontiguousarray((a_true @ ref.T).T))[0]
+    uv = uv + noise[:, None] * rng.normal(size=(n, 2))
+    field = np.zeros(n, np.int64)
+    ok, q_nan = field_attitudes(field, uv, ref, cam, uv_sigma=sig)
+    _, q_med = field_attitudes(field, uv, ref, cam, uv_sigma=np.where(np.isfinite(sig), sig, np.median(sig[:6])))
+    _, q_fix = field_attitudes(field, uv, ref, cam, uv_sigma=np.where(np.isfinite(sig), sig, 0.1))
+    assert ok.all()
+    def arcsec(q1, q2):                     # small angle between two attitudes: ‖A₁ − A₂‖_F / √2 (rad)
+        return np.linalg.norm(quat_to_dcm(q1) - quat_to_dcm(q2)) / np.sqrt(2.0) * 180 / np.pi * 3600
+
+    assert arcsec(q_nan[0], q_med[0]) < 1e-6
+    assert arcsec(q_nan[0], q_fix[0]) > 1e-3
