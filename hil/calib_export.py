@@ -13,8 +13,11 @@ Each window's spot is measured again independently of the loop's filter (window 
 by median/MAD clipping, thresholded centre of gravity: :mod:`gyrostar.core.centroid`) and
 given the catalog star the loop was tracking there: the predicted centroid in the output
 record nearest to the exposure mid-time that lies within ``GATE_PX`` of the measured one,
-with no other prediction within twice that. Fields (frames) with ≥ 3 such stars get a
-QUEST attitude through the run's camera. Layout of the file:
+with no other prediction within twice that. A star with another catalog star within
+``NEIGHBOUR_PX`` at most ``NEIGHBOUR_DMAG`` fainter (to that depth below the tracked limit)
+is left out: its spot is a blend whose centre is not its catalog place (HIP 24020 and
+24019, V 5.90 and 5.94 0.4 px apart, are one spot 0.2 px from either). Fields (frames) with
+≥ 3 labelled stars get a QUEST attitude through the run's camera. Layout of the file:
 :mod:`gyrostar.calibration.star_fields`.
 """
 
@@ -28,6 +31,8 @@ import numpy as np
 
 GATE_PX = 3.0
 THRESH_SIGMA = 5.0
+NEIGHBOUR_PX = 5.0       # px: a star with a neighbour this close is a blend (PSF σ ≈ 0.85 px: at 5 px the
+NEIGHBOUR_DMAG = 3.0     # overlap is e^(−d²/4σ²) < 1e-3), when the neighbour is at most this much fainter
 
 
 class GyroTap:
@@ -133,6 +138,21 @@ def smear_offsets(u: float, v: float, omega: np.ndarray, camera, exposure_s: flo
     return np.ascontiguousarray(t[:, None] * exposure_s * vel[None, :])
 
 
+def blended(cat, deep, radius_rad: float, dmag: float) -> np.ndarray:
+    """(n,) bool over ``cat``'s stars: another star of the deeper catalog ``deep`` lies within
+    ``radius_rad`` and is at most ``dmag`` fainter (the same star, matched by id, does not count)."""
+    from scipy.spatial import cKDTree
+
+    out = np.zeros(len(cat.ids), bool)
+    if not len(cat.ids) or not len(deep.ids):
+        return out
+    near = cKDTree(deep.vectors).query_ball_point(cat.vectors, 2.0 * np.sin(radius_rad / 2.0))
+    for k, nb in enumerate(near):
+        others = [j for j in nb if deep.ids[j] != cat.ids[k]]
+        out[k] = bool(others) and bool(np.any(deep.vmag[others] <= cat.vmag[k] + dmag))
+    return out
+
+
 def identify(uv: np.ndarray, rec) -> np.ndarray:
     """Catalog id of each measured spot from one output record's predicted centroids (−1: none)."""
     n = int(rec["n_stars"])
@@ -153,7 +173,7 @@ def export_calib(path: str | Path, out: str | Path) -> dict:
     """Replay ``path`` and write the calibration input ``out`` (.npz); returns the figures."""
     from .. import config as gconfig
     from ..calibration.star_fields import field_attitudes
-    from ..catalog import load_catalog
+    from ..catalog import deepest_limit, load_catalog
     from ..loop.sinks import CallbackSink
     from . import config as hc
     from . import flatsat
@@ -173,8 +193,13 @@ def export_calib(path: str | Path, out: str | Path) -> dict:
     outputs = log["outputs"]
     t_out = outputs["t"]
     cfg = gconfig.from_dict(meta["config"], hc.FlatsatConfig, source="log META")
-    cat = load_catalog(cfg.sim.catalog, max(cfg.loop.mag_limit, cfg.sim.mag_limit))
-    pos = {int(i): k for k, i in enumerate(cat.ids)}
+    limit = max(cfg.loop.mag_limit, cfg.sim.mag_limit)
+    cat = load_catalog(cfg.sim.catalog, limit)
+    deep = load_catalog(cfg.sim.catalog, deepest_limit(cfg.sim.catalog, limit + NEIGHBOUR_DMAG))
+    blends = blended(cat, deep, NEIGHBOUR_PX / loop.camera.focal_length_px, NEIGHBOUR_DMAG)
+    pos = {int(i): k for k, i in enumerate(cat.ids) if not blends[k]}
+    blend_ids = set(cat.ids[blends].tolist())
+    n_blended = 0
     fields, uvs, refs, sids, sigmas, t_cam = [], [], [], [], [], []
     t_g = np.concatenate(gtap.t) if gtap.t else np.zeros(0)
     rate = np.concatenate(gtap.rate) if gtap.rate else np.zeros((0, 3))
@@ -192,6 +217,7 @@ def export_calib(path: str | Path, out: str | Path) -> dict:
             continue
         ids = identify(spots[:, 1:3], rec)
         sel = [i for i in range(len(ids)) if ids[i] >= 0 and int(ids[i]) in pos]
+        n_blended += sum(1 for i in ids if int(i) in blend_ids)
         if len(sel) < 3:
             continue
         f = len(t_cam)
@@ -215,4 +241,5 @@ def export_calib(path: str | Path, out: str | Path) -> dict:
                                                   "calibration": (meta.get("calibration") or {}).get("sha256")})))
     return {"log": str(path), "export": "calib", "out": str(out), "gyro_samples": int(len(t_g)),
             "window_frames": len(htap.frames), "fields": int(len(t_cam)), "fields_with_attitude": int(ok.sum()),
-            "star_observations": int(len(field)), "replay_steps": steps, "stopped": stopped}
+            "star_observations": int(len(field)), "blended_observations_left_out": n_blended,
+            "replay_steps": steps, "stopped": stopped}

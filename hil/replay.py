@@ -276,7 +276,8 @@ def run(args) -> int:
             raise ConfigError("--check compares a replay with the log; an export does not replay: "
                               "run them separately")
         res = export(args.log, args.export, args.out, force=getattr(args, "force", False))
-        what = (f"{res['fields']} star fields ({res['star_observations']} stars) and {res['gyro_samples']} gyro "
+        what = (f"{res['fields']} star fields ({res['star_observations']} stars; "
+                f"{res['blended_observations_left_out']} of blended stars left out) and {res['gyro_samples']} gyro "
                 "samples" if args.export == "calib" else f"{res['outputs']} outputs")
         skipped = res.get("log_skipped_bytes") or 0
         note = (f"; CORRUPT LOG: {skipped} bytes skipped in {res['log_skipped_places']} place(s), the export holds "
