@@ -183,15 +183,18 @@ def loop_params(cfg: hc.FlatsatConfig, e_per_dn: float | None = None, scen: hc.S
         # the offset the part may have, as a 1σ prior wide enough for it: 3x its fixed value or
         # 3σ of its per-part draw (what a calibration's uncertainty would give)
         bias_prior = 3.0 * max(max(abs(v) for v in gp.bias_dps), gp.bias_sigma_dps, 0.002) * DEG
-    max_stars = scen.max_stars if scen is not None and scen.max_stars > 0 else lc.max_stars
+
+    def scen_or_config(key):             # a scenario's loop key overrides the config's when > 0
+        v = getattr(scen, key) if scen is not None else 0
+        return v if v > 0 else getattr(lc, key)
+
+    max_stars = scen_or_config("max_stars")
     if max_stars < lc.min_stars:
         raise ConfigError(f"scenario '{scen.name}': max_stars = {max_stars} is below loop.min_stars = {lc.min_stars}")
     p = LoopParams(frame_hz=lc.frame_hz, exposure_s=cfg.head.exposure_ms * 1e-3, window_k=lc.window_k,
-                   max_stars=max_stars, min_stars=lc.min_stars,
-                   coast_timeout_s=scen.coast_timeout_s if scen is not None and scen.coast_timeout_s > 0
-                   else lc.coast_timeout_s,
-                   acquire_every_s=scen.acquire_every_s if scen is not None and scen.acquire_every_s > 0
-                   else lc.acquire_every_s, mag_limit=lc.mag_limit, confirm_images=lc.confirm_images,
+                   max_stars=max_stars, min_stars=lc.min_stars, coast_timeout_s=scen_or_config("coast_timeout_s"),
+                   acquire_every_s=scen_or_config("acquire_every_s"), mag_limit=lc.mag_limit,
+                   confirm_images=lc.confirm_images,
                    wrong_id_rejects=lc.wrong_id_rejects, neighbour_sep_px=lc.neighbour_sep_px,
                    reconnect_every_s=lc.reconnect_every_s, head_timeouts_lost=lc.head_timeouts_lost, gyro_arw=arw,
                    gyro_delay_s=delay, gyro_lowpass_hz=lowpass, gyro_rate_error=rate_error,

@@ -37,6 +37,14 @@ CLUSTER_FLOOR_PX = 0.015  # px per axis: the error a star keeps at one pixel (me
 CLUSTER_CELL_PX = 0.5     # px: observations of a star in one cell this size share that error
 
 
+def fill_unknown_sigma(sigma: np.ndarray) -> np.ndarray | None:
+    """Centroid σ (N,) px with each unknown one (NaN or ≤ 0: a plain CoG) set to the median
+    of the usable ones; None when none is usable."""
+    sg = np.asarray(sigma, dtype=float)
+    ok = np.isfinite(sg) & (sg > 0)
+    return np.where(ok, sg, np.median(sg[ok])) if ok.any() else None
+
+
 @dataclass
 class StarFields:
     """Identified stars: ``field`` (N,) int (any ids; renumbered 0..F-1 in order), ``uv`` (N, 2)
@@ -76,10 +84,9 @@ class StarFields:
             sg = np.asarray(self.sigma, dtype=float)
             if sg.shape != (n,):
                 raise ConfigError(f"star table: centroid sigmas {sg.shape} must be ({n},)")
-            ok = np.isfinite(sg) & (sg > 0)
-            if not ok.any():
+            self.sigma = fill_unknown_sigma(sg)
+            if self.sigma is None:
                 raise ConfigError("star table: no centroid sigma is finite and positive")
-            self.sigma = np.where(ok, sg, np.median(sg[ok]))
 
     def weight_sigma(self, obs_floor: float = OBS_FLOOR_PX, cluster_floor: float = CLUSTER_FLOOR_PX) -> np.ndarray:
         """σ_eff (N,) px of every observation for the fit's weights (ones without ``sigma``):

@@ -54,12 +54,12 @@ def field_attitudes(field: np.ndarray, uv: np.ndarray, ref: np.ndarray, camera, 
     if uv_sigma is None:
         sig = np.full(len(field), sigma_px)
     else:
-        from .intrinsics import OBS_FLOOR_PX
+        from .intrinsics import OBS_FLOOR_PX, fill_unknown_sigma
 
-        sig = np.asarray(uv_sigma, float)
-        good = np.isfinite(sig) & (sig > 0)
-        fill = float(np.median(sig[good])) if good.any() else sigma_px
-        sig = np.sqrt(np.where(good, sig, fill) ** 2 + OBS_FLOOR_PX ** 2)
+        sig = fill_unknown_sigma(uv_sigma)
+        if sig is None:
+            sig = np.full(len(field), sigma_px)
+        sig = np.sqrt(sig ** 2 + OBS_FLOOR_PX ** 2)
     w_obs = 1.0 / (sig / camera.focal_length_px) ** 2
     order = np.argsort(field, kind="stable")
     bounds = np.searchsorted(field[order], np.arange(k + 1))
