@@ -177,7 +177,7 @@ def export_calib(path: str | Path, out: str | Path) -> dict:
     from ..loop.sinks import CallbackSink
     from . import config as hc
     from . import flatsat
-    from .replay import load_log
+    from .replay import load_log, log_state
 
     log = load_log(path)
     meta = log["meta"]
@@ -242,4 +242,4 @@ def export_calib(path: str | Path, out: str | Path) -> dict:
     return {"log": str(path), "export": "calib", "out": str(out), "gyro_samples": int(len(t_g)),
             "window_frames": len(htap.frames), "fields": int(len(t_cam)), "fields_with_attitude": int(ok.sum()),
             "star_observations": int(len(field)), "blended_observations_left_out": n_blended,
-            "replay_steps": steps, "stopped": stopped}
+            "replay_steps": steps, "stopped": stopped} | log_state(log)

@@ -53,6 +53,27 @@ def load_log(path: str | Path, on_progress=None) -> dict:
             "report": report, "t0": t0, "complete": complete}
 
 
+def log_state(log: dict) -> dict:
+    """What an export of ``log`` (from :func:`load_log`) holds of the recording: the corrupt
+    bytes skipped, the cut-off tail ignored, and whether the run's closing summary is there."""
+    report = log["report"]
+    return {"log_skipped_bytes": report.skipped_bytes, "log_skipped_places": len(report.skipped),
+            "log_tail_ignored_bytes": report.ignored_tail_bytes, "log_complete": bool(log["complete"])}
+
+
+def log_state_text(res: dict) -> str:
+    """The export line's note on a damaged or cut-short log ("" for a whole one)."""
+    notes = []
+    if res.get("log_skipped_bytes"):
+        notes.append(f"CORRUPT LOG: {res['log_skipped_bytes']} bytes skipped in {res['log_skipped_places']} "
+                     "place(s), the export holds the intact records only")
+    if res.get("log_tail_ignored_bytes"):
+        notes.append(f"the log ends in {res['log_tail_ignored_bytes']} bytes of a torn record (ignored)")
+    if res.get("log_complete") is False:
+        notes.append("the log has no closing summary: the run was cut short, the export holds what was recorded")
+    return "".join("; " + n for n in notes)
+
+
 def replay(path: str | Path, progress=None) -> dict:
     """Replay a log through the driver and loop; compare outputs. Returns the figures.
 
@@ -163,8 +184,7 @@ def export(path: str | Path, fmt: str, out: str | Path, force: bool = False) -> 
     log = load_log(path)
     recs = log["outputs"]
     res = {"log": str(path), "export": fmt, "out": str(out), "outputs": int(len(recs)),
-           "truth": log["truth"] is not None, "log_skipped_bytes": log["report"].skipped_bytes,
-           "log_skipped_places": len(log["report"].skipped)}
+           "truth": log["truth"] is not None} | log_state(log)
     try:
         if fmt == "aem":
             from ..telemetry import aem, timescale
@@ -279,10 +299,7 @@ def run(args) -> int:
         what = (f"{res['fields']} star fields ({res['star_observations']} stars; "
                 f"{res['blended_observations_left_out']} of blended stars left out) and {res['gyro_samples']} gyro "
                 "samples" if args.export == "calib" else f"{res['outputs']} outputs")
-        skipped = res.get("log_skipped_bytes") or 0
-        note = (f"; CORRUPT LOG: {skipped} bytes skipped in {res['log_skipped_places']} place(s), the export holds "
-                "the intact records only") if skipped else ""
-        emit(args, res, f"exported {what} to {res['out']} ({res['export']}){note}")
+        emit(args, res, f"exported {what} to {res['out']} ({res['export']}){log_state_text(res)}")
         return 0
     res = replay(args.log, lambda d, total: _bytes_or_items(args, d, total, progress))
     human = (f"replayed {res['replayed_outputs']} outputs of {res['recorded_outputs']} recorded "

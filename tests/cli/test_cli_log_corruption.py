@@ -141,3 +141,36 @@ def test_heavily_corrupt_log_gives_a_verdict_not_an_error(run_log, tmp_path):
     exp = gyrostar(["replay", bad, "--export", "csv", "--out", tmp_path / "h.csv"])
     assert exp.returncode == 0, exp.stderr
     assert "the export holds the intact records only" in exp.stdout + exp.stderr
+
+
+@pytest.mark.parametrize("fmt", ["csv", "calib"])
+def test_export_of_a_cut_log_says_it_is_cut(run_log, tmp_path, fmt):
+    """A log torn mid-record by a crash (no closing summary, a torn last record): the export
+    writes what was recorded and its line says the log was cut short and how many bytes of the
+    torn record it ignored; the same for a flipped byte in the calibration export."""
+    data = run_log.read_bytes()
+    spans = _record_spans(data)
+    cut_rec = spans[len(spans) * 2 // 3]
+    cut = tmp_path / "cut.gslog"
+    cut.write_bytes(data[: cut_rec[0] + 11])
+    out = tmp_path / f"cut.{'npz' if fmt == 'calib' else fmt}"
+    res = gyrostar(["replay", cut, "--export", fmt, "--out", out, "--json"])
+    assert res.returncode == 0 and "Traceback" not in res.stderr, res.stderr
+    obj = json.loads(res.stdout)
+    assert obj["log_tail_ignored_bytes"] == 11 and obj["log_complete"] is False and obj["log_skipped_bytes"] == 0
+    assert "11 bytes of a torn record" in res.stderr and "no closing summary" in res.stderr
+    assert out.exists()
+    whole = gyrostar(["replay", run_log, "--export", fmt, "--out", tmp_path / f"whole.{out.suffix[1:]}", "--json"])
+    wobj = json.loads(whole.stdout)
+    assert wobj["log_complete"] is True and wobj["log_tail_ignored_bytes"] == 0
+    assert "torn" not in whole.stderr and "summary" not in whole.stderr
+    if fmt == "calib":
+        flipped = bytearray(data)
+        outputs = [s for s in spans if s[2] == lf.OUTPUT]
+        off, size, _ = outputs[len(outputs) // 2]
+        flipped[off + HEAD + 40] ^= 0x01
+        bad = tmp_path / "flipped.gslog"
+        bad.write_bytes(bytes(flipped))
+        res = gyrostar(["replay", bad, "--export", "calib", "--out", tmp_path / "flipped.npz"])
+        assert res.returncode == 0 and "Traceback" not in res.stderr, res.stderr
+        assert f"CORRUPT LOG: {size} bytes skipped in 1 place(s)" in res.stdout + res.stderr
