@@ -112,9 +112,23 @@ def _edge_erf(edge_index, centre, inv):
     return math.erf((np.float64(edge_index) - 0.5 - centre) * inv)
 
 
+@njit(cache=True, inline="always")
+def _step_box(u, v, sigma, r0, r1, c0, c1):
+    # the pixels one sub-step's spot reaches: BOX_SIGMAS·σ + 1 px around (u, v) (the padding
+    # of :func:`star_boxes`), inside the star's box; (rows [ka, kb), cols [la, lb))
+    pad = BOX_SIGMAS * sigma + 1.0
+    la = min(max(c0, int(math.floor(u - pad))), c1)     # within [c0, c1] even for a sub-step off the sensor
+    lb = max(la, min(c1, int(math.ceil(u + pad)) + 1))
+    ka = min(max(r0, int(math.floor(v - pad))), r1)
+    kb = max(ka, min(r1, int(math.ceil(v + pad)) + 1))
+    return ka, kb, la, lb
+
+
 @njit(cache=True, nogil=True)
 def add_stars_full(signal, paths, electrons, boxes, sigma):
-    """Add every star's smeared spot to ``signal`` (H, W) float64, in place."""
+    """Add every star's smeared spot to ``signal`` (H, W) float64, in place: each sub-step's
+    spot over the pixels within ``BOX_SIGMAS``·σ + 1 px of it (beyond, a Gaussian PSF holds
+    < 1e-6 of the light), so a trail costs its length, not its box's area."""
     n, m = paths.shape[0], paths.shape[1]
     inv = 1.0 / (math.sqrt(2.0) * sigma)
     ex = np.empty(signal.shape[1] + 1)
@@ -126,13 +140,14 @@ def add_stars_full(signal, paths, electrons, boxes, sigma):
         w = electrons[s] / m
         for k in range(m):
             u, v = paths[s, k, 0], paths[s, k, 1]
-            for c in range(c0, c1 + 1):
+            ka, kb, la, lb = _step_box(u, v, sigma, r0, r1, c0, c1)
+            for c in range(la, lb + 1):
                 ex[c - c0] = _edge_erf(c, u, inv)
-            for r in range(r0, r1 + 1):
+            for r in range(ka, kb + 1):
                 ey[r - r0] = _edge_erf(r, v, inv)
-            for r in range(r0, r1):
+            for r in range(ka, kb):
                 a = w * (0.5 * (ey[r - r0 + 1] - ey[r - r0]))
-                for c in range(c0, c1):
+                for c in range(la, lb):
                     signal[r, c] += a * (0.5 * (ex[c - c0 + 1] - ex[c - c0]))
 
 
@@ -141,7 +156,8 @@ def add_stars_spans(signal, spans, paths, electrons, boxes, sigma):
     """Add every star's spot to the span pixels ``signal`` (m,) (span order), in place.
 
     Per star that touches a span, the edge-erf tables of its box are computed once per
-    sub-step (the same values :func:`add_stars_full` uses), then summed on the span pixels.
+    sub-step (the same values and sub-step pixels :func:`add_stars_full` uses), then summed on
+    the span pixels.
     """
     n, m = paths.shape[0], paths.shape[1]
     inv = 1.0 / (math.sqrt(2.0) * sigma)
@@ -162,11 +178,14 @@ def add_stars_spans(signal, spans, paths, electrons, boxes, sigma):
             continue
         ex = np.empty((m, c1 - c0 + 1))
         ey = np.empty((m, r1 - r0 + 1))
+        sub = np.empty((m, 4), dtype=np.int64)
         for k in range(m):
             u, v = paths[s, k, 0], paths[s, k, 1]
-            for c in range(c0, c1 + 1):
+            ka, kb, la, lb = _step_box(u, v, sigma, r0, r1, c0, c1)
+            sub[k, 0], sub[k, 1], sub[k, 2], sub[k, 3] = ka, kb, la, lb
+            for c in range(la, lb + 1):
                 ex[k, c - c0] = _edge_erf(c, u, inv)
-            for r in range(r0, r1 + 1):
+            for r in range(ka, kb + 1):
                 ey[k, r - r0] = _edge_erf(r, v, inv)
         w = electrons[s] / m
         for i in range(spans.shape[0]):
@@ -178,8 +197,10 @@ def add_stars_spans(signal, spans, paths, electrons, boxes, sigma):
                 continue
             base = starts[i] - spans[i, 2]
             for k in range(m):
+                if r < sub[k, 0] or r >= sub[k, 1]:
+                    continue
                 a = w * (0.5 * (ey[k, r - r0 + 1] - ey[k, r - r0]))
-                for c in range(a0, a1):
+                for c in range(max(a0, sub[k, 2]), min(a1, sub[k, 3])):
                     signal[base + c] += a * (0.5 * (ex[k, c - c0 + 1] - ex[k, c - c0]))
 
 
