@@ -13,10 +13,9 @@ Each window's spot is measured again independently of the loop's filter (window 
 by median/MAD clipping, thresholded centre of gravity: :mod:`gyrostar.core.centroid`) and
 given the catalog star the loop was tracking there: the predicted centroid in the output
 record nearest to the exposure mid-time that lies within ``GATE_PX`` of the measured one,
-with no other prediction within twice that. A star with another catalog star within
-``NEIGHBOUR_PX`` at most ``NEIGHBOUR_DMAG`` fainter (to that depth below the tracked limit)
-is left out: its spot is a blend whose centre is not its catalog place (HIP 24020 and
-24019, V 5.90 and 5.94 0.4 px apart, are one spot 0.2 px from either). Fields (frames) with
+with no other prediction within twice that. A blended star (another catalog star within
+``NEIGHBOUR_PX`` at most ``BLEND_DMAG`` fainter, :func:`gyrostar.starid.blends.blended`) is
+left out: its spot's centre is not its catalog place. Fields (frames) with
 ≥ 3 labelled stars get a QUEST attitude through the run's camera. Layout of the file:
 :mod:`gyrostar.calibration.star_fields`.
 """
@@ -31,8 +30,8 @@ import numpy as np
 
 GATE_PX = 3.0
 THRESH_SIGMA = 5.0
-NEIGHBOUR_PX = 5.0       # px: a star with a neighbour this close is a blend (PSF σ ≈ 0.85 px: at 5 px the
-NEIGHBOUR_DMAG = 3.0     # overlap is e^(−d²/4σ²) < 1e-3), when the neighbour is at most this much fainter
+NEIGHBOUR_PX = 5.0       # px: a star with a neighbour this close is a blend for calibration (PSF σ ≈ 0.85 px: at
+#                          5 px the overlap e^(−d²/4σ²) < 1e-3; the window's centre of gravity reaches that far)
 
 
 class GyroTap:
@@ -138,21 +137,6 @@ def smear_offsets(u: float, v: float, omega: np.ndarray, camera, exposure_s: flo
     return np.ascontiguousarray(t[:, None] * exposure_s * vel[None, :])
 
 
-def blended(cat, deep, radius_rad: float, dmag: float) -> np.ndarray:
-    """(n,) bool over ``cat``'s stars: another star of the deeper catalog ``deep`` lies within
-    ``radius_rad`` and is at most ``dmag`` fainter (the same star, matched by id, does not count)."""
-    from scipy.spatial import cKDTree
-
-    out = np.zeros(len(cat.ids), bool)
-    if not len(cat.ids) or not len(deep.ids):
-        return out
-    near = cKDTree(deep.vectors).query_ball_point(cat.vectors, 2.0 * np.sin(radius_rad / 2.0))
-    for k, nb in enumerate(near):
-        others = [j for j in nb if deep.ids[j] != cat.ids[k]]
-        out[k] = bool(others) and bool(np.any(deep.vmag[others] <= cat.vmag[k] + dmag))
-    return out
-
-
 def identify(uv: np.ndarray, rec) -> np.ndarray:
     """Catalog id of each measured spot from one output record's predicted centroids (−1: none)."""
     n = int(rec["n_stars"])
@@ -175,6 +159,7 @@ def export_calib(path: str | Path, out: str | Path) -> dict:
     from ..calibration.star_fields import field_attitudes
     from ..catalog import deepest_limit, load_catalog
     from ..loop.sinks import CallbackSink
+    from ..starid.blends import BLEND_DMAG, blended
     from . import config as hc
     from . import flatsat
     from .replay import load_log, log_state
@@ -195,8 +180,8 @@ def export_calib(path: str | Path, out: str | Path) -> dict:
     cfg = gconfig.from_dict(meta["config"], hc.FlatsatConfig, source="log META")
     limit = max(cfg.loop.mag_limit, cfg.sim.mag_limit)
     cat = load_catalog(cfg.sim.catalog, limit)
-    deep = load_catalog(cfg.sim.catalog, deepest_limit(cfg.sim.catalog, limit + NEIGHBOUR_DMAG))
-    blends = blended(cat, deep, NEIGHBOUR_PX / loop.camera.focal_length_px, NEIGHBOUR_DMAG)
+    deep = load_catalog(cfg.sim.catalog, deepest_limit(cfg.sim.catalog, limit + BLEND_DMAG))
+    blends = blended(cat, deep, NEIGHBOUR_PX / loop.camera.focal_length_px, BLEND_DMAG)
     pos = {int(i): k for k, i in enumerate(cat.ids) if not blends[k]}
     blend_ids = set(cat.ids[blends].tolist())
     n_blended = 0

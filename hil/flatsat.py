@@ -266,13 +266,16 @@ def make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock=None, e_per_dn=No
               camera_sigma_px=None):
     from ..catalog import deepest_limit, load_catalog
     from ..loop.coupled import CoupledLoop
+    from ..starid.blends import BLEND_DMAG, BLEND_PX, blended
     from ..starid.faint import DEPTH_MAG, faint_stars
     from ..starid.pyramid import Pyramid
 
     idx = star_index(cfg, camera)
     # the sky holds stars beyond the index's limit: a lost-in-space label next to one is dropped
-    deep = load_catalog(cfg.sim.catalog, deepest_limit(cfg.sim.catalog, idx.mag_limit + DEPTH_MAG))
-    ident = Pyramid(idx, camera, faint=faint_stars(deep, idx))
+    deep = load_catalog(cfg.sim.catalog, deepest_limit(cfg.sim.catalog, idx.mag_limit + max(DEPTH_MAG, BLEND_DMAG)))
+    ident = Pyramid(idx, camera, faint=faint_stars(deep.brighter_than(idx.mag_limit + DEPTH_MAG), idx))
+    # stars whose spot is a blend with a neighbour: tracked only when too few others are
+    blends = blended(idx, deep, BLEND_PX / camera.focal_length_px, BLEND_DMAG)
     budget = None
     if getattr(head, "streaming", False) and cfg.head.link != "none":
         from ..loop.linkbudget import LinkBudget
@@ -280,7 +283,7 @@ def make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock=None, e_per_dn=No
 
         budget = LinkBudget(preset(cfg.head.link), cfg.loop.frame_hz)
     return CoupledLoop(loop_params(cfg, e_per_dn, scen, camera_sigma_px), clock, gyro, head, camera, idx, ident, sinks,
-                       lat_clock=lat_clock, irq=irq, link_budget=budget)
+                       lat_clock=lat_clock, irq=irq, link_budget=budget, blended=blends)
 
 
 # ---------------------------------------------------------------------------- flatsat

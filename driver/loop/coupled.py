@@ -137,7 +137,7 @@ class CoupledLoop:
     """The loop. ``sinks`` get each step's output records (``put(records, t_ns)``)."""
 
     def __init__(self, params: LoopParams, clock, gyro, head, camera, star_index, identifier, sinks=(),
-                 lat_clock=None, irq=None, link_budget=None):
+                 lat_clock=None, irq=None, link_budget=None, blended=None):
         from ..gyro import GyroSamples
 
         self.irq = irq           # FIFO-watermark interrupt line: irq.now() = host time of the last edge
@@ -164,7 +164,7 @@ class CoupledLoop:
         self.filter = AttitudeFilter(params.gyro_arw, params.sigma_bias_rw, params.bias_prior,
                                      1.0 / gyro.odr_hz if gyro.odr_hz else 0.0025, params.gyro_delay_s,
                                      params.gyro_lowpass_hz, params.gyro_rate_error, params.coast_timeout_s)
-        self.tracks = StarTracks(params, camera, star_index)
+        self.tracks = StarTracks(params, camera, star_index, blended)
         self.image = ImagePipeline(params, camera, identifier)
         self.outputs = OutputStage(sinks, self.lat_clock)
         self.state = modes.ModeState()

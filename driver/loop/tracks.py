@@ -7,7 +7,10 @@ gyro between images), leave when they reach the sensor edge, miss too many image
 the filter's gate ``wrong_id_rejects`` times in a row. A star dropped that way is kept out
 for a while that doubles with each such drop (:meth:`drop_wrong`: 1, 2, 4 … 32 s): a star
 whose image a hot pixel or an unresolved neighbour pulls off its catalog place would
-otherwise come back at once and fail again, frame after frame. :meth:`plan` builds the windows of
+otherwise come back at once and fail again, frame after frame. A blended star (``blended``:
+a neighbour on the sensor whose light shares its spot, :mod:`gyrostar.starid.blends`) is
+taken only while fewer than ``BLEND_ADMIT_BELOW`` others are tracked: its centroid is not at
+its catalog place. :meth:`plan` builds the windows of
 the next exposure for every tracked star (trajectory over the exposure and the command
 lag from the current rate, :func:`gyrostar.loop.image_kernels.plan_tracked`).
 """
@@ -23,17 +26,23 @@ from .image_kernels import plan_tracked
 from .kernels import project_refs
 
 MODEL = 1                # core.motion.MODEL_PINHOLE
+BLEND_ADMIT_BELOW = 4    # blended stars are tracked only while fewer clean ones than this are tracked
 BAN_FIRST_S = 1.0        # a star dropped as a wrong identification stays out this long (s),
 BAN_MAX_S = 32.0         # twice as long after each further such drop, at most this long
 
 
 class StarTracks:
-    def __init__(self, params, camera, star_index):
+    def __init__(self, params, camera, star_index, blended=None):
         self.p = params
         self.camera = camera
         self.cam = camera.as_array()
         self.f_px = camera.focal_length_px
         self.index = star_index
+        # (len(star_index),) bool: a star whose spot is a blend (None: none known)
+        n_index = 0 if star_index is None else len(star_index)
+        self.blended = np.zeros(n_index, np.bool_) if blended is None else np.asarray(blended, np.bool_)
+        if self.blended.shape != (n_index,):
+            raise ValueError(f"blended mask has shape {self.blended.shape}, the star index {n_index} stars")
         S = R.MAX_STARS
         self.active = np.zeros(S, np.bool_)
         self.ref = np.zeros((S, 3))
@@ -77,7 +86,8 @@ class StarTracks:
     def fill_from_catalog(self, q, now: float = -math.inf) -> None:
         """Fill free slots with catalog stars attitude ``q`` puts on the sensor, brightest
         first, skipping one closer than ``neighbour_sep_px`` to a tracked star and one kept
-        out until after ``now`` (s) by :meth:`drop_wrong`."""
+        out until after ``now`` (s) by :meth:`drop_wrong`; blended stars after all clean ones,
+        and only up to ``BLEND_ADMIT_BELOW`` tracked stars."""
         from ..attitude import quat_to_dcm
 
         free = [s for s in range(self.p.max_stars) if not self.active[s]]
@@ -97,25 +107,29 @@ class StarTracks:
         tracked = set(self.nav[self.active].tolist())
         sep = self.p.neighbour_sep_px
         fi = 0
-        for j in np.flatnonzero(inside):
-            if fi >= len(free):
+        # clean stars first; then blended ones, while fewer than BLEND_ADMIT_BELOW are tracked
+        for blend_pass in (False, True):
+            if blend_pass and len(tracked) >= BLEND_ADMIT_BELOW:
                 break
-            nav = int(cand[j])
-            if nav in tracked or self.banned_until.get(nav, -math.inf) > now:
-                continue
-            act = self.active
-            if np.any(act & (np.abs(uv[j, 0] - self.uv[:, 0]) < sep) & (np.abs(uv[j, 1] - self.uv[:, 1]) < sep)):
-                continue
-            s = free[fi]
-            self.ref[s] = self.index.vectors[nav]
-            self.nav[s] = nav
-            self.ids[s] = int(self.index.ids[nav])
-            self.active[s] = True
-            self.misses[s] = 0
-            self.rejects[s] = 0
-            self.uv[s] = uv[j]
-            tracked.add(nav)
-            fi += 1
+            for j in np.flatnonzero(inside):
+                if fi >= len(free) or (blend_pass and len(tracked) >= BLEND_ADMIT_BELOW):
+                    break
+                nav = int(cand[j])
+                if self.blended[nav] != blend_pass or nav in tracked or self.banned_until.get(nav, -math.inf) > now:
+                    continue
+                act = self.active
+                if np.any(act & (np.abs(uv[j, 0] - self.uv[:, 0]) < sep) & (np.abs(uv[j, 1] - self.uv[:, 1]) < sep)):
+                    continue
+                s = free[fi]
+                self.ref[s] = self.index.vectors[nav]
+                self.nav[s] = nav
+                self.ids[s] = int(self.index.ids[nav])
+                self.active[s] = True
+                self.misses[s] = 0
+                self.rejects[s] = 0
+                self.uv[s] = uv[j]
+                tracked.add(nav)
+                fi += 1
         if fi:
             self.version += 1
 

@@ -43,29 +43,3 @@ def test_export_calib_of_a_streamed_run(tmp_path):
     # the σ it states is the scatter it has (the default flatsat's camera is the nominal one)
     z_rms = np.sqrt(np.mean(np.concatenate(norm) ** 2))
     assert 0.6 < z_rms < 1.5, z_rms
-
-
-def test_blended_stars_are_named_by_their_neighbours():
-    """A star with a neighbour within 5 px that is at most 3 mag fainter is a blend (its spot
-    is not at its catalog place); a neighbour 4 mag fainter, one 6 px away, or the star's own
-    entry in the deeper catalog do not make it one. Hand-placed stars at 30″ per px."""
-    from types import SimpleNamespace
-
-    from gyrostar.hil.calib_export import NEIGHBOUR_DMAG, NEIGHBOUR_PX, blended
-
-    px = np.radians(30.0 / 3600.0)
-    def vec(x_px, y_px):
-        v = np.array([x_px * px, y_px * px, 1.0])
-        return v / np.linalg.norm(v)
-
-    # id: (x px, y px, V); 1-2 a pair 3 px apart 0.5 mag apart; 3 with a V+4 star 2 px away;
-    # 5 with a V+1 star 6 px away; 7 alone (its own entry only)
-    stars = {1: (0, 0, 5.0), 2: (3, 0, 5.5), 3: (100, 0, 5.0), 4: (100, 2, 9.0), 5: (200, 0, 5.0),
-             6: (206, 0, 6.0), 7: (300, 0, 4.0)}
-    def catalog(ids):
-        return SimpleNamespace(ids=np.array(ids), vectors=np.array([vec(*stars[i][:2]) for i in ids]),
-                               vmag=np.array([stars[i][2] for i in ids]))
-    cat = catalog([1, 2, 3, 5, 6, 7])
-    deep = catalog([1, 2, 3, 4, 5, 6, 7])
-    got = blended(cat, deep, NEIGHBOUR_PX * px, NEIGHBOUR_DMAG)
-    assert got.tolist() == [True, True, False, False, False, False]
