@@ -131,7 +131,7 @@ class SimConfig:
     preset: Literal["xing2012", "qian2015"] = "xing2012"
     gyro_errors: str = "bmi088"        # a gyro error parameter set of gyrostar.mocks
     catalog: Literal["hip2", "gaia"] = "hip2"
-    mag_limit: float = 6.5
+    mag_limit: float = 8.0             # fainter than the camera detects (~V 7): their light reaches windows and blends
 
 
 @dataclass
