@@ -107,29 +107,29 @@ class StarTracks:
         tracked = set(self.nav[self.active].tolist())
         sep = self.p.neighbour_sep_px
         fi = 0
-        # clean stars first; then blended ones, while fewer than BLEND_ADMIT_BELOW are tracked
-        for blend_pass in (False, True):
-            if blend_pass and len(tracked) >= BLEND_ADMIT_BELOW:
+        # clean stars first (brightest first within each kind); blended ones only while fewer
+        # than BLEND_ADMIT_BELOW are tracked
+        order = np.flatnonzero(inside)
+        order = order[np.argsort(self.blended[cand[order]], kind="stable")]
+        for j in order:
+            nav = int(cand[j])
+            if fi >= len(free) or (self.blended[nav] and len(tracked) >= BLEND_ADMIT_BELOW):
                 break
-            for j in np.flatnonzero(inside):
-                if fi >= len(free) or (blend_pass and len(tracked) >= BLEND_ADMIT_BELOW):
-                    break
-                nav = int(cand[j])
-                if self.blended[nav] != blend_pass or nav in tracked or self.banned_until.get(nav, -math.inf) > now:
-                    continue
-                act = self.active
-                if np.any(act & (np.abs(uv[j, 0] - self.uv[:, 0]) < sep) & (np.abs(uv[j, 1] - self.uv[:, 1]) < sep)):
-                    continue
-                s = free[fi]
-                self.ref[s] = self.index.vectors[nav]
-                self.nav[s] = nav
-                self.ids[s] = int(self.index.ids[nav])
-                self.active[s] = True
-                self.misses[s] = 0
-                self.rejects[s] = 0
-                self.uv[s] = uv[j]
-                tracked.add(nav)
-                fi += 1
+            if nav in tracked or self.banned_until.get(nav, -math.inf) > now:
+                continue
+            act = self.active
+            if np.any(act & (np.abs(uv[j, 0] - self.uv[:, 0]) < sep) & (np.abs(uv[j, 1] - self.uv[:, 1]) < sep)):
+                continue
+            s = free[fi]
+            self.ref[s] = self.index.vectors[nav]
+            self.nav[s] = nav
+            self.ids[s] = int(self.index.ids[nav])
+            self.active[s] = True
+            self.misses[s] = 0
+            self.rejects[s] = 0
+            self.uv[s] = uv[j]
+            tracked.add(nav)
+            fi += 1
         if fi:
             self.version += 1
 
