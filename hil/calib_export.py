@@ -178,7 +178,7 @@ def export_calib(path: str | Path, out: str | Path) -> dict:
     outputs = log["outputs"]
     t_out = outputs["t"]
     cfg = gconfig.from_dict(meta["config"], hc.FlatsatConfig, source="log META")
-    limit = max(cfg.loop.mag_limit, cfg.sim.mag_limit)
+    limit = cfg.loop.mag_limit           # the labels are the loop's tracked stars (its index stops here)
     cat = load_catalog(cfg.sim.catalog, limit)
     deep = load_catalog(cfg.sim.catalog, deepest_limit(cfg.sim.catalog, limit + BLEND_DMAG))
     blends = blended(cat, deep, NEIGHBOUR_PX / loop.camera.focal_length_px, BLEND_DMAG)
