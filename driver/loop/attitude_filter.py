@@ -37,24 +37,23 @@ SMOOTH_GAP_S = 0.1       # s: frames further apart than this are not smoothed to
 
 class AttitudeFilter:
     def __init__(self, arw: float, sigma_bias_rw: float, bias_prior: float, period_s: float, delay_s: float = 0.0,
-                 lowpass_hz: float = 0.0, rate_error: float = 0.0, rate_error_horizon_s: float = 5.0):
+                 lowpass_hz: float = 0.0, rate_error: float = 0.0):
         self.q = np.array([0.0, 0.0, 0.0, 1.0])   # ACQUIRE: gyro-relative attitude from the start
         self.b = np.zeros(3)
         self.P = np.zeros((6, 6))
         self.P[:3, :3] = np.eye(3) * 1e-2
         self.P[3:, 3:] = np.eye(3) * bias_prior ** 2
-        self.ts = np.array([np.nan, 0.0, 0.0, 0.0])   # [t of the last sample, ω̂]
+        # [t of the last sample, ω̂ (3), t of the last fix: the newest applied update's mid-exposure]
+        self.ts = np.array([np.nan, 0.0, 0.0, 0.0, np.nan])
         self.hist_t = np.full(HIST, -np.inf)
         self.hist_q = np.zeros((HIST, 4))
         # [ring head, output seq, writes out of time order]: while the last is 0 the ring's
         # times increase from its oldest entry to its head, and searches walk back from the head
         self.ih = np.array([HIST - 1, 0, 0], np.int64)
         # rate-proportional gyro error left after calibration (scale factor and misalignment,
-        # 1σ per axis, rad per rad): a constant error, folded into the rate noise as a walk
-        # whose variance matches its linear growth (σ_s |ω| t)² at t = rate_error_horizon_s
-        # and exceeds it before, so a coast at speed is never over-confident
-        self.prm = np.array([period_s, arw, sigma_bias_rw, (1e-4) ** 2, delay_s,
-                             rate_error ** 2 * rate_error_horizon_s])
+        # 1σ per axis, rad per rad): a constant error, so the angle it adds since the last fix
+        # grows linearly, variance (σ_s |ω̂| τ)² at τ after the fix (kernels.predict_batch)
+        self.prm = np.array([period_s, arw, sigma_bias_rw, (1e-4) ** 2, delay_s, rate_error ** 2])
         # the gyro's 2nd-order low-pass takes the rate noise above f_c out of every finite
         # window: the angle walk over Δ is N²(Δ − κ), κ = 1/(2√2 π f_c) (Δ ≫ 1/f_c)
         self.kappa = 1.0 / (2.0 * math.sqrt(2.0) * math.pi * lowpass_hz) if lowpass_hz > 0 else 0.0
@@ -66,7 +65,7 @@ class AttitudeFilter:
     @property
     def omega(self) -> np.ndarray:
         """Bias-corrected body rate at the last sample (rad/s)."""
-        return self.ts[1:]
+        return self.ts[1:4]
 
     @property
     def t_last(self) -> float | None:
@@ -129,6 +128,7 @@ class AttitudeFilter:
         dq = quat_mult(self.q, quat_conj(self.q_at(t_mid)))          # rotation mid → now
         self.q[:] = quat_normalize(quat_mult(dq, np.asarray(q_ident, np.float64)))
         self.valid = True
+        self.ts[4] = t_mid                            # a fix: the rate-proportional error restarts
         lag = max(now - t_mid, 0.0)
         pbb = self.P[3:, 3:].copy()
         self.P[:3, :3] = np.asarray(cov_rad2, np.float64).reshape(3, 3) + pbb * lag * lag

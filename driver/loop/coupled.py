@@ -163,7 +163,7 @@ class CoupledLoop:
         self.samples = GyroSamples(256)
         self.filter = AttitudeFilter(params.gyro_arw, params.sigma_bias_rw, params.bias_prior,
                                      1.0 / gyro.odr_hz if gyro.odr_hz else 0.0025, params.gyro_delay_s,
-                                     params.gyro_lowpass_hz, params.gyro_rate_error, params.coast_timeout_s)
+                                     params.gyro_lowpass_hz, params.gyro_rate_error)
         self.tracks = StarTracks(params, camera, star_index, blended)
         self.image = ImagePipeline(params, camera, identifier)
         self.outputs = OutputStage(sinks, self.lat_clock)
@@ -826,7 +826,7 @@ def warmup() -> dict:
         (image_kernels.plan_windows, (np.array([[20.0, 20.0]]), np.array([0], np.int64), rates, 0.0025, w, cam,
                                       MODEL, 1, 0, 6, 1024, 1024, 8192, 2048, 512)),
         (image_kernels.plan_tracked, (np.ones(2, np.bool_), np.array([0, 1], np.int64), np.array([5.0, 6.0]), ref, q,
-                                      af.ts[1:], w, 4, 1, 0.0025, cam, MODEL, 6, 1024, 1024, 8192, 2048, 512)),
+                                      af.ts[1:4], w, 4, 1, 0.0025, cam, MODEL, 6, 1024, 1024, 8192, 2048, 512)),
         (image_kernels.measure_windows, (spans, vals, np.array([0], np.int64), np.zeros((2, 2)),
                                          np.array([0], np.int64), np.array([2], np.int64), cam, 0.85, 4.0, 30.0,
                                          5.0, 10, 1e-3)),

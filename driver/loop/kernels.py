@@ -38,9 +38,11 @@ def predict_batch(smp_t, smp_rate, smp_flags, n, q, b, P, ts, hist_t, hist_q, ih
     q, b, P: filter state, in place. ts (4,): [t of the last sample (s, nan: none), ω̂ (rad/s)]
     in place. hist_t (H,), hist_q (H, 4): history ring; ih (3,) int64: [ring head, output seq,
     writes out of time order (counted here)]
-    in place. prm: [gyro period s, σ_v rad/s/√Hz, σ_u rad/s/√s, bias-converged variance
-    (rad/s)², gyro group delay τ s, σ_s² T_s s (rate-proportional error: the rate noise
-    density used is √(σ_v² + σ_s² T_s |ω̂|²))]. A sample stamped t measured the rate at t − τ: the
+    in place. ts[4]: time of the last fix (s; set here to the first sample's when nan).
+    prm: [gyro period s, σ_v rad/s/√Hz, σ_u rad/s/√s, bias-converged variance (rad/s)², gyro
+    group delay τ s, σ_s² (rate-proportional error, rad/rad: a constant error, so the angle
+    it adds since the last fix grows linearly, (σ_s |ω̂| a)² at an age a of the fix; the
+    step's rate noise density is √(σ_v² + σ_s² |ω̂|² (2a + dt)))]. A sample stamped t measured the rate at t − τ: the
     filter and its history run on t − τ, and each record's attitude is carried on to t
     with the current rate (``t`` stays the sample's stamp). flags_first: flags only the
     first output carries (overrun, gyro gap); flags_base: flags every output carries.
@@ -72,8 +74,12 @@ def predict_batch(smp_t, smp_rate, smp_flags, n, q, b, P, ts, hist_t, hist_q, ih
             w[j] = smp_rate[i, j]
         sv = prm[1]
         if prm[5] > 0.0:
+            if ts[4] != ts[4]:      # no fix yet: the error grows from the first sample
+                ts[4] = t - dt
+            fix_age = max(t - dt - ts[4], 0.0)
             wn2 = (w[0] - b[0]) ** 2 + (w[1] - b[1]) ** 2 + (w[2] - b[2]) ** 2
-            sv = np.sqrt(sv * sv + prm[5] * wn2)
+            # (σ_s |ω̂| τ)² grows by σ_s² |ω̂|² (2τ + dt) dt over this step
+            sv = np.sqrt(sv * sv + prm[5] * wn2 * (2.0 * fix_age + dt))
         mekf_predict_blocks(q, b, P, w, dt, sv, prm[2], E, T)
         if t <= hist_t[ih[0]]:
             ih[2] += 1          # the history is out of time order from here: searches scan all of it

@@ -23,14 +23,14 @@ from ..core.small_matrix import inv3_sym
 @njit(cache=True)
 def q_at_history(q, ts, hist_t, hist_q, ih, t):
     """Attitude at time ``t`` (s): the newest history entry at or before it, propagated to
-    ``t`` with the current rate ``ts[1:]`` (≤ one gyro period); ``q`` when there is none.
+    ``t`` with the current rate ``ts[1:4]`` (≤ one gyro period); ``q`` when there is none.
     ``ih``: the ring's [head, …, writes out of time order] (:class:`AttitudeFilter`)."""
     if ts[0] != ts[0]:
         return q.copy()
     best = _newest_at_or_before(hist_t, ih, t)
     if best < 0:
         return q.copy()
-    return quat_propagate(hist_q[best], ts[1:], t - hist_t[best])
+    return quat_propagate(hist_q[best], ts[1:4], t - hist_t[best])
 
 
 @njit(cache=True)
@@ -112,7 +112,15 @@ def update_at_mid(q, b, P, ts, hist_t, hist_q, ih, prm, kappa, mid, smoothed, t_
     bvecs = np.ascontiguousarray(b_mid @ np.ascontiguousarray(rot.T))
     t_last = ts[0] if ts[0] == ts[0] else t_mid
     lag = max(t_last - t_mid, 0.0)
-    qd = prm[1] ** 2 * lag
+    # the rate-proportional error's share of the walk since t_mid: it grows from the last fix
+    # (kernels.predict_batch), (σ_s |ω̂| a)² at an age a of the fix
+    qr = 0.0
+    s2w2 = 0.0
+    t_fix = ts[4]
+    if prm[5] > 0.0 and t_fix == t_fix:
+        s2w2 = prm[5] * (ts[1] ** 2 + ts[2] ** 2 + ts[3] ** 2)
+        qr = s2w2 * (max(t_last - t_fix, 0.0) ** 2 - max(t_mid - t_fix, 0.0) ** 2)
+    qd = prm[1] ** 2 * lag + qr
     if qd > 0 and min(P[0, 0], P[1, 1], P[2, 2]) > qd_margin * qd:   # else: no usable prior at t_mid
         for i in range(3):
             P[i, i] -= qd
@@ -151,8 +159,15 @@ def update_at_mid(q, b, P, ts, hist_t, hist_q, ih, prm, kappa, mid, smoothed, t_
         for i in range(3):
             for j in range(3):
                 mid[5 + 3 * i + j] = p_mid[i, j]
-    # back to now: the walk since t_mid, less what the gyro's low-pass takes out of it
-    back = prm[1] ** 2 * max(lag - kappa, 0.0) if qd > 0 else 0.0
+    # back to now: the walk since t_mid, less what the gyro's low-pass takes out of it; an
+    # applied update is the new fix, from which the rate-proportional error grows again
+    back = 0.0
+    if qd > 0:
+        back = prm[1] ** 2 * max(lag - kappa, 0.0) + qr
+        if n and s2w2 > 0.0:
+            back += s2w2 * lag * lag - qr
+    if n and not t_mid <= ts[4]:
+        ts[4] = t_mid
     for i in range(3):
         P[i, i] += back
     return n

@@ -116,23 +116,28 @@ def test_gyro_delay_shifts_the_history_and_carries_outputs_on():
     np.testing.assert_allclose(f.q_at(1.005 - tau), f.q, atol=1e-15)
 
 
-def test_rate_proportional_error_grows_the_coast_covariance_to_its_linear_bound():
-    """A scale/misalignment error σ_s: at rate ω the attitude variance grows by
-    (σ_v² + σ_s² T ω²) per second, so at t = T it holds the error's linear growth (σ_s ω T)²."""
-    sv, ss, horizon, w = 1.7e-4, 0.005, 5.0, 0.6          # rad/√s, rad/rad, s, rad/s (34 °/s)
-    f = AttitudeFilter(sv, 0.0, 0.0, 0.0025, rate_error=ss, rate_error_horizon_s=horizon)
-    f.P[:] = 0.0
-    n = 400
-    t = 20.0 + np.arange(1, n + 1) * 0.0025
-    f.ts[0] = 20.0
+def test_rate_proportional_error_grows_linearly_from_the_last_fix():
+    """A scale/misalignment error σ_s is constant: at rate ω the attitude error it adds since
+    the last fix at t_f is σ_s ω (t − t_f), so a coast's variance is σ_v² T + (σ_s ω T)²
+    (the steps' increments σ_s² ω² (2a + dt) dt sum to it exactly), and a filter fixed 10 ms
+    ago carries (σ_s ω · 10 ms)², not a walk at the coast's slope."""
+    sv, ss, w = 1.7e-4, 0.005, 0.6                      # rad/√s, rad/rad, rad/s (34 °/s)
+    cam = np.array([6666.6, 511.5, 511.5, 0, 0, 0, 0, 0, 1024, 1024])
 
-    class Smp:
-        pass
-    smp = Smp()
-    smp.t, smp.rate, smp.flags, smp.n = t, np.tile([0.0, 0.0, w], (n, 1)), np.zeros(n, np.uint8), n
-    f.predict(smp, 0, 0, R.MODE_COAST, np.zeros((0, 3)), np.zeros(0, np.int32),
-              np.array([6666.6, 511.5, 511.5, 0, 0, 0, 0, 0, 1024, 1024]), np.zeros((0, 2)), R.empty(n))
-    per_s = sv ** 2 + ss ** 2 * horizon * w ** 2
-    assert np.allclose(np.diag(f.P[:3, :3]), per_s * 1.0, rtol=1e-9)
-    # after the horizon the walk's variance equals the linear bound of a constant scale error
-    assert per_s * horizon >= (ss * w * horizon) ** 2
+    def coast(n):
+        f = AttitudeFilter(sv, 0.0, 0.0, 0.0025, rate_error=ss)
+        f.P[:] = 0.0
+        f.ts[0] = 20.0
+        f.ts[4] = 20.0                                  # the last fix
+        smp = type("Smp", (), {})()
+        smp.t = 20.0 + np.arange(1, n + 1) * 0.0025
+        smp.rate, smp.flags, smp.n = np.tile([0.0, 0.0, w], (n, 1)), np.zeros(n, np.uint8), n
+        f.predict(smp, 0, 0, R.MODE_COAST, np.zeros((0, 3)), np.zeros(0, np.int32), cam, np.zeros((0, 2)),
+                  R.empty(n))
+        return np.diag(f.P[:3, :3])
+
+    for n in (4, 400, 2000):                            # 10 ms, 1 s, 5 s
+        T = n * 0.0025
+        np.testing.assert_allclose(coast(n), sv ** 2 * T + (ss * w * T) ** 2, rtol=1e-9)
+    # 10 ms after a fix the scale error holds 0.6 % of what a 5 s walk at its slope would
+    assert coast(4)[0] - sv ** 2 * 0.01 < 0.01 * ss ** 2 * w ** 2 * 5.0 * 0.01

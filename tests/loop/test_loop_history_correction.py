@@ -101,3 +101,37 @@ def test_overlapping_updates_keep_the_walk_since_mid_exposure():
     p_mid = f.mid[5:].reshape(3, 3)
     walk = arw ** 2 * (lag - f.kappa)
     np.testing.assert_allclose(np.diag(f.P)[:3], np.diag(p_mid) + walk, rtol=0.02)
+
+
+def test_a_delayed_update_with_a_scale_error_equals_one_at_mid_exposure():
+    """With a rate-proportional error the walk since mid-exposure is not linear in time: the
+    error grows from the last fix. An update measured at t_mid and applied 7.5 ms later must
+    leave the covariance that the same update applied at t_mid and carried on by the gyro
+    leaves: the prior at t_mid takes out the error's growth since t_mid, and the new fix
+    restarts it there."""
+    arw, ss = 2e-4, 0.004                        # rad/√s; rad/rad (0.4 %)
+    sig = 2 / 206265
+    t_mid = 0.0925
+
+    def filt():
+        f = AttitudeFilter(arw, 1e-12, 1e-9, PERIOD, rate_error=ss)
+        f.ts[0] = -PERIOD
+        f.ts[4] = -PERIOD                        # fixed at the start
+        f.P[:3, :3] = np.eye(3) * (5 / 206265) ** 2
+        f.valid = True
+        return f
+
+    a = filt()                                   # applied at t_mid, then carried on to 0.100 s
+    _run(a, 0.0, 38)                             # samples to 0.0925 s
+    assert a.t_last == t_mid
+    body, refs = _stars(a.q_at(t_mid), seed=3)
+    a.update(t_mid, body, refs, np.full(len(body), sig), np.zeros(len(body), np.uint8))
+    _run(a, 0.095, 3)
+    b = filt()                                   # applied at 0.100 s
+    _run(b, 0.0, 41)
+    assert b.update(t_mid, body, refs, np.full(len(body), sig), np.zeros(len(body), np.uint8)) == len(body)
+    np.testing.assert_allclose(b.P[:3, :3], a.P[:3, :3], rtol=1e-6, atol=1e-9 * a.P[0, 0])
+    assert b.ts[4] == a.ts[4] == t_mid
+    # the growth since the fix is the scale error's, (σ_s |ω| lag)², besides the walk
+    grow = (ss * np.linalg.norm(W) * 0.0075) ** 2
+    assert grow > 1e-3 * a.P[0, 0]               # large enough for the check above to see it
