@@ -129,7 +129,9 @@ def gyro_part(model: str) -> GyroPart:
 @dataclass
 class SimConfig:
     preset: Literal["xing2012", "qian2015"] = "xing2012"
-    gyro_errors: str = "bmi088"        # a gyro error parameter set of gyrostar.mocks
+    # a gyro error parameter set of gyrostar.mocks; the built-in flatsat's: paper 000's
+    # calibrated BMI088-class gyro (the datasheet part, uncalibrated: "bmi088")
+    gyro_errors: str = "xing2012"
     catalog: Literal["hip2", "gaia"] = "hip2"
     mag_limit: float = 8.0             # fainter than the camera detects (~V 7): their light reaches windows and blends
 
@@ -229,7 +231,8 @@ class OutputsConfig:
 
 @dataclass
 class RealtimeConfig:
-    sched_fifo_priority: int = 0       # 0 = do not ask for SCHED_FIFO
+    # the loop thread's SCHED_FIFO priority (0 = do not ask; not granted: a note, SCHED_OTHER)
+    sched_fifo_priority: int = 50
     cpus: list[int] = field(default_factory=list)
 
 

@@ -21,7 +21,9 @@ HEADER = """# Configuration reference
 
 Generated from the schema in `hil/config.py` by `make config-doc` (do not edit by hand).
 TOML is validated against these dataclasses: an unknown key, a wrong type or a value out of
-range is exit 2 naming the key and the file. Units are in the key names.
+range is exit 2 naming the key and the file. Units are in the key names. A key a flatsat
+file leaves out takes the default below, which is the built-in simulated flatsat's value: a
+file of a few keys is the built-in flatsat with those keys changed.
 
 """
 
