@@ -78,10 +78,10 @@ def _loop_predict_update(X, P, w, n):
 
 
 @njit  # no cache: this module is loaded from a path by the bench runner
-def _loop_window(traj, n):
+def _loop_window(traj, n, k=6):
     c = 0
     for _ in range(n):
-        c += trajectory_window(traj, 6, 1024, 1024, 0).shape[0]
+        c += trajectory_window(traj, k, 1024, 1024, 0).shape[0]
     return c
 
 
@@ -351,6 +351,18 @@ def run(quick: bool) -> dict:
     t_nb = _median_us(lambda: _timed(_loop_window, n_fast // 10, traj), rep)
     t_np = _py_us(lambda: np_window(traj, 6, 1024, 1024), rep, 300)
     out["window_build"] = _case(t_nb, t_np, f"{spans.shape[0]} spans, {int(np.sum(spans[:, 3] - spans[:, 2]))} px")
+    # a slew: 20 °/s over a 10 ms exposure and its 2.5 ms lag (~29 px of trail), the window
+    # widened to the loop's cap of 40 px by the attitude's uncertainty
+    w_slew = np.array([0.0, 0.0, math.radians(20.0)]) + np.array([math.radians(14.0), math.radians(-14.0), 0.0])
+    traj_s = predict_trajectory(300.0, 200.0, np.tile(w_slew, (5, 1)), DT, np.zeros(3), F_PX, MODEL_PINHOLE, 24)
+    traj_s += 511.5
+    spans_s = trajectory_window(traj_s, 40, 1024, 1024, 0)
+    np.testing.assert_array_equal(np_window(traj_s, 40, 1024, 1024), spans_s)
+    t_nb = _median_us(lambda: _timed(_loop_window, n_fast // 100, traj_s, 40), rep)
+    t_np = _py_us(lambda: np_window(traj_s, 40, 1024, 1024), rep, 30)
+    trail = float(np.hypot(*(traj_s[-1] - traj_s[0])))
+    out["window_build_slew"] = _case(t_nb, t_np, f"{trail:.0f} px trail, k 40: {spans_s.shape[0]} spans, "
+                                                 f"{int(np.sum(spans_s[:, 3] - spans_s[:, 2]))} px")
 
     npx = int(np.sum(spans[:, 3] - spans[:, 2]))
     centre = traj.mean(axis=0)

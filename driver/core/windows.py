@@ -28,6 +28,24 @@ def _square_origin(c, k):
 
 
 @njit(cache=True)
+def _paint(mask, row_lo, row_hi, r_a, r_b, c_a, c_b):
+    """Set ``mask[r_a:r_b, c_a:c_b]`` (clipped to the mask) and widen those rows' painted
+    column ranges ``[row_lo, row_hi)``."""
+    h, w = mask.shape
+    r_a = max(r_a, 0)
+    r_b = min(r_b, h)
+    c_a = max(c_a, 0)
+    c_b = min(c_b, w)
+    if c_b <= c_a:
+        return
+    for rr in range(r_a, r_b):
+        for cc in range(c_a, c_b):
+            mask[rr, cc] = 1
+        row_lo[rr] = min(row_lo[rr], c_a)
+        row_hi[rr] = max(row_hi[rr], c_b)
+
+
+@njit(cache=True)
 def trajectory_window(traj_uv, k, n_rows, n_cols, window_id):
     """Row spans of the union of k×k squares on the trajectory ``traj_uv`` (m, 2) (col, row).
 
@@ -61,6 +79,11 @@ def trajectory_window(traj_uv, k, n_rows, n_cols, window_id):
     h = r1 - r0
     w = c1 - c0
     mask = np.zeros((h, w), dtype=np.uint8)
+    row_lo = np.full(h, w, np.int64)        # each row's painted columns lie in [row_lo, row_hi)
+    row_hi = np.zeros(h, np.int64)
+    painted = False
+    pc = 0
+    pr = 0
     for i in range(m):
         ua, va = traj_uv[i, 0], traj_uv[i, 1]
         if i + 1 < m:
@@ -73,14 +96,27 @@ def trajectory_window(traj_uv, k, n_rows, n_cols, window_id):
             t = j / ns
             cs = _square_origin(ua + t * (ub - ua), k) - c0
             rs = _square_origin(va + t * (vb - va), k) - r0
-            for rr in range(max(0, rs), min(h, rs + k)):
-                for cc in range(max(0, cs), min(w, cs + k)):
-                    mask[rr, cc] = 1
-    # run-length encode each row
+            if not painted:
+                _paint(mask, row_lo, row_hi, rs, rs + k, cs, cs + k)
+                painted = True
+            elif cs != pc or rs != pr:
+                # only what the new square adds to the last one: its rows outside the last
+                # square's, whole, and within them its columns outside the last square's
+                if rs > pr:
+                    _paint(mask, row_lo, row_hi, max(rs, pr + k), rs + k, cs, cs + k)
+                elif rs < pr:
+                    _paint(mask, row_lo, row_hi, rs, min(rs + k, pr), cs, cs + k)
+                if cs > pc:
+                    _paint(mask, row_lo, row_hi, max(rs, pr), min(rs, pr) + k, max(cs, pc + k), cs + k)
+                elif cs < pc:
+                    _paint(mask, row_lo, row_hi, max(rs, pr), min(rs, pr) + k, cs, min(cs + k, pc))
+            pc = cs
+            pr = rs
+    # run-length encode each row within its painted range
     count = 0
     for rr in range(h):
         prev = 0
-        for cc in range(w):
+        for cc in range(row_lo[rr], row_hi[rr]):
             if mask[rr, cc] == 1 and prev == 0:
                 count += 1
             prev = mask[rr, cc]
@@ -88,8 +124,8 @@ def trajectory_window(traj_uv, k, n_rows, n_cols, window_id):
     n = 0
     for rr in range(h):
         start = -1
-        for cc in range(w + 1):
-            on = cc < w and mask[rr, cc] == 1
+        for cc in range(row_lo[rr], row_hi[rr] + 1):
+            on = cc < row_hi[rr] and mask[rr, cc] == 1
             if on and start < 0:
                 start = cc
             elif not on and start >= 0:

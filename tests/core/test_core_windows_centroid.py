@@ -69,6 +69,50 @@ def test_trajectory_window_clipped_to_sensor_and_u_turn():
     assert counts.max() == 2
 
 
+def _squares_painted(traj, k, n_rows, n_cols):
+    """Every k×k square at the window's 0.5 px resampling of ``traj``, painted whole into a
+    sensor-sized mask (numpy, no shortcuts)."""
+    mask = np.zeros((n_rows, n_cols), dtype=int)
+    half = (k - 1) / 2.0
+    for i in range(len(traj)):
+        a = traj[i]
+        b = traj[i + 1] if i + 1 < len(traj) else a
+        ns = max(1, int(np.ceil(max(abs(b - a)) / 0.5)))
+        for j in range(ns):
+            u, v = a + j / ns * (b - a)
+            c0 = int(np.floor(u - half + 0.5))
+            r0 = int(np.floor(v - half + 0.5))
+            mask[max(r0, 0):max(r0 + k, 0), max(c0, 0):max(c0 + k, 0)] = 1
+    return mask
+
+
+@pytest.mark.parametrize("shape", ["line", "curve", "jumps", "back-and-forth"])
+def test_trajectory_window_equals_every_square_painted(shape):
+    """The window paints only what each square adds to the one before it: the union must be
+    that of every square, for any path (curling, jumping, reversing, leaving the sensor) and
+    any side up to 40 px."""
+    rng = np.random.default_rng(11)
+    for _ in range(150):
+        m = int(rng.integers(1, 40))
+        k = int(rng.integers(1, 41))
+        start = rng.uniform(-30, 130, 2)
+        if shape == "line":
+            traj = start + np.arange(m)[:, None] * rng.normal(size=2) * rng.uniform(0, 3)
+        elif shape == "curve":
+            ang = np.cumsum(rng.normal(0, 0.4, m))
+            traj = start + np.cumsum(np.stack([np.cos(ang), np.sin(ang)], 1) * rng.uniform(0, 3), 0)
+        elif shape == "jumps":
+            traj = start + np.cumsum(rng.normal(0, 6, (m, 2)), 0)
+        else:
+            traj = start + np.sin(np.arange(m) * rng.uniform(0.2, 1.5))[:, None] * rng.normal(0, 8, 2)
+        spans = trajectory_window(traj, k, 100, 120, 3)
+        mask = spans_to_mask(spans, 100, 120)
+        assert mask.max(initial=0) <= 1
+        np.testing.assert_array_equal(mask, _squares_painted(traj, k, 100, 120))
+        if len(spans):
+            assert np.all(np.diff(spans[:, 1]) >= 0) and np.all(spans[:, 2] < spans[:, 3])
+
+
 def test_concat_windows_sorted():
     a = fixed_window(30.0, 30.0, 6, 64, 64, 1)
     b = fixed_window(10.0, 10.0, 6, 64, 64, 0)
