@@ -9,8 +9,8 @@ for a while that doubles with each such drop (:meth:`drop_wrong`: 1, 2, 4 … 32
 whose image a hot pixel or an unresolved neighbour pulls off its catalog place would
 otherwise come back at once and fail again, frame after frame. A blended star (``blended``:
 a neighbour on the sensor whose light shares its spot, :mod:`gyrostar.starid.blends`) is
-taken only while fewer than ``BLEND_ADMIT_BELOW`` others are tracked: its centroid is not at
-its catalog place. :meth:`plan` builds the windows of
+taken only while fewer than ``BLEND_ADMIT_BELOW`` others are tracked, and dropped once that
+many clean ones are: its centroid is not at its catalog place. :meth:`plan` builds the windows of
 the next exposure for every tracked star (trajectory over the exposure and the command
 lag from the current rate, :func:`gyrostar.loop.image_kernels.plan_tracked`).
 """
@@ -132,6 +132,18 @@ class StarTracks:
             fi += 1
         if fi:
             self.version += 1
+        self._release_blends()
+
+    def _release_blends(self) -> None:
+        """Drop the tracked blended stars once ``BLEND_ADMIT_BELOW`` clean ones are tracked:
+        a sparse field let them in, and clean stars have come onto the sensor since."""
+        act = self.tracked()
+        if not len(act):
+            return
+        blend = self.blended[self.nav[act]]
+        if blend.any() and np.count_nonzero(~blend) >= BLEND_ADMIT_BELOW:
+            for s in act[blend]:
+                self.drop(int(s))
 
     def drop_lost(self, tracking: bool) -> None:
         """Drop stars that left the sensor, or (``tracking``) missed more than ``max_misses``

@@ -51,6 +51,31 @@ def test_blended_stars_fill_a_sparse_field_up_to_the_minimum():
     assert len(tr.tracked()) == 4
 
 
+def test_blended_stars_leave_when_clean_ones_come_onto_the_sensor():
+    """A sparse field lets blends in; as the attitude moves on and clean stars enter the
+    sensor, the blends give their slots up."""
+    from gyrostar.attitude import quat_mult, rotvec_to_quat
+
+    cam = camera_preset("xing2012")
+    idx = load_index("hip2", 6.5, max_sep_deg=12.2)
+    first = _candidates(cam, idx, Q_ORION)
+    q2 = quat_mult(rotvec_to_quat(np.radians([3.0, 0.0, 0.0])), Q_ORION)      # 3° on
+    second = _candidates(cam, idx, q2)
+    new = [n for n in second if n not in first]
+    assert len(new) >= BLEND_ADMIT_BELOW
+    mask = np.ones(len(idx), bool)
+    mask[first[5]] = mask[first[9]] = False      # two clean stars in the first field
+    mask[new] = False                            # the stars that come into view are clean
+    tr = StarTracks(LoopParams(max_stars=16), cam, idx, mask)
+    tr.fill_from_catalog(Q_ORION)
+    assert sum(mask[n] for n in tr.nav[tr.tracked()]) == 2          # two blends let in
+    v = tr.version
+    tr.fill_from_catalog(q2)
+    got = [int(n) for n in tr.nav[tr.tracked()]]
+    assert not any(mask[n] for n in got)                            # the blends are gone
+    assert set(new) <= set(got) and tr.version > v
+
+
 def test_blend_mask_must_cover_the_index():
     import pytest
 
