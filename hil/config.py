@@ -165,9 +165,10 @@ class LoopConfig:
     # it out of short windows (BMI088 at 400 Hz ODR: 47 Hz); the simulated flatsat uses its model's
     gyro_lowpass_hz: float = 47.0
     # rate-proportional gyro error left after calibration (scale factor and misalignment, 1σ,
-    # ppm of the rate): the filter's coast covariance grows with it at speed. BMI088 uncalibrated:
-    # ~4700 (sensitivity ±1 %, cross-axis ±1 %); after `gyrostar calibrate gyro-scale`: ~200.
-    # The simulated flatsat uses its gyro model's
+    # ppm of the rate): the filter's attitude covariance grows with it at speed, linearly from
+    # the last star fix. BMI088 uncalibrated: ~4700 (sensitivity ±1 %, cross-axis ±1 %); after
+    # `gyrostar calibrate gyro-scale`: ~200. The simulated flatsat uses its gyro model's unless
+    # the run's calibration has a [gyro_scale] table
     gyro_rate_error_ppm: float = 200.0
     # the gyro offset the filter starts from (1σ, deg/s): the BMI088's zero-rate offset is
     # ±1 deg/s raw, ~0.01 after `gyrostar calibrate gyro-static`. The simulated flatsat uses its

@@ -155,11 +155,13 @@ class ScenarioScene:
 
 # ---------------------------------------------------------------------------- driver
 def loop_params(cfg: hc.FlatsatConfig, e_per_dn: float | None = None, scen: hc.Scenario | None = None,
-                camera_sigma_px: float | None = None):
+                camera_sigma_px: float | None = None, gyro_scale_calibrated: bool = False):
     """The loop's parameters from the config; a simulated flatsat's detector gain, gyro
     angle random walk and gyro low-pass cut-off come from its simulator models (what a
     calibration or the datasheet would give); ``camera_sigma_px`` the camera-model σ
-    (:func:`camera_sigma`; default the config's)."""
+    (:func:`camera_sigma`; default the config's). The rate-proportional gyro error is the
+    config's (what is left after a scale calibration) on a real gyro or under a [gyro_scale]
+    calibration (``gyro_scale_calibrated``), else a simulated part's own."""
     from ..loop.coupled import LoopParams
 
     lc = cfg.loop
@@ -178,8 +180,10 @@ def loop_params(cfg: hc.FlatsatConfig, e_per_dn: float | None = None, scen: hc.S
         if n2 > 0:
             arw = math.sqrt(n2)
         lowpass = gp.filter_hz
-        # scale factor and cross-axis errors the simulated part carries (none in a calibrated set)
-        rate_error = math.hypot(gp.scale_factor_sigma_ppm * 1e-6, gp.misalignment_sigma_mrad * 1e-3)
+        # scale factor and cross-axis errors the simulated part carries (none in a calibrated
+        # set), unless a [gyro_scale] calibration takes them out: then what it leaves (config)
+        if not gyro_scale_calibrated:
+            rate_error = math.hypot(gp.scale_factor_sigma_ppm * 1e-6, gp.misalignment_sigma_mrad * 1e-3)
         # the offset the part may have, as a 1σ prior wide enough for it: 3x its fixed value or
         # 3σ of its per-part draw (what a calibration's uncertainty would give)
         bias_prior = 3.0 * max(max(abs(v) for v in gp.bias_dps), gp.bias_sigma_dps, 0.002) * DEG
@@ -262,8 +266,13 @@ def camera_sigma(cfg: hc.FlatsatConfig, scen: hc.Scenario, calib) -> float:
     return scen.camera_sigma_px if scen.camera_sigma_px > 0 else cfg.loop.camera_sigma_px
 
 
+def gyro_scale_calibrated(calib) -> bool:
+    """The run applies a [gyro_scale] calibration (scale factors and misalignment)."""
+    return calib is not None and calib.cal is not None and calib.cal.gyro_scale is not None
+
+
 def make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock=None, e_per_dn=None, irq=None, scen=None,
-              camera_sigma_px=None):
+              camera_sigma_px=None, scale_calibrated=False):
     from ..catalog import deepest_limit, load_catalog
     from ..loop.coupled import CoupledLoop
     from ..starid.blends import BLEND_DMAG, BLEND_PX, blended
@@ -282,7 +291,8 @@ def make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock=None, e_per_dn=No
         from ..transport.linkrate import preset
 
         budget = LinkBudget(preset(cfg.head.link), cfg.loop.frame_hz)
-    return CoupledLoop(loop_params(cfg, e_per_dn, scen, camera_sigma_px), clock, gyro, head, camera, idx, ident, sinks,
+    return CoupledLoop(loop_params(cfg, e_per_dn, scen, camera_sigma_px, scale_calibrated), clock, gyro, head, camera,
+                       idx, ident, sinks,
                        lat_clock=lat_clock, irq=irq, link_budget=budget, blended=blends)
 
 
@@ -317,7 +327,8 @@ class Flatsat:
 
     def make_loop(self, sinks):
         return make_loop(self.cfg, self.clock, self.gyro, self.head, self.camera, sinks, self.lat_clock,
-                         self.e_per_dn, self.irq, self.scen, camera_sigma(self.cfg, self.scen, self.calibration))
+                         self.e_per_dn, self.irq, self.scen, camera_sigma(self.cfg, self.scen, self.calibration),
+                         gyro_scale_calibrated(self.calibration))
 
     def clock_now(self) -> float:
         return self.base_clock.now()
@@ -928,7 +939,7 @@ def replay_loop(meta: dict, records, sinks):
                      replay_reconnects=reconnects, fast=bool(meta.get("fast")), replay_records=records)
     head = with_hot_pixels(head, calib, camera, {})
     loop = make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock, e_per_dn, irq, scen,
-                     camera_sigma(cfg, scen, calib))
+                     camera_sigma(cfg, scen, calib), gyro_scale_calibrated(calib))
 
     def run_all():
         steps = 0
