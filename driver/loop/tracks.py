@@ -149,11 +149,13 @@ class StarTracks:
         """Drop stars that left the sensor, or (``tracking``) missed more than ``max_misses``
         images in a row while others were measured."""
         w, h = self.camera.width_px, self.camera.height_px
-        for s in self.tracked():
-            u, v = self.uv[s]
-            off = u < 2 or v < 2 or u > w - 3 or v > h - 3
-            if off or (tracking and self.misses[s] > self.p.max_misses):
-                self.drop(int(s))
+        act = self.tracked()
+        u, v = self.uv[act, 0], self.uv[act, 1]
+        gone = (u < 2) | (v < 2) | (u > w - 3) | (v > h - 3)
+        if tracking:
+            gone |= self.misses[act] > self.p.max_misses
+        for s in act[gone]:
+            self.drop(int(s))
 
     def score(self, slots, accepted) -> list[int]:
         """Record the filter's verdict on measured ``slots``; returns the slots that failed
