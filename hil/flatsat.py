@@ -155,13 +155,13 @@ class ScenarioScene:
 
 # ---------------------------------------------------------------------------- driver
 def loop_params(cfg: hc.FlatsatConfig, e_per_dn: float | None = None, scen: hc.Scenario | None = None,
-                camera_sigma_px: float | None = None, gyro_scale_calibrated: bool = False):
+                camera_sigma_px: float | None = None, scale_calibrated: bool = False):
     """The loop's parameters from the config; a simulated flatsat's detector gain, gyro
     angle random walk and gyro low-pass cut-off come from its simulator models (what a
     calibration or the datasheet would give); ``camera_sigma_px`` the camera-model σ
     (:func:`camera_sigma`; default the config's). The rate-proportional gyro error is the
     config's (what is left after a scale calibration) on a real gyro or under a [gyro_scale]
-    calibration (``gyro_scale_calibrated``), else a simulated part's own."""
+    calibration (``scale_calibrated``), else a simulated part's own."""
     from ..loop.coupled import LoopParams
 
     lc = cfg.loop
@@ -182,7 +182,7 @@ def loop_params(cfg: hc.FlatsatConfig, e_per_dn: float | None = None, scen: hc.S
         lowpass = gp.filter_hz
         # scale factor and cross-axis errors the simulated part carries (none in a calibrated
         # set), unless a [gyro_scale] calibration takes them out: then what it leaves (config)
-        if not gyro_scale_calibrated:
+        if not scale_calibrated:
             rate_error = math.hypot(gp.scale_factor_sigma_ppm * 1e-6, gp.misalignment_sigma_mrad * 1e-3)
         # the offset the part may have, as a 1σ prior wide enough for it: 3x its fixed value or
         # 3σ of its per-part draw (what a calibration's uncertainty would give)

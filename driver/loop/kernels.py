@@ -35,10 +35,10 @@ def predict_batch(smp_t, smp_rate, smp_flags, n, q, b, P, ts, hist_t, hist_q, ih
     tracked stars and write the output record — no Python object per sample.
 
     smp_t (s), smp_rate (rad/s, body), smp_flags (gyro sample flags): the batch, first ``n``.
-    q, b, P: filter state, in place. ts (4,): [t of the last sample (s, nan: none), ω̂ (rad/s)]
-    in place. hist_t (H,), hist_q (H, 4): history ring; ih (3,) int64: [ring head, output seq,
+    q, b, P: filter state, in place. ts (5,): [t of the last sample (s, nan: none), ω̂ (rad/s),
+    t of the last fix (s)] in place. hist_t (H,), hist_q (H, 4): history ring; ih (3,) int64: [ring head, output seq,
     writes out of time order (counted here)]
-    in place. ts[4]: time of the last fix (s; set here to the first sample's when nan).
+    in place (ts[4] set here to the first sample's time while there is no fix).
     prm: [gyro period s, σ_v rad/s/√Hz, σ_u rad/s/√s, bias-converged variance (rad/s)², gyro
     group delay τ s, σ_s² (rate-proportional error, rad/rad: a constant error, so the angle
     it adds since the last fix grows linearly, (σ_s |ω̂| a)² at an age a of the fix; the

@@ -138,8 +138,6 @@ class StarTracks:
         """Drop the tracked blended stars once ``BLEND_ADMIT_BELOW`` clean ones are tracked:
         a sparse field let them in, and clean stars have come onto the sensor since."""
         act = self.tracked()
-        if not len(act):
-            return
         blend = self.blended[self.nav[act]]
         if blend.any() and np.count_nonzero(~blend) >= BLEND_ADMIT_BELOW:
             for s in act[blend]:

@@ -163,10 +163,8 @@ def update_at_mid(q, b, P, ts, hist_t, hist_q, ih, prm, kappa, mid, smoothed, t_
     # applied update is the new fix, from which the rate-proportional error grows again
     back = 0.0
     if qd > 0:
-        back = prm[1] ** 2 * max(lag - kappa, 0.0) + qr
-        if n and s2w2 > 0.0:
-            back += s2w2 * lag * lag - qr
-    if n and not t_mid <= ts[4]:
+        back = prm[1] ** 2 * max(lag - kappa, 0.0) + (s2w2 * lag * lag if n else qr)
+    if n and not t_mid <= ts[4]:      # a newer fix (or the first: nan)
         ts[4] = t_mid
     for i in range(3):
         P[i, i] += back

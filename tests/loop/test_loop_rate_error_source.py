@@ -21,6 +21,6 @@ def test_the_rate_error_is_the_parts_until_a_scale_calibration():
     assert gyro_scale_calibrated(cal)
     assert not gyro_scale_calibrated(RunCalibration(None)) and not gyro_scale_calibrated(None)
     assert not gyro_scale_calibrated(RunCalibration(Calibration()))
-    after = loop_params(cfg, scen=miscal, gyro_scale_calibrated=True).gyro_rate_error
+    after = loop_params(cfg, scen=miscal, scale_calibrated=True).gyro_rate_error
     assert after == cfg.loop.gyro_rate_error_ppm * 1e-6 and math.isclose(after, 200e-6, rel_tol=1e-12)
     assert loop_params(cfg, scen=hc.load_scenario("demo")).gyro_rate_error == 0.0   # xing2012: calibrated set
