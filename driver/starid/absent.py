@@ -2,9 +2,10 @@
 
 After a lost-in-space identification, every catalog star the sensor surely detects that
 the attitude puts on the sensor should have a spot near its predicted position. "Surely
-detected": V at least ``margin_mag`` brighter than both the index's limiting magnitude and
-the faintest star the identification labelled (the image shows that faint a star, and a
-star ``margin_mag`` brighter is seen whatever the magnitude noise). A wrong attitude that
+detected": V at least ``margin_mag`` brighter than both the sensor's limiting magnitude
+(the index's navigation limit, ``StarIndex.nav_limit``) and the faintest star the
+identification labelled (the image shows that faint a star, and a star ``margin_mag``
+brighter is seen whatever the magnitude noise). A wrong attitude that
 happens to fit a few spots looks at another patch of sky, whose own bright stars then fall
 where the image has nothing: one such star rejects it.
 

@@ -4,7 +4,10 @@ per-star neighbour tables and a voxel grid for cone queries. Built once, cached 
 * Stars: the catalog to ``mag_limit`` less the fainter member of every pair closer than
   ``DOUBLE_SEP_DEG`` (unresolved doubles); all of them can label an image once the
   attitude is known.
-* Navigation stars (``is_nav``): those stars, optionally thinned so that they are spread
+* Navigation stars (``is_nav``): those of them to ``nav_mag_limit`` (all by default; a
+  sensor whose magnitudes scatter by σ_m sees stars ~3σ_m fainter than its limit now and
+  then, so an index may hold such stars to label spots while only the stars to the
+  sensor's limit form patterns), optionally thinned so that they are spread
   evenly over the sky — walking from the brightest down, a star is kept only if fewer
   than ``per_field`` kept stars lie within ``thin_radius`` of it (0 keeps all).
 * Star pairs: every pair of navigation stars closer than ``max_sep`` (rad, the sensor's
@@ -14,8 +17,9 @@ per-star neighbour tables and a voxel grid for cone queries. Built once, cached 
 * Voxels: the cube [-1, 1]³ cut into cells of side ``vox_h``; each cell lists its stars,
   so a cone of radius ρ around a direction visits only the cells around it.
 
-Everything is ICRS. ``load_index(catalog, max_sep_deg, per_field=..)`` builds or reads
-``<cache_dir("starid")>/index_<catalog>_m<mag>_e<epoch>_f<sep>_n<per_field>_v<version>.npz``.
+Everything is ICRS. ``load_index(catalog, mag_limit, max_sep_deg, per_field=.., label_depth_mag=..)``
+builds or reads
+``<cache_dir("starid")>/index_<catalog>_m<mag>_e<epoch>_f<sep>_n<per_field>_l<depth>_v<version>.npz``.
 """
 
 from __future__ import annotations
@@ -33,7 +37,7 @@ from ..errors import ConfigError
 from ..paths import cache_dir
 from . import kvector
 
-INDEX_VERSION = 7
+INDEX_VERSION = 8
 DOUBLE_SEP_DEG = 0.02  # 72″: closer pairs are one spot for every preset sensor (blend ≥ 3 px ≥ 84″)
 
 
@@ -63,6 +67,13 @@ class StarIndex:
     vox_start: np.ndarray    # int64 (g³+1,)
     vox_stars: np.ndarray    # int32 (n,)
     vox_vec: np.ndarray      # float64 (n, 3) vectors in voxel order
+    nav_mag_limit: float = math.inf   # V of the faintest navigation star if fainter stars are held (inf: all navigate)
+
+    @property
+    def nav_limit(self) -> float:
+        """V of the faintest star a navigation star may be: the sensor's limit the index was
+        built for (its stars may go deeper, to label spots)."""
+        return min(self.mag_limit, self.nav_mag_limit)
 
     def __len__(self) -> int:
         return int(self.ids.shape[0])
@@ -223,8 +234,10 @@ MAX_PAIRS = 50_000_000   # star pairs an index may hold (~3 GB while it is built
 
 
 def build_index(catalog, max_sep_deg: float, per_field: int = 0, thin_radius_deg: float | None = None,
-                vox_h: float = 0.05, double_sep_deg: float = DOUBLE_SEP_DEG) -> StarIndex:
-    """Build the index of a :class:`gyrostar.catalog.StarCatalog` (no cache)."""
+                vox_h: float = 0.05, double_sep_deg: float = DOUBLE_SEP_DEG,
+                nav_mag_limit: float = math.inf) -> StarIndex:
+    """Build the index of a :class:`gyrostar.catalog.StarCatalog` (no cache); navigation stars
+    only to ``nav_mag_limit`` (V; the fainter stars label spots but form no pattern)."""
     if not (math.isfinite(max_sep_deg) and 0.0 < max_sep_deg < 60.0):
         raise ConfigError(f"index max_sep_deg must be in (0, 60), got {max_sep_deg!r}")
     if per_field < 0:
@@ -233,7 +246,10 @@ def build_index(catalog, max_sep_deg: float, per_field: int = 0, thin_radius_deg
     thin = math.radians(thin_radius_deg) if thin_radius_deg is not None else max_sep / 2.0
     keep = select_navigation_stars(catalog.vectors, 0, thin, math.radians(double_sep_deg))
     vec = np.ascontiguousarray(catalog.vectors[keep])
-    nav = select_navigation_stars(vec, per_field, thin)
+    bright = np.flatnonzero(catalog.vmag[keep] <= nav_mag_limit)
+    # the limit as the faintest star within it (as mag_limit is the faintest star of all)
+    nav_v = float(catalog.vmag[keep][bright[-1]]) if math.isfinite(nav_mag_limit) and bright.size else math.inf
+    nav = bright[select_navigation_stars(vec[bright], per_field, thin)]
     # a uniform sky of n stars has n²·(1 − cos θ)/4 pairs within θ; each costs ~60 B while built
     pairs = len(nav) ** 2 * (1.0 - math.cos(max_sep)) / 4.0
     if pairs > MAX_PAIRS:
@@ -255,21 +271,27 @@ def build_index(catalog, max_sep_deg: float, per_field: int = 0, thin_radius_deg
     return StarIndex(catalog.name, mag_limit, float(catalog.epoch), max_sep, int(per_field), is_nav,
                      np.ascontiguousarray(catalog.ids[keep]), vec, np.ascontiguousarray(catalog.vmag[keep]),
                      theta, a, b, kv, m, q, nb_start, nb_idx, float(vox_h), g, vstart, vstars,
-                     np.ascontiguousarray(vec[vstars]))
+                     np.ascontiguousarray(vec[vstars]), nav_v)
 
 
-def index_path(catalog: str, mag_limit: float, epoch: float, max_sep_deg: float, per_field: int) -> Path:
+def index_path(catalog: str, mag_limit: float, epoch: float, max_sep_deg: float, per_field: int,
+               label_depth_mag: float = 0.0) -> Path:
     """Cache file of an index."""
     return cache_dir("starid") / (f"index_{catalog}_m{mag_limit:.3f}_e{epoch:.3f}_f{max_sep_deg:.4f}"
-                                  f"_n{per_field}_v{INDEX_VERSION}.npz")
+                                  f"_n{per_field}_l{label_depth_mag:.2f}_v{INDEX_VERSION}.npz")
 
 
 def load_index(catalog: str = "hip2", mag_limit: float = 6.5, max_sep_deg: float = 14.2,
-               per_field: int = 0, epoch: float = 2025.0) -> StarIndex:
-    """The index of ``catalog`` to ``mag_limit`` for pairs within ``max_sep_deg``, cached."""
-    from ..catalog import load_catalog
+               per_field: int = 0, epoch: float = 2025.0, label_depth_mag: float = 0.0) -> StarIndex:
+    """The index of ``catalog`` for pairs within ``max_sep_deg``, cached: navigation stars to
+    ``mag_limit`` (the sensor's limit), and stars that only label spots ``label_depth_mag``
+    deeper (0: none)."""
+    from ..catalog import deepest_limit, load_catalog
 
-    path = index_path(catalog, float(mag_limit), float(epoch), float(max_sep_deg), int(per_field))
+    if not (math.isfinite(label_depth_mag) and label_depth_mag >= 0.0):
+        raise ConfigError(f"index label_depth_mag must be ≥ 0, got {label_depth_mag!r}")
+    path = index_path(catalog, float(mag_limit), float(epoch), float(max_sep_deg), int(per_field),
+                      float(label_depth_mag))
     if path.exists():
         try:
             with np.load(path) as z:
@@ -278,11 +300,15 @@ def load_index(catalog: str = "hip2", mag_limit: float = 6.5, max_sep_deg: float
                              int(f["per_field"]), f["is_nav"], f["ids"], f["vectors"], f["vmag"], f["pair_theta"],
                              f["pair_a"], f["pair_b"], f["kv"], float(f["kv_m"]), float(f["kv_q"]),
                              f["nb_start"], f["nb_idx"], float(f["vox_h"]), int(f["vox_g"]),
-                             f["vox_start"], f["vox_stars"], f["vox_vec"])
+                             f["vox_start"], f["vox_stars"], f["vox_vec"], float(f["nav_mag_limit"]))
         except (OSError, KeyError, ValueError):
             path.unlink(missing_ok=True)  # corrupt cache: rebuild below
-    cat = load_catalog(catalog, float(mag_limit), float(epoch))
-    idx = build_index(cat, float(max_sep_deg), int(per_field))
+    if label_depth_mag > 0.0:
+        cat = load_catalog(catalog, deepest_limit(catalog, float(mag_limit) + label_depth_mag), float(epoch))
+        idx = build_index(cat, float(max_sep_deg), int(per_field), nav_mag_limit=float(mag_limit))
+    else:
+        cat = load_catalog(catalog, float(mag_limit), float(epoch))
+        idx = build_index(cat, float(max_sep_deg), int(per_field))
     fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".npz")
     os.close(fd)
     arrays = {f.name: getattr(idx, f.name) for f in dataclasses.fields(idx) if f.name != "catalog"}

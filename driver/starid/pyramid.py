@@ -19,7 +19,9 @@ residuals of every identified star are within ``label_tol``.
    direction predicted by the candidate's triad); a triangle is accepted when exactly
    one of its candidates is confirmed.
 4. QUEST on the pyramid, then every other centroid (all of them, whatever the budget) is
-   labelled with the nearest catalog star within ``label_tol`` of its predicted direction;
+   labelled with the nearest catalog star within ``label_tol`` of its predicted direction
+   (any indexed star: an index built with ``label_depth_mag`` holds stars fainter than its
+   navigation stars, which the sensor sees now and then; only navigation stars form pyramids);
    QUEST again over all and the residual test of :mod:`gyrostar.starid.verify`.
 5. The per-star check (:class:`gyrostar.starid.star_check.StarCheck`, swappable): each
    label's own χ² (position, and magnitude when given) after QUEST; failures are
@@ -759,7 +761,7 @@ class Pyramid:
     brightest ``fast_spots`` centroids; the full index follows when it finds nothing.
     ``check``: the per-star verification stage (any object with ``apply(b, mag, ref, vmag,
     match) -> (q, match, n_ok)``); default a :class:`StarCheck` at ``sigma_px`` and the
-    index's limiting magnitude, three stars minimum.
+    index's navigation limit (the sensor's), three stars minimum.
     ``sigma_mag``: 1σ of measured minus catalog V (mag, sensor and catalog together); when > 0
     and the caller gives magnitudes, a catalog star stands for a spot only within
     ``n_sigma·sigma_mag`` of its measured V, in the search, the confirming star and the labels,
@@ -819,13 +821,13 @@ class Pyramid:
         # every indexed star (labels): the full tier's navigation density scaled to all stars
         self._lab_nloc = dens[-1] * (len(self.index) / np.count_nonzero(self.index.is_nav))
         if self.check is None:
-            self.check = StarCheck(self.sigma_px, self.camera.focal_length_px, mag_limit=self.index.mag_limit,
+            self.check = StarCheck(self.sigma_px, self.camera.focal_length_px, mag_limit=self.index.nav_limit,
                                    min_stars=3)
         # a StarCheck runs inside the compiled call; another stage runs after it
         self._fused = self.check.settings() if isinstance(self.check, StarCheck) else np.empty(0)
         near = self.label_tol + BLEND_PX / self.camera.focal_length_px
         self._absent_cfg = np.empty(0) if self.absent_max < 0 else np.array(
-            [float(self.absent_max), MARGIN_MAG, near, EDGE_PX, self.index.mag_limit])
+            [float(self.absent_max), MARGIN_MAG, near, EDGE_PX, self.index.nav_limit])
         f = self.faint
         self._faint_grid = (np.empty((0, 3)), np.zeros(2, np.int64), 1.0, 1) if f is None else (
             f.vox_vec, f.vox_start, float(f.vox_h), int(f.vox_g))

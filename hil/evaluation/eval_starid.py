@@ -50,6 +50,7 @@ SWEEPS = ("fig10", "fig11", "fig12", "fig13", "fig14", "fig15", "fig16")
 DPH = math.pi / 180.0 / 3600.0
 FAST_PER_FIELD = 10  # navigation stars per field of Pyramid's first (thinned) tier
 MAG_SIGMA_FLOOR = 0.2    # mag: the narrowest photometric window Pyramid is given (the paper-001 camera)
+LABEL_DEPTH_SIGMA = 3.0  # × the fields' magnitude noise: how far beyond its limit Pyramid's index labels spots
 FOV_RANGE_DEG = (1.0, 40.0)      # --fov-deg: a square field's diagonal must stay inside the index's 60° pairs
 MAG_LIMIT_RANGE = (2.0, 10.0)    # --mag-limit, V
 
@@ -214,14 +215,17 @@ def setup(cfg: TrialConfig) -> dict:
     # measured magnitudes in the search and the bound, never trusted beyond the paper-001
     # camera's 0.2 mag (a field generated with exact magnitudes still gets a 0.2 mag window)
     sigma_mag = max(cfg.total_mag_noise, MAG_SIGMA_FLOOR)
+    # the sensor sees stars up to ~3σ of its magnitude noise fainter than its limit: the
+    # index holds them to label spots (none when the fields' magnitudes are exact)
+    label_depth = round(LABEL_DEPTH_SIGMA * cfg.total_mag_noise, 1)
     key = (dataclasses.replace(cfg, pos_noise_px=0.0, mag_noise=0.0, cat_pos_noise_px=0.0, cat_mag_noise=0.0,
-                               update_period_s=1.0, false_stars=0), sigma, sigma_mag)
+                               update_period_s=1.0, false_stars=0), sigma, sigma_mag, label_depth)
     if key in _SETUP:
         return _SETUP[key]
     from ...catalog import deepest_limit, load_catalog
     from ...mocks.star_lists import Sky
     from ...starid.extended import ExtendedIdentifier
-    from ...starid.faint import faint_stars
+    from ...starid.faint import DEPTH_MAG, faint_stars
     from ...starid.grid import GridIdentifier, GridParams, load_grid_database
     from ...starid.index import load_index
     from ...starid.pyramid import Pyramid
@@ -234,13 +238,16 @@ def setup(cfg: TrialConfig) -> dict:
     if cfg.method == "pyramid":
         per_field = cfg.per_field if cfg.per_field >= 0 else (12 if cfg.catalog == "gaia" else 0)
         sep = round(diag + 0.01, 3)
-        index = load_index(cfg.catalog, cfg.mag_limit, sep, per_field)
+        # navigation stars to the sensor's limit; stars label_depth fainter label spots too
+        index = load_index(cfg.catalog, cfg.mag_limit, sep, per_field, label_depth_mag=label_depth)
         # thinned first tier (the brightest stars per field) unless the index is thinned already
-        fast = load_index(cfg.catalog, cfg.mag_limit, sep, FAST_PER_FIELD) if per_field == 0 else None
-        # labels next to a star the index leaves out (fainter than its limit, or the fainter
+        fast = load_index(cfg.catalog, cfg.mag_limit, sep, FAST_PER_FIELD,
+                          label_depth_mag=label_depth) if per_field == 0 else None
+        # labels next to a star the index leaves out (fainter than its stars, or the fainter
         # of a close double) are dropped: the sensor sees such stars now and then
+        below = load_catalog(cfg.catalog, deepest_limit(cfg.catalog, cfg.mag_limit + label_depth + DEPTH_MAG))
         out["ident"] = Pyramid(index, cam, sigma_px=sigma, fast_index=fast, sigma_mag=sigma_mag,
-                               faint=faint_stars(deep, index), p_false_max=cfg.p_false_max)
+                               faint=faint_stars(below, index), p_false_max=cfg.p_false_max)
         if cfg.peer:
             from .starid_peers import load_peer
 

@@ -27,7 +27,7 @@ def _absent(pyr, q, uv, match):
     near = pyr.label_tol + BLEND_PX / cam.focal_length_px
     return absent_stars(np.asarray(q, np.float64), cam.unproject(uv), np.asarray(match, np.int64), cam.as_array(),
                         ix.vectors, ix.vmag, ix.vox_vec, ix.vox_stars, ix.vox_start, ix.vox_h, ix.vox_g,
-                        pyr.fov_radius, ix.mag_limit, MARGIN_MAG, near, EDGE_PX)
+                        pyr.fov_radius, ix.nav_limit, MARGIN_MAG, near, EDGE_PX)
 
 
 def _labels(ix, truth):
@@ -104,7 +104,13 @@ def test_a_label_on_an_index_star_missed_next_to_a_fainter_one_seen_is_dropped(q
     """qian2015, `--trials 10000 --seed 6`, chunk 0 field 61: HIP 97016 (V 7.07, in the
     index) was not detected, HIP 97022 (V 7.51, beyond the index's 7.5) was, 97″ away —
     within the 106″ label tolerance of 1 px noise. Without the faint stars its spot was
-    labelled 97016: a wrong label on a right attitude."""
+    labelled 97016: a wrong label on a right attitude. The eval's index now holds stars 0.7 mag
+    beyond its navigation stars, 97022 among them; the fault, and the faint-star check that
+    mends it, are shown on an index that stops at 7.5."""
+    from gyrostar.catalog import load_catalog
+    from gyrostar.starid.faint import faint_stars
+    from gyrostar.starid.index import load_index
+
     cfg, s = qian
     f = _chunk_frames(cfg, s, 6, 10000, 0)[61]
     pyr = s["ident"]
@@ -112,10 +118,15 @@ def test_a_label_on_an_index_star_missed_next_to_a_fainter_one_seen_is_dropped(q
     r = pyr.identify(f.uv, mag=f.mag)
     c, w = score(r.ids, f.truth, f.alt)
     assert r.ok and w == 0 and c >= 5 and 97016 not in r.ids.tolist()
-    bare = Pyramid(pyr.index, s["camera"], sigma_px=pyr.sigma_px, fast_index=pyr.fast_index,
-                   sigma_mag=pyr.sigma_mag)
+    sep = math.degrees(pyr.index.max_sep)
+    flat, flat_fast = load_index("hip2", 7.5, sep, 0), load_index("hip2", 7.5, sep, 10)
+    bare = Pyramid(flat, s["camera"], sigma_px=pyr.sigma_px, fast_index=flat_fast, sigma_mag=pyr.sigma_mag)
     r = bare.identify(f.uv, mag=f.mag)
     assert score(r.ids, f.truth, f.alt)[1] == 1 and 97016 in r.ids.tolist()
+    checked = Pyramid(flat, s["camera"], sigma_px=pyr.sigma_px, fast_index=flat_fast, sigma_mag=pyr.sigma_mag,
+                      faint=faint_stars(load_catalog("hip2", 8.1), flat))
+    r = checked.identify(f.uv, mag=f.mag)
+    assert r.ok and score(r.ids, f.truth, f.alt)[1] == 0 and 97016 not in r.ids.tolist()
 
 
 def test_a_close_pair_seen_as_two_spots_keeps_no_label(qian):

@@ -89,3 +89,32 @@ def test_an_index_too_large_to_build_is_a_config_error_before_it_is_built():
     cat = StarCatalog("synthetic", np.arange(len(v)), v, np.linspace(1.0, 9.0, len(v)), 2025.0, None)
     with pytest.raises(ConfigError, match=r"~9\d M pairs"):
         sidx.build_index(cat, 40.0)
+
+
+def test_stars_beyond_the_navigation_limit_label_but_form_no_pairs(tmp_path, monkeypatch):
+    """``nav_mag_limit``: every star is in the voxel grid (it can label a spot), only the
+    stars to the limit are navigation stars with pairs; the cached index keeps the limit."""
+    cat = _random_sky(3000)
+    ix = sidx.build_index(cat, 12.0, double_sep_deg=0.0, nav_mag_limit=5.0)
+    assert len(ix) == len(cat)
+    np.testing.assert_array_equal(ix.is_nav, cat.vmag <= 5.0)
+    assert ix.nav_limit == cat.vmag[cat.vmag <= 5.0].max() and ix.mag_limit == float(cat.vmag[-1])
+    bright = np.flatnonzero(cat.vmag <= 5.0)
+    ang = np.arccos(np.clip(cat.vectors[bright] @ cat.vectors[bright].T, -1, 1))
+    assert ix.n_pairs == int((ang[np.triu_indices(len(bright), 1)] < math.radians(12.0)).sum())
+    assert np.all(ix.is_nav[ix.pair_a]) and np.all(ix.is_nav[ix.pair_b])
+    c = cat.vectors[len(cat) - 1]               # the faintest star: in the cones, not a navigation star
+    assert len(cat) - 1 in ix.cone(c, 1e-3)
+    assert sidx.build_index(cat, 12.0, double_sep_deg=0.0).nav_limit == ix.mag_limit  # default: all navigate
+
+    monkeypatch.setenv("GYROSTAR_CACHE", str(tmp_path))
+    deep = sidx.load_index("hip2", 4.0, 10.0, 0, label_depth_mag=0.5)
+    flat = sidx.load_index("hip2", 4.0, 10.0, 0)
+    assert len(list((tmp_path / "starid").glob("index_hip2_*.npz"))) == 2
+    assert deep.nav_limit == flat.nav_limit == flat.mag_limit <= 4.0 and 4.4 < deep.mag_limit <= 4.5
+    np.testing.assert_array_equal(deep.ids[deep.is_nav], flat.ids)
+    np.testing.assert_array_equal(deep.pair_theta, flat.pair_theta)
+    again = sidx.load_index("hip2", 4.0, 10.0, 0, label_depth_mag=0.5)
+    assert again.nav_limit == deep.nav_limit and np.array_equal(again.is_nav, deep.is_nav)
+    with pytest.raises(ConfigError, match="label_depth_mag"):
+        sidx.load_index("hip2", 4.0, 10.0, 0, label_depth_mag=-0.1)
