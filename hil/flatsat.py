@@ -155,13 +155,15 @@ class ScenarioScene:
 
 # ---------------------------------------------------------------------------- driver
 def loop_params(cfg: hc.FlatsatConfig, e_per_dn: float | None = None, scen: hc.Scenario | None = None,
-                camera_sigma_px: float | None = None, scale_calibrated: bool = False):
+                camera_sigma_px: float | None = None, scale_calibrated: bool = False,
+                camera_bias_px: tuple = (0.0, 0.0)):
     """The loop's parameters from the config; a simulated flatsat's detector gain, gyro
     angle random walk and gyro low-pass cut-off come from its simulator models (what a
     calibration or the datasheet would give); ``camera_sigma_px`` the camera-model σ
     (:func:`camera_sigma`; default the config's). The rate-proportional gyro error is the
     config's (what is left after a scale calibration) on a real gyro or under a [gyro_scale]
-    calibration (``scale_calibrated``), else a simulated part's own."""
+    calibration (``scale_calibrated``), else a simulated part's own. ``camera_bias_px``: the
+    principal point's 1σ (:func:`camera_bias`), a pointing bias the outputs' covariance carries."""
     from ..loop.coupled import LoopParams
 
     lc = cfg.loop
@@ -204,7 +206,8 @@ def loop_params(cfg: hc.FlatsatConfig, e_per_dn: float | None = None, scen: hc.S
                    gyro_delay_s=delay, gyro_lowpass_hz=lowpass, gyro_rate_error=rate_error,
                    max_track_rate=lc.max_track_rate_dps * DEG,
                    bias_prior=bias_prior,
-                   camera_sigma_px=lc.camera_sigma_px if camera_sigma_px is None else camera_sigma_px)
+                   camera_sigma_px=lc.camera_sigma_px if camera_sigma_px is None else camera_sigma_px,
+                   camera_bias_px=tuple(camera_bias_px))
     if e_per_dn:
         p.e_per_dn = e_per_dn
     return p
@@ -266,13 +269,22 @@ def camera_sigma(cfg: hc.FlatsatConfig, scen: hc.Scenario, calib) -> float:
     return scen.camera_sigma_px if scen.camera_sigma_px > 0 else cfg.loop.camera_sigma_px
 
 
+def camera_bias(calib) -> tuple[float, float]:
+    """1σ (px, column and row) of the [camera] calibration's principal point, (0, 0) without
+    one: the camera model's error common to every star (a pointing bias)."""
+    if calib is not None and calib.cal is not None and calib.cal.camera is not None:
+        sx, sy = calib.cal.camera.principal_point_sigma_px
+        return float(sx), float(sy)
+    return 0.0, 0.0
+
+
 def gyro_scale_calibrated(calib) -> bool:
     """The run applies a [gyro_scale] calibration (scale factors and misalignment)."""
     return calib is not None and calib.cal is not None and calib.cal.gyro_scale is not None
 
 
 def make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock=None, e_per_dn=None, irq=None, scen=None,
-              camera_sigma_px=None, scale_calibrated=False):
+              camera_sigma_px=None, scale_calibrated=False, camera_bias_px=(0.0, 0.0)):
     from ..catalog import deepest_limit, load_catalog
     from ..loop.coupled import CoupledLoop
     from ..starid.blends import BLEND_DMAG, BLEND_PX, blended
@@ -291,7 +303,8 @@ def make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock=None, e_per_dn=No
         from ..transport.linkrate import preset
 
         budget = LinkBudget(preset(cfg.head.link), cfg.loop.frame_hz)
-    return CoupledLoop(loop_params(cfg, e_per_dn, scen, camera_sigma_px, scale_calibrated), clock, gyro, head, camera,
+    return CoupledLoop(loop_params(cfg, e_per_dn, scen, camera_sigma_px, scale_calibrated, camera_bias_px), clock,
+                       gyro, head, camera,
                        idx, ident, sinks,
                        lat_clock=lat_clock, irq=irq, link_budget=budget, blended=blends)
 
@@ -328,7 +341,7 @@ class Flatsat:
     def make_loop(self, sinks):
         return make_loop(self.cfg, self.clock, self.gyro, self.head, self.camera, sinks, self.lat_clock,
                          self.e_per_dn, self.irq, self.scen, camera_sigma(self.cfg, self.scen, self.calibration),
-                         gyro_scale_calibrated(self.calibration))
+                         gyro_scale_calibrated(self.calibration), camera_bias(self.calibration))
 
     def clock_now(self) -> float:
         return self.base_clock.now()
@@ -939,7 +952,7 @@ def replay_loop(meta: dict, records, sinks):
                      replay_reconnects=reconnects, fast=bool(meta.get("fast")), replay_records=records)
     head = with_hot_pixels(head, calib, camera, {})
     loop = make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock, e_per_dn, irq, scen,
-                     camera_sigma(cfg, scen, calib), gyro_scale_calibrated(calib))
+                     camera_sigma(cfg, scen, calib), gyro_scale_calibrated(calib), camera_bias(calib))
 
     def run_all():
         steps = 0

@@ -336,6 +336,8 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
             "mid_exposure_error_arcsec_1sigma_at_rest": res.get("mid_exposure_error_arcsec_1sigma_at_rest"),
             "mid_exposure_smoothed_error_arcsec_1sigma": res.get("mid_exposure_smoothed_error_arcsec_1sigma"),
             "floor_mid_exposure_arcsec": floor.get("floor_mid_exposure_arcsec"),
+            # the camera calibration's pointing bias (principal point σ / f) the covariances carry
+            "pointing_bias_arcsec_1sigma": floor.get("pointing_bias_arcsec_1sigma"),
             "nees_after_update": res.get("nees_after_update"),
             "nees_before_update": res.get("nees_before_update"),
             "latency_p99_ms": res.get("latency_p99_ms"),

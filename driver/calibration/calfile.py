@@ -33,6 +33,7 @@ Mat3 = tuple[Vec3, Vec3, Vec3]
 
 FOV_DEG = (0.5, 58.0)       # diagonal field of view (deg) a [camera] may imply; the star index holds pairs < 60°
 CORNER_DISTORTION = 0.2     # |radial distortion| (fraction of the radius) allowed at the sensor corner
+PP_SIGMA_MAX_PX = 100.0     # a principal point known only to 100 px is no calibration
 TIME_OFFSET_MAX_S = 1.0     # |[alignment] time_offset_s| (s): more is a wrong clock, not a gyro-camera delay
 QUAT_NORM_TOL = 1e-3        # |‖q‖ − 1| accepted (hand-typed quaternions), normalised when applied
 BIAS_MAX_RPS = math.radians(10.0)   # |gyro bias| (rad/s): a MEMS zero-rate offset is ~1 °/s
@@ -106,6 +107,7 @@ class CameraCal:
     image_size_px: tuple[int, int] = (1024, 1024)
     residual_rms_px: float = 0.0
     pixel_pitch_um: float = 15.0       # only turns the focal length into metres (the loop works in px)
+    principal_point_sigma_px: tuple[float, float] = (0.0, 0.0)   # the fit's 1σ of each (0: not known)
 
     def validate(self) -> None:
         w, h = self.image_size_px
@@ -131,6 +133,9 @@ class CameraCal:
                              f"(allowed ±{CORNER_DISTORTION:g})")
         if not 0.0 < self.pixel_pitch_um <= 1000.0:
             raise ValueError(f"camera.pixel_pitch_um must be in (0, 1000] µm, got {self.pixel_pitch_um!r}")
+        if not all(math.isfinite(v) and 0.0 <= v <= PP_SIGMA_MAX_PX for v in self.principal_point_sigma_px):
+            raise ValueError(f"camera.principal_point_sigma_px must be two values in [0, {PP_SIGMA_MAX_PX:g}] px, got "
+                             f"{list(self.principal_point_sigma_px)}")
 
 
 @dataclass

@@ -85,6 +85,8 @@ class LoopParams:
     max_spans: int = 512
     pyramid_sigma_px: float = 0.5
     camera_sigma_px: float = 0.0      # camera-model uncertainty added to every centroid σ (px; 0: exact model)
+    camera_bias_px: tuple = (0.0, 0.0)  # 1σ of the camera's principal point (column, row), px: a pointing bias
+                                        # common to every star, reported in the outputs' covariance only
     confirm_images: int = 20          # ACQUIRE: images that may fail to confirm an identification
     wrong_id_rejects: int = 5         # gate rejections in a row that drop a star (wrong or lost id)
     neighbour_sep_px: float = 12.0    # a catalog star closer than this (px, per axis) to a tracked one is skipped
@@ -161,9 +163,11 @@ class CoupledLoop:
         self.index = star_index
         self.c = Counters()
         self.samples = GyroSamples(256)
+        # a principal point off by δ (column, row) turns the camera's attitude by δ/f about its y and x axes
+        bias = (params.camera_bias_px[1] / self.f_px, params.camera_bias_px[0] / self.f_px)
         self.filter = AttitudeFilter(params.gyro_arw, params.sigma_bias_rw, params.bias_prior,
                                      1.0 / gyro.odr_hz if gyro.odr_hz else 0.0025, params.gyro_delay_s,
-                                     params.gyro_lowpass_hz, params.gyro_rate_error)
+                                     params.gyro_lowpass_hz, params.gyro_rate_error, bias)
         self.tracks = StarTracks(params, camera, star_index, blended)
         self.image = ImagePipeline(params, camera, identifier)
         self.outputs = OutputStage(sinks, self.lat_clock)
@@ -758,8 +762,12 @@ class CoupledLoop:
             "mode_changes": list(c.mode_changes)}
 
     def floor_summary(self) -> dict:
-        """The steady-state floor for this run's gyro ARW, star noise, star count and timing."""
-        return self.floor.summary(self.p.gyro_arw, self.filter.kappa)
+        """The steady-state floor for this run's gyro ARW, star noise, star count and timing,
+        and the camera model's pointing bias its covariances carry besides (cross-boresight 1σ,
+        arcsec: outside the floor, which no filter could lower)."""
+        res = self.floor.summary(self.p.gyro_arw, self.filter.kappa)
+        res["pointing_bias_arcsec_1sigma"] = math.sqrt(0.5 * (self.filter.prm[6] + self.filter.prm[7])) / ARCSEC
+        return res
 
     def host_us_per_gyro_sample(self) -> float | None:
         """Host CPU µs per gyro sample in the 400 Hz path after the FIFO read (filter kernel,

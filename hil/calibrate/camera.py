@@ -222,7 +222,8 @@ def run(args) -> int:
                   "distortion_residual_px": report.check(rms, 0.05, "px")}
     cal = calfile.CameraCal(float(res.theta[0]), (float(res.theta[1]), float(res.theta[2])),
                             *[float(v) for v in res.theta[3:8]], image_size_px=(int(w), int(h)),
-                            residual_rms_px=res.rms_px)
+                            residual_rms_px=res.rms_px,
+                            principal_point_sigma_px=(float(res.sigma[1]), float(res.sigma[2])))
     toml = args.toml or folder / "calibration.toml"
     calfile.write_section(toml, "camera", cal, source=str(args.input) if args.input else source)
     extra["toml"] = str(toml)

@@ -104,7 +104,11 @@ def test_camera_from_a_csv_star_table(tmp_path, capsys):
     assert code == 0
     assert out["parameters"]["f_px"]["value"] == pytest.approx(true.focal_length_px, rel=1e-4)
     assert out["parameters"]["k1"]["value"] == pytest.approx(-0.2, abs=0.02)
-    assert calfile.load(tmp_path / "r" / "calibration.toml").camera.residual_rms_px < 0.03
+    cam = calfile.load(tmp_path / "r" / "calibration.toml").camera
+    assert cam.residual_rms_px < 0.03
+    # the principal point's σ goes into the file with it (the loop's pointing bias)
+    assert cam.principal_point_sigma_px == (out["parameters"]["cx_px"]["sigma"], out["parameters"]["cy_px"]["sigma"])
+    assert 0 < cam.principal_point_sigma_px[0] < 1.0
 
 
 def _tracked_fields(seed, per_star_px, noise_px=0.05, n_stars=40, n_fields=400):

@@ -43,6 +43,9 @@ def _align(q="0.0, 0.0, 0.0, 1.0", dt="0.002"):
     (_camera(f="1e7"), "camera.focal_length_px = 1e+07 gives a 0.0083° diagonal field of view"),
     (_camera(cx="-3000", cy="4000"), "camera.principal_point_px (-3000, 4000) is off the 1024×1024 px sensor"),
     (_camera() + "k1 = 1e6\n", "camera.k1, k2, k3 distort the sensor corner"),
+    (_camera() + "principal_point_sigma_px = [0.05, -0.1]\n", "camera.principal_point_sigma_px must be two values in "
+     "[0, 100] px, got [0.05, -0.1]"),
+    (_camera() + "principal_point_sigma_px = [0.05]\n", "key 'camera.principal_point_sigma_px' must have 2 items"),
     (_align(dt="1e9"), "alignment.time_offset_s must be within ±1 s, got 1000000000.0"),
     (_align(dt="-1.5"), "alignment.time_offset_s must be within ±1 s"),
     (_align(q="0.0, 0.0, 0.5, 0.5"), "alignment.q_gyro_to_camera must be a unit quaternion"),

@@ -11,6 +11,8 @@ from gyrostar.camera import camera_preset
 from gyrostar.errors import ConfigError
 from gyrostar.gyro import GyroSamples
 from gyrostar.gyro.calibrated import CalibratedGyro
+from gyrostar.hil import config as hc
+from gyrostar.hil.flatsat import camera_bias, loop_params
 
 
 class _ListGyro:
@@ -56,7 +58,8 @@ def test_calibrated_gyro_maps_axes_bias_and_time():
 def test_run_calibration_camera_gyro_and_hash(tmp_path):
     path = tmp_path / "cal.toml"
     nom = camera_preset("xing2012")
-    calfile.write_section(path, "camera", calfile.CameraCal(6640.0, (515.5, 508.5), k1=0.3), "test")
+    calfile.write_section(path, "camera", calfile.CameraCal(6640.0, (515.5, 508.5), k1=0.3,
+                                                            principal_point_sigma_px=(0.05, 0.08)), "test")
     calfile.write_section(path, "alignment", calfile.AlignmentCal((0.0, 0.0, math.sin(0.0025), math.cos(0.0025)),
                                                                   0.002), "test")
     rc = apply.load_for_run(path)
@@ -72,6 +75,12 @@ def test_run_calibration_camera_gyro_and_hash(tmp_path):
     assert np.allclose(m, [[math.cos(0.005), math.sin(0.005), 0], [-math.sin(0.005), math.cos(0.005), 0], [0, 0, 1]])
     again = apply.from_meta(rc.meta())             # replay rebuilds it from the log's META text
     assert again.sha256 == rc.sha256 and again.cal == rc.cal
+    # the principal point's σ reaches the loop as its pointing bias (run and replay alike)
+    assert camera_bias(rc) == camera_bias(again) == (0.05, 0.08)
+    assert camera_bias(apply.load_for_run(None)) == (0.0, 0.0)
+    cfg = hc.load_flatsat(None)
+    assert loop_params(cfg, camera_bias_px=camera_bias(rc)).camera_bias_px == (0.05, 0.08)
+    assert loop_params(cfg).camera_bias_px == (0.0, 0.0)
 
 
 def test_real_head_without_camera_table_names_the_key(tmp_path):
