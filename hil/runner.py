@@ -336,7 +336,8 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
             "mid_exposure_error_arcsec_1sigma_at_rest": res.get("mid_exposure_error_arcsec_1sigma_at_rest"),
             "mid_exposure_smoothed_error_arcsec_1sigma": res.get("mid_exposure_smoothed_error_arcsec_1sigma"),
             "floor_mid_exposure_arcsec": floor.get("floor_mid_exposure_arcsec"),
-            # the camera calibration's pointing bias (principal point σ / f) the covariances carry
+            # the camera calibration's pointing bias, 1σ about camera x and y (principal point σ / f): a
+            # constant error beside the covariance (which holds the filter's random error only)
             "pointing_bias_arcsec_1sigma": floor.get("pointing_bias_arcsec_1sigma"),
             "nees_after_update": res.get("nees_after_update"),
             "nees_before_update": res.get("nees_before_update"),
@@ -608,7 +609,9 @@ def human_summary(r: dict) -> str:
             else "never in TRACK" if "track_fraction" in r else "n/a (no simulator truth)")
         + f" (floor {f(r.get('floor_arcsec'), '.2f')}″); mid-exposure "
         f"{f(r.get('mid_exposure_error_arcsec_1sigma'), '.2f')}″ "
-        f"(floor {f(r.get('floor_mid_exposure_arcsec'), '.2f')}″)",
+        f"(floor {f(r.get('floor_mid_exposure_arcsec'), '.2f')}″)"
+        + (", camera pointing bias {:.2f}″ / {:.2f}″ (x / y, 1σ, from the calibration)".format(*pb)
+           if (pb := r.get("pointing_bias_arcsec_1sigma")) and any(pb) else ""),
         f"  modes: {modes}",
         f"  frames {r['frames']}, gyro samples {r['gyro_samples']}, samples lost {r['samples_lost']}",
         f"  latency p99 {f(r['latency_p99_ms'], '.3f')} ms ({r['latency_clock']}), loop CPU "

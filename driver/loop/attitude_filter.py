@@ -37,7 +37,7 @@ SMOOTH_GAP_S = 0.1       # s: frames further apart than this are not smoothed to
 
 class AttitudeFilter:
     def __init__(self, arw: float, sigma_bias_rw: float, bias_prior: float, period_s: float, delay_s: float = 0.0,
-                 lowpass_hz: float = 0.0, rate_error: float = 0.0, pointing_bias: tuple = (0.0, 0.0)):
+                 lowpass_hz: float = 0.0, rate_error: float = 0.0):
         self.q = np.array([0.0, 0.0, 0.0, 1.0])   # ACQUIRE: gyro-relative attitude from the start
         self.b = np.zeros(3)
         self.P = np.zeros((6, 6))
@@ -53,11 +53,7 @@ class AttitudeFilter:
         # rate-proportional gyro error left after calibration (scale factor and misalignment,
         # 1σ per axis, rad per rad): a constant error, so the angle it adds since the last fix
         # grows linearly, variance (σ_s |ω̂| τ)² at τ after the fix (kernels.predict_batch)
-        # pointing_bias (rad, 1σ about the camera's x and y axes): a constant error of the camera
-        # model (its principal point) common to every star — no update can see it, so it stays
-        # out of P and is added to the covariances the outputs report
-        self.prm = np.array([period_s, arw, sigma_bias_rw, (1e-4) ** 2, delay_s, rate_error ** 2,
-                             pointing_bias[0] ** 2, pointing_bias[1] ** 2])
+        self.prm = np.array([period_s, arw, sigma_bias_rw, (1e-4) ** 2, delay_s, rate_error ** 2])
         # the gyro's 2nd-order low-pass takes the rate noise above f_c out of every finite
         # window: the angle walk over Δ is N²(Δ − κ), κ = 1/(2√2 π f_c) (Δ ≫ 1/f_c)
         self.kappa = 1.0 / (2.0 * math.sqrt(2.0) * math.pi * lowpass_hz) if lowpass_hz > 0 else 0.0

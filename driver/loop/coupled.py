@@ -42,7 +42,7 @@ from ..head.client import HeadTimeoutError
 from . import modes
 from . import record as R
 from .attitude_filter import GATE, QD_MARGIN, SMOOTH_GAP_S, AttitudeFilter, fix_covariance
-from .floor import FloorInputs
+from .floor import FloorInputs, pointing_bias_arcsec
 from .image import ImagePipeline
 from .image_kernels import select_measured
 from .outputs import OutputStage
@@ -86,7 +86,7 @@ class LoopParams:
     pyramid_sigma_px: float = 0.5
     camera_sigma_px: float = 0.0      # camera-model uncertainty added to every centroid σ (px; 0: exact model)
     camera_bias_px: tuple = (0.0, 0.0)  # 1σ of the camera's principal point (column, row), px: a pointing bias
-                                        # common to every star, reported in the outputs' covariance only
+                                        # common to every star, reported beside the covariance (loop.floor)
     confirm_images: int = 20          # ACQUIRE: images that may fail to confirm an identification
     wrong_id_rejects: int = 5         # gate rejections in a row that drop a star (wrong or lost id)
     neighbour_sep_px: float = 12.0    # a catalog star closer than this (px, per axis) to a tracked one is skipped
@@ -163,11 +163,9 @@ class CoupledLoop:
         self.index = star_index
         self.c = Counters()
         self.samples = GyroSamples(256)
-        # a principal point off by δ (column, row) turns the camera's attitude by δ/f about its y and x axes
-        bias = (params.camera_bias_px[1] / self.f_px, params.camera_bias_px[0] / self.f_px)
         self.filter = AttitudeFilter(params.gyro_arw, params.sigma_bias_rw, params.bias_prior,
                                      1.0 / gyro.odr_hz if gyro.odr_hz else 0.0025, params.gyro_delay_s,
-                                     params.gyro_lowpass_hz, params.gyro_rate_error, bias)
+                                     params.gyro_lowpass_hz, params.gyro_rate_error)
         self.tracks = StarTracks(params, camera, star_index, blended)
         self.image = ImagePipeline(params, camera, identifier)
         self.outputs = OutputStage(sinks, self.lat_clock)
@@ -763,10 +761,10 @@ class CoupledLoop:
 
     def floor_summary(self) -> dict:
         """The steady-state floor for this run's gyro ARW, star noise, star count and timing,
-        and the camera model's pointing bias its covariances carry besides (cross-boresight 1σ,
-        arcsec: outside the floor, which no filter could lower)."""
+        and beside it the camera model's pointing bias (1σ about camera x and y, arcsec: a
+        constant error outside the floor and the covariance; :mod:`gyrostar.loop.floor`)."""
         res = self.floor.summary(self.p.gyro_arw, self.filter.kappa)
-        res["pointing_bias_arcsec_1sigma"] = math.sqrt(0.5 * (self.filter.prm[6] + self.filter.prm[7])) / ARCSEC
+        res["pointing_bias_arcsec_1sigma"] = pointing_bias_arcsec(self.p.camera_bias_px, self.f_px)
         return res
 
     def host_us_per_gyro_sample(self) -> float | None:

@@ -10,6 +10,13 @@ t ∈ [d, d + T], d the delay from mid-exposure to the first of them, so the out
 is √(P⁺ + q (d + T/2)) and the mid-exposure product's floor √P⁺. A gyro with a low-pass
 (cut-off f_c, 2nd order) walks less over a finite window: q (Δ − κ), κ = 1/(2√2 π f_c)
 (the rate noise above f_c is filtered out), which enters every window above.
+
+Outside the floor, and outside the filter's covariance: the camera model's pointing bias. A
+principal point off by δ = (δc, δr) px turns every star's direction, and so the camera's
+attitude, by δr/f about the camera's x axis and δc/f about its y axis (f the focal length,
+px) — the same for every star of every frame, so no update can see it and no filter lowers
+it. It is reported beside the covariance, as a star tracker's bias error is reported beside
+its noise: from a [camera] calibration's principal-point 1σ (:func:`pointing_bias_arcsec`).
 """
 
 from __future__ import annotations
@@ -30,6 +37,13 @@ def attitude_floor(arw: float, r: float, period_s: float, delay_s: float, kappa_
     p_plus = p_minus * r / (p_minus + r) if p_minus + r > 0 else 0.0
     out = p_plus + q * max(delay_s + 0.5 * period_s - kappa_s, 0.0)
     return {"floor_arcsec": math.sqrt(out) / ARCSEC, "floor_mid_exposure_arcsec": math.sqrt(p_plus) / ARCSEC}
+
+
+def pointing_bias_arcsec(principal_point_sigma_px, f_px: float) -> list[float]:
+    """1σ of the camera model's pointing bias about the camera's x and y axes (arcsec) from
+    the principal point's 1σ (column, row; px) and the focal length (px)."""
+    sc, sr = principal_point_sigma_px
+    return [sr / f_px / ARCSEC, sc / f_px / ARCSEC]
 
 
 class FloorInputs:

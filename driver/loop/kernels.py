@@ -42,11 +42,8 @@ def predict_batch(smp_t, smp_rate, smp_flags, n, q, b, P, ts, hist_t, hist_q, ih
     prm: [gyro period s, σ_v rad/s/√Hz, σ_u rad/s/√s, bias-converged variance (rad/s)², gyro
     group delay τ s, σ_s² (rate-proportional error, rad/rad: a constant error, so the angle
     it adds since the last fix grows linearly, (σ_s |ω̂| a)² at an age a of the fix; the
-    step's rate noise density is √(σ_v² + σ_s² |ω̂|² (2a + dt))), the camera model's pointing-bias
-    variances about body x and y (rad²: a constant error common to every star, added to every
-    reported covariance — ``cov``, ``cov_mid``, ``cov_mid_s`` — and never to P)]. A sample
-    stamped t measured the rate at t − τ: the filter and its history run on t − τ, and each
-    record's attitude is carried on to t
+    step's rate noise density is √(σ_v² + σ_s² |ω̂|² (2a + dt)))]. A sample stamped t measured the rate at t − τ: the
+    filter and its history run on t − τ, and each record's attitude is carried on to t
     with the current rate (``t`` stays the sample's stamp). flags_first: flags only the
     first output carries (overrun, gyro gap); flags_base: flags every output carries.
     refs (k, 3), ids (k,): tracked stars' catalog vectors and ids (k = 0 when the attitude is
@@ -126,8 +123,6 @@ def predict_batch(smp_t, smp_rate, smp_flags, n, q, b, P, ts, hist_t, hist_q, ih
         for a in range(6):
             for c in range(6):
                 r.cov[a, c] = P[a, c]
-        r.cov[0, 0] += prm[6]      # the camera model's pointing bias: reported, never in P
-        r.cov[1, 1] += prm[7]
         if k > 0:
             A = quat_to_dcm(qo)
             for s in range(k):
@@ -155,7 +150,4 @@ def predict_batch(smp_t, smp_rate, smp_flags, n, q, b, P, ts, hist_t, hist_q, ih
             for c in range(3):
                 r.cov_mid[a, c] = mid[5 + 3 * a + c]
                 r.cov_mid_s[a, c] = smoothed[5 + 3 * a + c]
-        for a in range(2):
-            r.cov_mid[a, a] += prm[6 + a]
-            r.cov_mid_s[a, a] += prm[6 + a]
     return stuck

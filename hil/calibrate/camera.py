@@ -27,8 +27,8 @@ writes) each observation is weighted by it, with a floor per observation and one
 position (:func:`gyrostar.calibration.intrinsics.fit`): a V 3 star's centroid is ten times
 as precise as a V 6.3 one's, and a star held at one pixel through a rest of a hundred frames
 keeps most of its error in all of them. The file's [camera] keeps the principal point's 1σ
-(``principal_point_sigma_px``): the loop reports the attitude bias it implies (σ/f) in its
-covariances.
+(``principal_point_sigma_px``): a run reports the pointing bias it implies (σ/f) beside its
+covariance.
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 import pytest
-from gyrostar.loop.floor import ARCSEC, FloorInputs, attitude_floor
+from gyrostar.loop.floor import ARCSEC, FloorInputs, attitude_floor, pointing_bias_arcsec
 
 
 def _simulated_floor(q, r, T, d, n=4000):
@@ -50,3 +50,27 @@ def test_lowpass_share_shortens_every_window():
     b = attitude_floor(arw, r, 0.016 - kappa, 0.011 - kappa / 2, 0.0)   # same windows, written out
     assert a["floor_mid_exposure_arcsec"] == pytest.approx(b["floor_mid_exposure_arcsec"], rel=1e-12)
     assert a["floor_arcsec"] < attitude_floor(arw, r, 0.016, 0.011)["floor_arcsec"]
+
+
+def test_pointing_bias_is_the_attitude_turn_a_principal_point_shift_gives():
+    """Stars seen through a camera model whose principal point is off by (δc, δr) px give a
+    QUEST attitude turned by δr/f about camera x and δc/f about camera y (0.5 % in a
+    9° field): so a principal point known to 1σ (σc, σr) is a pointing bias of σr/f, σc/f."""
+    import dataclasses
+
+    from gyrostar.attitude import quat_conj, quat_mult
+    from gyrostar.camera import camera_preset
+    from gyrostar.core.quest import quest
+
+    cam = camera_preset("xing2012")
+    rng = np.random.default_rng(4)
+    uv = rng.uniform(50, 974, size=(30, 2))
+    refs = cam.unproject(uv)                       # the true directions (identity attitude)
+    for dc, dr in ((0.3, 0.0), (0.0, -0.2), (0.15, 0.25)):
+        off = dataclasses.replace(cam, cx_px=cam.cx_px + dc, cy_px=cam.cy_px + dr)
+        q, _ = quest(off.unproject(uv), refs, np.ones(len(uv)))
+        e = quat_mult(q, quat_conj(np.array([0.0, 0.0, 0.0, 1.0])))
+        angle = 2.0 * e[:3] * np.sign(e[3]) / ARCSEC
+        want = pointing_bias_arcsec((abs(dc), abs(dr)), cam.focal_length_px)
+        np.testing.assert_allclose(np.abs(angle[:2]), want, rtol=5e-3, atol=0.01)
+    assert pointing_bias_arcsec((0.05, 0.08), 6640.0) == pytest.approx([0.08 / 6640 / ARCSEC, 0.05 / 6640 / ARCSEC])

@@ -136,39 +136,3 @@ def test_a_delayed_update_with_a_scale_error_equals_one_at_mid_exposure():
     grow = (ss * np.linalg.norm(W) * 0.0075) ** 2
     assert grow > 1e-3 * a.P[0, 0]               # large enough for the check above to see it
 
-
-def test_pointing_bias_is_reported_in_every_covariance_and_kept_out_of_the_filter():
-    """A principal point known to 1σ (σc, σr) px turns the camera attitude by a constant δ/f:
-    every reported covariance (400 Hz ``cov``, ``cov_mid``, ``cov_mid_s``) carries (σr/f)²
-    about body x and (σc/f)² about body y on top of P, while the estimate, P and the mid-exposure
-    product the smoother reads stay those of a filter without it (no update can see a bias
-    common to every star)."""
-    bx, by = 2.0 / 206265, 3.0 / 206265
-    plain, biased = (AttitudeFilter(1e-5, 1e-9, 1e-4, PERIOD, pointing_bias=pb) for pb in ((0.0, 0.0), (bx, by)))
-    outs = []
-    for f in (plain, biased):
-        f.ts[0] = -PERIOD
-        f.P[:3, :3] = np.eye(3) * (20 / 206265) ** 2
-        f.valid = True
-        _run(f, 0.0, 40)
-        off = rotvec_to_quat(np.array([0.0, 20.0, 0.0]) / 206265)    # truth: the estimate turned by 20″
-        truth = {t: quat_mult(f.q_at(t), off) for t in (0.0725, 0.0825)}
-        for t_mid in (0.0725, 0.0825):               # two frames: the first is smoothed with the second
-            body, refs = _stars(truth[t_mid], seed=int(t_mid * 1e4))
-            assert f.update(t_mid, body, refs, np.full(len(body), 5 / 206265), np.zeros(len(body), np.uint8)) > 0
-        out = R.empty(4)
-        f.predict(_Samples(0.1 + np.arange(4) * PERIOD, np.tile(W, (4, 1))), 0, R.FLAG_ATTITUDE_VALID,
-                  R.MODE_TRACK, np.zeros((0, 3)), np.zeros(0, np.int32), np.zeros(10), np.zeros((0, 2)), out)
-        outs.append(out)
-    a, b = outs
-    np.testing.assert_array_equal(plain.q, biased.q)
-    np.testing.assert_array_equal(plain.P, biased.P)
-    np.testing.assert_array_equal(plain.mid, biased.mid)
-    np.testing.assert_array_equal(plain.smoothed, biased.smoothed)
-    assert np.isfinite(a["cov_mid_s"]).all() and np.isfinite(a["cov_mid"]).all()
-    add = np.zeros((6, 6))
-    add[0, 0], add[1, 1] = bx ** 2, by ** 2
-    np.testing.assert_allclose(b["cov"] - a["cov"], np.broadcast_to(add, (4, 6, 6)), rtol=0, atol=1e-24)
-    for key in ("cov_mid", "cov_mid_s"):
-        np.testing.assert_allclose(b[key] - a[key], np.broadcast_to(add[:3, :3], (4, 3, 3)), rtol=0, atol=1e-24)
-    np.testing.assert_array_equal(a["q"], b["q"])
