@@ -163,7 +163,7 @@ def loop_params(cfg: hc.FlatsatConfig, e_per_dn: float | None = None, scen: hc.S
     (:func:`camera_sigma`; default the config's). The rate-proportional gyro error is the
     config's (what is left after a scale calibration) on a real gyro or under a [gyro_scale]
     calibration (``scale_calibrated``), else a simulated part's own. ``camera_bias_px``: the
-    principal point's 1σ (:func:`camera_bias`), a pointing bias the outputs' covariance carries."""
+    principal point's 1σ (:func:`camera_bias`), a pointing bias reported beside the covariance."""
     from ..loop.coupled import LoopParams
 
     lc = cfg.loop
@@ -303,9 +303,8 @@ def make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock=None, e_per_dn=No
         from ..transport.linkrate import preset
 
         budget = LinkBudget(preset(cfg.head.link), cfg.loop.frame_hz)
-    return CoupledLoop(loop_params(cfg, e_per_dn, scen, camera_sigma_px, scale_calibrated, camera_bias_px), clock,
-                       gyro, head, camera,
-                       idx, ident, sinks,
+    params = loop_params(cfg, e_per_dn, scen, camera_sigma_px, scale_calibrated, camera_bias_px)
+    return CoupledLoop(params, clock, gyro, head, camera, idx, ident, sinks,
                        lat_clock=lat_clock, irq=irq, link_budget=budget, blended=blends)
 
 
