@@ -303,12 +303,9 @@ def load_index(catalog: str = "hip2", mag_limit: float = 6.5, max_sep_deg: float
                              f["vox_start"], f["vox_stars"], f["vox_vec"], float(f["nav_mag_limit"]))
         except (OSError, KeyError, ValueError):
             path.unlink(missing_ok=True)  # corrupt cache: rebuild below
-    if label_depth_mag > 0.0:
-        cat = load_catalog(catalog, deepest_limit(catalog, float(mag_limit) + label_depth_mag), float(epoch))
-        idx = build_index(cat, float(max_sep_deg), int(per_field), nav_mag_limit=float(mag_limit))
-    else:
-        cat = load_catalog(catalog, float(mag_limit), float(epoch))
-        idx = build_index(cat, float(max_sep_deg), int(per_field))
+    depth = deepest_limit(catalog, float(mag_limit) + label_depth_mag) if label_depth_mag > 0.0 else float(mag_limit)
+    cat = load_catalog(catalog, depth, float(epoch))
+    idx = build_index(cat, float(max_sep_deg), int(per_field), nav_mag_limit=float(mag_limit))
     fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".npz")
     os.close(fd)
     arrays = {f.name: getattr(idx, f.name) for f in dataclasses.fields(idx) if f.name != "catalog"}

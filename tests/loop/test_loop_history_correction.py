@@ -135,4 +135,3 @@ def test_a_delayed_update_with_a_scale_error_equals_one_at_mid_exposure():
     # the growth since the fix is the scale error's, (σ_s |ω| lag)², besides the walk
     grow = (ss * np.linalg.norm(W) * 0.0075) ** 2
     assert grow > 1e-3 * a.P[0, 0]               # large enough for the check above to see it
-
