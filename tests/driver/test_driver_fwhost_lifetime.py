@@ -12,7 +12,7 @@ from gyrostar.mocks.firmware_host import binary_path
 LAUNCHER = """
 import sys, time
 from gyrostar.mocks.firmware_host import FirmwareHost
-host = FirmwareHost(64, 64)
+host = FirmwareHost(64, 64, workdir=sys.argv[1])   # a SIGKILL leaves its files there
 host.start()
 print(host.proc.pid, flush=True)
 time.sleep(60)
@@ -28,10 +28,10 @@ def _alive(pid: int) -> bool:
         return fh.read().split(")")[-1].split()[0] != "Z"
 
 
-def test_host_program_exits_when_its_launcher_is_killed():
+def test_host_program_exits_when_its_launcher_is_killed(tmp_path):
     if not binary_path().exists():
         pytest.skip("firmware host program not built (make -C firmware host)")
-    launcher = subprocess.Popen([sys.executable, "-c", LAUNCHER], stdout=subprocess.PIPE, text=True)
+    launcher = subprocess.Popen([sys.executable, "-c", LAUNCHER, str(tmp_path)], stdout=subprocess.PIPE, text=True)
     host_pid = int(launcher.stdout.readline())
     assert _alive(host_pid)
     launcher.send_signal(signal.SIGKILL)
