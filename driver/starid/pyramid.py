@@ -282,9 +282,10 @@ def _triangle_candidates(b, i, j, k, vec, pt, pa, pb, kv, km, kq, eps, mark, nxt
     ``_MAX_CAND`` rows of ``cand``; returns their count (more than ``_MAX_CAND``: too many to
     be useful) and the work arrays ``nxt``/``oth`` (grown when needed). ``mark`` int32 (N,) zeros, left zeroed.
 
-    The shorter of the ik/jk pair ranges (k-vector) is threaded into per-star linked lists
-    (heads in ``mark``, 1-based); each ij pair (x, y) in both orders walks the list of x (or
-    of y) and tests the third side by its cosine window, so one pass over each range."""
+    The side with the fewest pairs in its window (k-vector) is scanned, in both orders (P, Q);
+    the shorter of the other two sides' ranges is threaded into per-star linked lists (heads
+    in ``mark``, 1-based), and each scanned pair walks the list of its end on that side and
+    tests the third side by its cosine window: one pass over two of the ranges."""
     tij = _angle(b[i], b[j])
     tik = _angle(b[i], b[k])
     tjk = _angle(b[j], b[k])
@@ -293,14 +294,24 @@ def _triangle_candidates(b, i, j, k, vec, pt, pa, pb, kv, km, kq, eps, mark, nxt
     s3, e3 = query(pt, kv, km, kq, tjk - eps, tjk + eps)
     if e1 == s1 or e2 == s2 or e3 == s3:
         return 0, nxt, oth
-    # thread the shorter range: from x (ik pairs) or from y (jk pairs)
-    from_x = (e2 - s2) <= (e3 - s3)
-    if from_x:
-        s, e = s2, e2
-        c_lo, c_hi = np.cos(tjk + eps), np.cos(max(tjk - eps, 0.0))
+    # roles: P–Q the scanned side, R the third spot; cP, cQ, cR their columns in ``cand``
+    if e1 - s1 <= e2 - s2 and e1 - s1 <= e3 - s3:
+        P, Q, R, cP, cQ, cR = i, j, k, 0, 1, 2
+        sS, eS, sA, eA, sB, eB, tPR, tQR = s1, e1, s2, e2, s3, e3, tik, tjk
+    elif e2 - s2 <= e3 - s3:
+        P, Q, R, cP, cQ, cR = i, k, j, 0, 2, 1
+        sS, eS, sA, eA, sB, eB, tPR, tQR = s2, e2, s1, e1, s3, e3, tij, tjk
     else:
-        s, e = s3, e3
-        c_lo, c_hi = np.cos(tik + eps), np.cos(max(tik - eps, 0.0))
+        P, Q, R, cP, cQ, cR = j, k, i, 1, 2, 0
+        sS, eS, sA, eA, sB, eB, tPR, tQR = s3, e3, s1, e1, s2, e2, tij, tik
+    # thread the shorter range: from P's star (P–R pairs) or from Q's (Q–R pairs)
+    from_p = (eA - sA) <= (eB - sB)
+    if from_p:
+        s, e = sA, eA
+        c_lo, c_hi = np.cos(tQR + eps), np.cos(max(tQR - eps, 0.0))
+    else:
+        s, e = sB, eB
+        c_lo, c_hi = np.cos(tPR + eps), np.cos(max(tPR - eps, 0.0))
     m = e - s
     if nxt.shape[0] < 2 * m:
         nxt = np.empty(4 * m, dtype=np.int32)
@@ -315,16 +326,16 @@ def _triangle_candidates(b, i, j, k, vec, pt, pa, pb, kv, km, kq, eps, mark, nxt
         nxt[t + 1] = mark[c] - 1
         oth[t + 1] = a
         mark[c] = t + 2
-    hand = np.sign(_triple(b[i], b[j], b[k]))
+    hand = np.sign(_triple(b[P], b[Q], b[R]))
     nc = 0
-    for p in range(s1, e1):
+    for p in range(sS, eS):
         for o in range(2):
             x = pa[p] if o == 0 else pb[p]
             y = pb[p] if o == 0 else pa[p]
-            h = x if from_x else y
-            u = y if from_x else x   # the vertex whose side to z is tested by angle
+            h = x if from_p else y
+            u = y if from_p else x   # the vertex whose side to z is tested by angle
             t = mark[h] - 1
-            if t < 0 or not (_mag_ok(smag, vmag, mwin, i, x) and _mag_ok(smag, vmag, mwin, j, y)):
+            if t < 0 or not (_mag_ok(smag, vmag, mwin, P, x) and _mag_ok(smag, vmag, mwin, Q, y)):
                 continue
             vu = vec[u]
             while t >= 0:
@@ -336,12 +347,12 @@ def _triangle_candidates(b, i, j, k, vec, pt, pa, pb, kv, km, kq, eps, mark, nxt
                 d = vu[0] * vzz[0] + vu[1] * vzz[1] + vu[2] * vzz[2]
                 if d < c_lo or d > c_hi:
                     continue
-                if np.sign(_triple(vec[x], vec[y], vzz)) != hand or not _mag_ok(smag, vmag, mwin, k, z):
+                if np.sign(_triple(vec[x], vec[y], vzz)) != hand or not _mag_ok(smag, vmag, mwin, R, z):
                     continue
                 if nc < _MAX_CAND:
-                    cand[nc, 0] = x
-                    cand[nc, 1] = y
-                    cand[nc, 2] = z
+                    cand[nc, cP] = x
+                    cand[nc, cQ] = y
+                    cand[nc, cR] = z
                 nc += 1
     for p in range(s, e):
         mark[pa[p]] = 0
