@@ -523,9 +523,10 @@ def pyramid_core(b, vec, vmag, tiers, lab_nloc, vstart, vstars, vvec, vh, vg, ep
     """Numba core. ``b`` (n,3) body unit vectors, brightest first; ``mark`` int32 (N,) zeros (work, left zeroed).
 
     ``tiers``: tuple of navigation-star tiers, searched in order, each
-    ``(is_nav, pair_theta, pair_a, pair_b, kv, nloc, (kv_m, kv_q, n_nav, max_spots, nloc_p5))``
-    over the same star numbering (a thinned tier of the brightest stars per field, on the brightest few
-    spots, first; then all stars on all spots).
+    ``(is_nav, pair_theta, pair_a, pair_b, kv, nloc, (kv_m, kv_q, n_nav, max_spots, nloc_p5,
+    max_tier_triangles), nav_share)`` over the same star numbering (a thinned tier of the brightest
+    stars per field, on the brightest few spots, first — in a field of no more than ``max_spots``
+    spots for ``max_tier_triangles`` triangles at most; then all stars on all spots).
     Adaptive spot budget: triangles and confirming stars come from the brightest
     ``budgets[0]`` spots first; when no pyramid is accepted there, from the brightest
     ``budgets[1]`` (only triangles with a new spot), and so on, then from all. Labelling and
@@ -561,9 +562,15 @@ def pyramid_core(b, vec, vmag, tiers, lab_nloc, vstart, vstars, vvec, vh, vg, ep
         if use_mag:
             for s in range(n):
                 fn[s] = _mag_fraction(nav_sorted_v, smag[s])
+        # this tier's triangles end here: a field of no more spots than the tier takes has them
+        # all among its candidates, so a thinned tier that finds nothing in its first few
+        # triangles lacks the field's stars (the thinning kept a denser neighbourhood's)
+        cap = max_triangles
+        if n <= kmq[3]:
+            cap = min(max_triangles, tried + max(int(kmq[5]), n * (n - 1) * (n - 2) // 12))
         match, q, pf, status, tried = _search(b, vec, vmag, is_nav, pt, pa, pb, kv, kmq[0], kmq[1], vstart, vstars,
                                               vvec, vh, vg, eps, label_tol, max_sep, fov_radius, p_false_max,
-                                              max_triangles, mark, kmq[2], nloc, kmq[4], lab_nloc, int(kmq[3]),
+                                              cap, mark, kmq[2], nloc, kmq[4], lab_nloc, int(kmq[3]),
                                               budgets, tried, status, gate, mwin, fn, flab, n_sigma)
         if status == ST_OK or status == ST_SPARSE or tried >= max_triangles:
             return match, q, pf, status, tried
@@ -713,16 +720,16 @@ def pyramid_identify_uv(uv, cam, tiers, lab_nloc, vec, vmag, ids, vstart, vstars
     the per-star check :func:`gyrostar.starid.star_check.check_stars` (scalars ``check`` from
     ``StarCheck.settings()``; empty: no check here). ``mag`` (n,) measured V or empty; the search
     uses it when ``mwin`` > 0 (:func:`pyramid_core`); then :func:`post_checks`.
-    Returns ``(match, catalog ids, q, status, p_false, n_ok)``; status ``ST_BAD`` for a
-    non-finite centroid."""
+    Returns ``(match, catalog ids, q, status, p_false, n_ok, triangles tried)``; status
+    ``ST_BAD`` for a non-finite centroid."""
     n = uv.shape[0]
     for i in range(n):
         if not (np.isfinite(uv[i, 0]) and np.isfinite(uv[i, 1])):
             none = -np.ones(n, dtype=np.int64)
-            return none, none.copy(), np.array([0.0, 0.0, 0.0, 1.0]), ST_BAD, np.inf, 0
+            return none, none.copy(), np.array([0.0, 0.0, 0.0, 1.0]), ST_BAD, np.inf, 0, 0
     b = unproject_many(cam, uv)
     smag = mag[:n] if (mwin > 0.0 and mag.shape[0] == n) else mag[:0]
-    match, q, pf, st, _ = pyramid_core(b, vec, vmag, tiers, lab_nloc, vstart, vstars, vvec, vh, vg, eps, label_tol,
+    match, q, pf, st, tried = pyramid_core(b, vec, vmag, tiers, lab_nloc, vstart, vstars, vvec, vh, vg, eps, label_tol,
                                        max_sep, fov_radius, p_false_max, max_triangles, mark, budgets, smag, mwin,
                                        lab_sorted_v, n_sigma)
     n_ok = 0
@@ -746,7 +753,7 @@ def pyramid_identify_uv(uv, cam, tiers, lab_nloc, vec, vmag, ids, vstart, vstars
     for i in range(n):
         if match[i] >= 0:
             out_ids[i] = ids[match[i]]
-    return match, out_ids, q, st, pf, n_ok
+    return match, out_ids, q, st, pf, n_ok, tried
 
 
 def local_density(index: StarIndex) -> np.ndarray:
@@ -769,7 +776,11 @@ class Pyramid:
     ``fast_index``: optional thinned index over the same stars (``load_index(..., per_field=k)``:
     the brightest k navigation stars per field), searched first — its pair table is a few
     per cent of the full one and its smaller N makes its pyramids more certain — on the
-    brightest ``fast_spots`` centroids; the full index follows when it finds nothing.
+    brightest ``fast_spots`` centroids; the full index follows when it finds nothing. In a
+    field of at most ``fast_spots`` spots the thinned index gets ``fast_triangles`` triangles:
+    there its solves take 1 triangle at the median and ≤ 6 at the 99th percentile (qian2015),
+    and a sparse field next to a denser one, whose stars the thinning left out, would
+    otherwise try every triangle there before the full index names it at the first.
     ``check``: the per-star verification stage (any object with ``apply(b, mag, ref, vmag,
     match) -> (q, match, n_ok)``); default a :class:`StarCheck` at ``sigma_px`` and the
     index's navigation limit (the sensor's), three stars minimum.
@@ -792,6 +803,7 @@ class Pyramid:
     budgets: tuple = (8, 12, 16, 24)
     fast_index: object = None
     fast_spots: int = 10
+    fast_triangles: int = 10
     max_triangles: int = 400
     check: object = None
     sigma_mag: float = 0.0
@@ -799,10 +811,10 @@ class Pyramid:
     faint: object = None
 
     def __post_init__(self) -> None:
-        if not (self.sigma_px > 0 and self.n_sigma > 0 and self.max_triangles >= 1 and self.sigma_mag >= 0
-                and self.absent_max >= -1):
-            raise ConfigError("pyramid needs sigma_px > 0, n_sigma > 0, max_triangles ≥ 1, sigma_mag ≥ 0 and "
-                              "absent_max ≥ -1")
+        if not (self.sigma_px > 0 and self.n_sigma > 0 and self.max_triangles >= 1 and self.fast_triangles >= 1
+                and self.sigma_mag >= 0 and self.absent_max >= -1):
+            raise ConfigError("pyramid needs sigma_px > 0, n_sigma > 0, max_triangles ≥ 1, fast_triangles ≥ 1, "
+                              "sigma_mag ≥ 0 and absent_max ≥ -1")
         self.mwin = self.n_sigma * self.sigma_mag
         if not (len(self.budgets) >= 1 and all(int(k) >= 3 for k in self.budgets)
                 and list(self.budgets) == sorted(self.budgets)):
@@ -822,11 +834,13 @@ class Pyramid:
         if self.fast_index is not None and not (len(self.fast_index) == len(self.index)
                                                 and np.array_equal(self.fast_index.ids, self.index.ids)):
             raise ConfigError("pyramid fast_index must index the same stars as index (same catalog and limit)")
-        caps = [float(self.fast_spots)] * (len(tiers) - 1) + [1e9]
+        caps = [(float(self.fast_spots), float(self.fast_triangles))] * (len(tiers) - 1) + \
+            [(1e9, float(self.max_triangles))]
         dens = [local_density(t) for t in tiers]
         self._tiers = tuple((t.is_nav, t.pair_theta, t.pair_a, t.pair_b, t.kv, d,
-                             (float(t.kv_m), float(t.kv_q), float(np.count_nonzero(t.is_nav)), cap,
-                              float(np.percentile(d[t.is_nav], 5))), mag_share_table(t.vmag[t.is_nav], self.mwin))
+                             (float(t.kv_m), float(t.kv_q), float(np.count_nonzero(t.is_nav)), cap[0],
+                              float(np.percentile(d[t.is_nav], 5)), cap[1]),
+                             mag_share_table(t.vmag[t.is_nav], self.mwin))
                             for t, cap, d in zip(tiers, caps, dens))
         self._lab_sorted_v = mag_share_table(self.index.vmag, self.mwin)
         # every indexed star (labels): the full tier's navigation density scaled to all stars
@@ -864,7 +878,7 @@ class Pyramid:
                 st, q, n_ok = post_checks(np.asarray(q, np.float64), b, full, n_ok, self._params, ix.vectors, ix.vmag,
                                           ix.vox_start, ix.vox_stars, ix.vox_vec, ix.vox_h, ix.vox_g, self.fov_radius,
                                           self.label_tol, self._absent_cfg, *self._faint_grid)
-        return StarIdResult.make(ix, full, q, st == ST_OK, self._status(st, n_ok, pf), pf, "pyramid")
+        return StarIdResult.make(ix, full, q, st == ST_OK, self._status(st, n_ok, pf), pf, "pyramid", tried)
 
     def identify(self, uv: np.ndarray, mag=None) -> StarIdResult:
         """Identify centroids ``uv`` (n, 2) [col, row] px, brightest first; ``mag`` (n,)
@@ -879,14 +893,14 @@ class Pyramid:
             pts = np.ascontiguousarray(pts.reshape(-1, 2) if pts.size else np.empty((0, 2)))
         m = self._magnitudes(mag, pts.shape[0])
         ix = self.index
-        match, ids, q, st, pf, n_ok = pyramid_identify_uv(
+        match, ids, q, st, pf, n_ok, tried = pyramid_identify_uv(
             pts, self._params, self._tiers, self._lab_nloc, ix.vectors, ix.vmag, ix.ids, ix.vox_start, ix.vox_stars,
             ix.vox_vec, ix.vox_h, ix.vox_g, self.eps, self.label_tol, ix.max_sep, self.fov_radius, self.p_false_max,
             self.max_triangles, self._mark, self._budgets, m, self._fused, self.mwin, self._lab_sorted_v,
             self.n_sigma, self._absent_cfg, *self._faint_grid)
         if st == ST_BAD:
             raise ConfigError(STATUS_TEXT[ST_BAD])
-        return StarIdResult(match, ids, q, st == ST_OK, self._status(st, n_ok, pf), float(pf), "pyramid")
+        return StarIdResult(match, ids, q, st == ST_OK, self._status(st, n_ok, pf), float(pf), "pyramid", int(tried))
 
     def _magnitudes(self, mag, n: int) -> np.ndarray:
         """``mag`` as a float64 (n,) array (empty for None)."""

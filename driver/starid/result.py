@@ -27,7 +27,8 @@ class StarIdResult:
     when unidentified; ``ids`` (n,): catalog ids (HIP / Gaia), -1 likewise; ``q``: attitude
     ICRS → body ([x, y, z, w]) from QUEST over the identified stars; ``ok``: accepted (at
     least two stars, every residual within tolerance); ``p_false``: analytic expected number
-    of false matches (Pyramid; NaN for tracking methods); ``status``: why it failed.
+    of false matches (Pyramid; NaN for tracking methods); ``status``: why it failed;
+    ``triangles``: star triangles the search tried (Pyramid; 0 for the other methods).
     """
 
     index: np.ndarray
@@ -37,17 +38,19 @@ class StarIdResult:
     status: str
     p_false: float
     method: str
+    triangles: int = 0
 
     @property
     def n_identified(self) -> int:
         return int(np.count_nonzero(self.index >= 0))
 
     @staticmethod
-    def make(star_index, match, q, ok, status, p_false, method) -> StarIdResult:
+    def make(star_index, match, q, ok, status, p_false, method, triangles: int = 0) -> StarIdResult:
         match = np.asarray(match, dtype=np.int64)
         if not ok:
             match = np.full(match.shape, -1, dtype=np.int64)
         ids = np.full(match.shape, -1, dtype=np.int64)
         got = match >= 0
         ids[got] = star_index.ids[match[got]]
-        return StarIdResult(match, ids, np.asarray(q, dtype=np.float64), bool(ok), status, float(p_false), method)
+        return StarIdResult(match, ids, np.asarray(q, dtype=np.float64), bool(ok), status, float(p_false), method,
+                            int(triangles))
