@@ -7,7 +7,7 @@ A **flatsat config** says which devices the loop talks to and where outputs go::
     [gyro]    kind = "emulator" | "i2c" | "spi";  model, i2c_bus, i2c_address, spi_bus, ...
     [sim]     preset, gyro_errors, catalog, mag_limit        (simulated devices only)
     [loop]    rates, window size, identification settings
-    [outputs] record, udp, udp_host, udp_port, space_packets, tm_host, tm_port, tm_apid, allow_remote
+    [outputs] record, udp, udp_host, udp_port, space_packets, tm_host, tm_port, tm_apid, tm_frame_apid, allow_remote
     [realtime] sched_fifo_priority, cpus
     calibration = "path/to/calibration.toml"                  (optional)
 
@@ -220,14 +220,19 @@ class OutputsConfig:
     tm_host: str = "127.0.0.1"
     tm_port: int = 47801
     tm_apid: int = 0x0A1
+    tm_frame_apid: int = 0x0A2         # the mid-exposure packets, one per image update
     allow_remote: bool = False         # let udp_host / tm_host be another machine
 
     def validate(self):
         for name in ("udp_port", "tm_port"):
             if not 0 < getattr(self, name) < 65536:
                 raise ValueError(f"outputs.{name} {getattr(self, name)} outside 1..65535")
-        if not 0 <= self.tm_apid <= 0x7FE:
-            raise ValueError(f"outputs.tm_apid 0x{self.tm_apid:x} outside 0..0x7FE (0x7FF is the idle APID)")
+        for name in ("tm_apid", "tm_frame_apid"):
+            if not 0 <= getattr(self, name) <= 0x7FE:
+                raise ValueError(f"outputs.{name} 0x{getattr(self, name):x} outside 0..0x7FE (0x7FF is the idle APID)")
+        if self.tm_frame_apid == self.tm_apid:
+            raise ValueError(f"outputs.tm_frame_apid 0x{self.tm_frame_apid:x} is tm_apid's: the frame packets need "
+                             "their own APID")
 
 
 @dataclass

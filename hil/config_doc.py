@@ -64,6 +64,7 @@ MEANING = {
     "outputs.tm_host": "destination of the space packets (another host needs allow_remote)",
     "outputs.tm_port": "UDP port of the space packets",
     "outputs.tm_apid": "APID of the attitude packets",
+    "outputs.tm_frame_apid": "APID of the mid-exposure packets (one per image update)",
     "realtime.cpus": "CPU affinity of the loop thread with --realtime ([] = any)",
     "description": "one line shown by gyrostar run",
     "duration_s": "default run length, s (--duration overrides)",

@@ -193,6 +193,7 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
     """The body of :func:`run_flatsat` once its log holds the META record."""
     import sys
 
+    from ..loop.floor import ARCSEC, pointing_bias_arcsec
     from ..loop.scheduler import PeriodicScheduler, StepGate, realtime_setup
     from ..loop.sinks import ArraySink, CallbackSink, RecorderSink, SpacePacketSink, UdpSink
     from ..recording import logfile as lf
@@ -229,10 +230,13 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
     tm = None
     if cfg.outputs.space_packets:
         tm = SpacePacketSink(cfg.outputs.tm_host, cfg.outputs.tm_port, timemap, apid=cfg.outputs.tm_apid,
-                             allow_remote=cfg.outputs.allow_remote)
+                             allow_remote=cfg.outputs.allow_remote, frame_apid=cfg.outputs.tm_frame_apid)
         sinks.append(tm)
 
     fs = flatsat.build(cfg, scen, seed=seed, realtime=realtime, writer=writer, fast=fast, calibration=calib)
+    if tm is not None:   # the frame packets carry the camera calibration's pointing bias
+        bias = pointing_bias_arcsec(flatsat.camera_bias(fs.calibration), fs.camera.focal_length_px)
+        tm.pointing_bias_rad = (bias[0] * ARCSEC, bias[1] * ARCSEC)
     loop = fs.make_loop(sinks)
     warm["identifier_s"] = loop.warm_identifier()
     import gc
@@ -398,8 +402,9 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
         if rt is not None:
             res_top["realtime_setup"] = {"sched_fifo": rt.sched_fifo, "cpus": rt.cpus, "notes": rt.notes}
         if tm is not None:
-            res_top["space_packets"] = {"sent": tm.sent, "dropped": tm.dropped, "to": f"{tm.addr[0]}:{tm.addr[1]}",
-                                        "apid": tm.apid}
+            res_top["space_packets"] = {"sent": tm.sent, "frames_sent": tm.frames_sent, "dropped": tm.dropped,
+                                        "to": f"{tm.addr[0]}:{tm.addr[1]}", "apid": tm.apid,
+                                        "frame_apid": tm.frame_apid}
         t_first = float(out["t"][0]) if len(out) else timemap.monotonic_s
         res_top["time"] = {"clock": "host CLOCK_MONOTONIC (s); TAI/UTC from the start pair (docs/TELEMETRY.md)",
                            "first_output_monotonic_s": t_first, "first_output_tai_s": float(timemap.tai(t_first)),

@@ -15,8 +15,8 @@ from . import packets
 SYSTEM = "gyrostar"
 
 
-def build(apid: int = packets.APID_ATTITUDE):
-    """The yamcs-pymdb ``System`` of the packets."""
+def build(apid: int = packets.APID_ATTITUDE, frame_apid: int = packets.APID_FRAME):
+    """The yamcs-pymdb ``System`` of the packets (attitude and frame)."""
     import yamcs.pymdb as y
 
     sysm = y.System(SYSTEM, short_description="gyrostar star tracker: attitude telemetry (CCSDS Space Packets)")
@@ -55,11 +55,30 @@ def build(apid: int = packets.APID_ATTITUDE):
     y.Container(sysm, "attitude", base=base, entries=[y.ParameterEntry(p) for p in body],
                 condition=y.EqExpression(head[3], apid), rate=400.0,
                 short_description="one 400 Hz loop output (gyrostar.telemetry.packets)")
+    frame = [uint("tai_mid_coarse", 32, "s", "CUC coarse time of the frame's mid-exposure: whole TAI s since 1958"),
+             uint("tai_mid_fine", 16, "s/65536", "CUC fine time of the frame's mid-exposure: 2^-16 s"),
+             uint("frame_seq", 32, "count", "output counter of the first output holding this frame's update"),
+             uint("frame_mode", 8, "1", "0 ACQUIRE, 1 TRACK, 2 COAST"),
+             uint("frame_n_stars", 8, "count", "stars tracked"),
+             uint("frame_flags", 16, "1", "quality flags (gyrostar.loop.record FLAG_*)")]
+    frame += [f64(f"q_mid_{a}", "1", f"attitude at mid-exposure, filtered with the frame, ICRS → body, {a}")
+              for a in "xyzw"]
+    frame += [f32(f"sigma_theta_mid_{a}", "rad", f"1-sigma error of q_mid about body {a}") for a in "xyz"]
+    frame += [uint("tai_mid_s_coarse", 32, "s", "mid-exposure of the frame before: whole TAI seconds (0: none)"),
+              uint("tai_mid_s_fine", 16, "s/65536", "mid-exposure of the frame before: 2^-16 s")]
+    frame += [f64(f"q_mid_s_{a}", "1", f"attitude of the frame before, smoothed with this one, ICRS → body, {a}")
+              for a in "xyzw"]
+    frame += [f32(f"sigma_theta_mid_s_{a}", "rad", f"1-sigma error of q_mid_s about body {a}") for a in "xyz"]
+    frame += [f32(f"pointing_bias_{a}", "rad", f"camera calibration's pointing bias, 1-sigma about camera {a}")
+              for a in "xy"]
+    y.Container(sysm, "frame_attitude", base=base, entries=[y.ParameterEntry(p) for p in frame],
+                condition=y.EqExpression(head[3], frame_apid),
+                short_description="one per image update: the attitude at its mid-exposure (gyrostar.telemetry.packets)")
     return sysm
 
 
-def xml(apid: int = packets.APID_ATTITUDE) -> str:
-    return build(apid).dumps()
+def xml(apid: int = packets.APID_ATTITUDE, frame_apid: int = packets.APID_FRAME) -> str:
+    return build(apid, frame_apid).dumps()
 
 
 def main(argv=None) -> int:

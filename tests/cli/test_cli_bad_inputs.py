@@ -91,6 +91,8 @@ CASES = [
     ("run-frame-hz-0", ["run", "--config", ("loop", "frame_hz", "0")], USAGE, ["loop.frame_hz", ".toml"]),
     ("run-frame-hz-neg", ["run", "--config", ("loop", "frame_hz", "-5")], USAGE, ["loop.frame_hz", ".toml"]),
     ("run-frame-hz-nan", ["run", "--config", ("loop", "frame_hz", "nan")], USAGE, ["loop.frame_hz", ".toml"]),
+    ("run-frame-apid-shared", ["run", "--config", ("outputs", "tm_frame_apid", "0x0A1")], USAGE,
+     ["outputs.tm_frame_apid", "own APID"]),
     ("run-bmi088-range", ["run", "--config", ("gyro", "range_dps", "7")], USAGE, ["gyro.range_dps", "BMI088"]),
     ("run-bmi088-odr", ["run", "--config", ("gyro", "odr_hz", "800")], USAGE, ["gyro.odr_hz", "BMI088"]),
     ("run-bmi088-watermark", ["run", "--config", ("gyro", "fifo_watermark", "1000")], USAGE,

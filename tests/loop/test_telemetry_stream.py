@@ -1,6 +1,7 @@
 """Telemetry a ground station reads as it is: TAI/UTC from host time, CCSDS Space Packets of
-a 10 s run decoded by ``spacepackets`` with no sequence gap at 400 Hz, and the XTCE definition
-(yamcs-pymdb) matching the packet layout with a unit on every parameter."""
+a 10 s run decoded by ``spacepackets`` with no sequence gap at 400 Hz and one mid-exposure
+packet per image update, and the XTCE definition (yamcs-pymdb) matching both packet layouts
+with a unit on every parameter."""
 
 import calendar
 import socket
@@ -47,18 +48,47 @@ def test_xtce_matches_the_packet_layout_and_every_parameter_has_a_unit(repo):
     root = ET.fromstring(text)
     types = {t.get("name"): t for t in root.find("x:TelemetryMetaData/x:ParameterTypeSet", NS)}
     params = root.findall("x:TelemetryMetaData/x:ParameterSet/x:Parameter", NS)
-    assert len(params) == 7 + 2 + 4 + 4 + 3 + 3 + 3 + 3 + 1
+    assert len(params) == 7 + (2 + 4 + 4 + 3 + 3 + 3 + 3 + 1) + (2 + 4 + 4 + 3 + 2 + 4 + 3 + 2)
     for p in params:
         unit = types[p.get("parameterTypeRef")].find("x:UnitSet/x:Unit", NS)
         assert unit is not None and unit.text, p.get("name")
     bits = {t.get("name"): int(t.find("*[@sizeInBits]", NS).get("sizeInBits")) for t in types.values()}
     containers = {c.get("name"): c for c in root.findall("x:TelemetryMetaData/x:ContainerSet/x:SequenceContainer",
                                                           NS)}
-    total = 0
-    for name in ("ccsds_space_packet", "attitude"):
-        for e in containers[name].find("x:EntryList", NS):
-            total += bits[e.get("parameterRef")]
-    assert total == 8 * packets.PACKET_LEN
+    for body, size in (("attitude", packets.PACKET_LEN), ("frame_attitude", packets.FRAME_PACKET_LEN)):
+        total = 0
+        for name in ("ccsds_space_packet", body):
+            for e in containers[name].find("x:EntryList", NS):
+                total += bits[e.get("parameterRef")]
+        assert total == 8 * size, body
+
+
+def test_frame_packet_round_trip_by_hand():
+    """One record through encode_frames/decode against hand-set values: the header, the CUC
+    times (none for the frame before), the covariances' 1σ and the pointing bias."""
+    from gyrostar.loop.record import empty
+
+    r = empty(1)
+    r["seq"], r["mode"], r["n_stars"], r["flags"] = 70001, 1, 9, 0x0004
+    r["t_mid"] = 12.5
+    r["q_mid"] = [0.1, -0.2, 0.3, np.sqrt(1 - 0.14)]
+    r["cov_mid"] = np.diag([4e-10, 9e-10, 1e-8])
+    r["q_mid_s"] = np.nan
+    r["cov_mid_s"] = np.nan
+    tai = 2.1e9 + 0.25                      # CUC: exact in 2⁻¹⁶ s
+    (pkt,) = packets.encode_frames(r, np.array([tai]), np.array([np.nan]), 16385, (5e-6, -1e-6), apid=0x0A2)
+    assert len(pkt) == packets.FRAME_PACKET_LEN
+    d = packets.decode(pkt)
+    assert d["kind"] == "frame" and d["apid"] == 0x0A2 and d["seq_count"] == 1 and d["tai_s"] == tai
+    assert (d["seq"], d["mode"], d["n_stars"], d["flags"]) == (70001, 1, 9, 4)
+    assert np.allclose(d["q_mid"], r["q_mid"][0], rtol=0, atol=0)
+    assert np.allclose(d["sigma_theta_mid"], [2e-5, 3e-5, 1e-4], rtol=1e-6)
+    assert np.isnan(d["tai_mid_s"]) and np.all(np.isnan(d["q_mid_s"]))
+    assert np.allclose(d["pointing_bias"], [5e-6, -1e-6], rtol=1e-6)
+    # the rows that open a frame: a finite t_mid unlike the one before (the previous batch's last too)
+    t = empty(5)
+    t["t_mid"] = [np.nan, 1.0, 1.0, 1.01, 1.01]
+    assert list(packets.frame_rows(t, np.nan)) == [1, 3] and list(packets.frame_rows(t[2:], 1.0)) == [1]
 
 
 @pytest.fixture(scope="module")
@@ -90,9 +120,11 @@ def packet_run(tmp_path_factory):
 
 def test_space_packets_decode_without_gaps(packet_run):
     res, folder, stream = packet_run
-    parsed = parse_space_packets(stream, [PacketId(PacketType.TM, True, packets.APID_ATTITUDE)])
+    parsed = parse_space_packets(stream, [PacketId(PacketType.TM, True, packets.APID_ATTITUDE),
+                                          PacketId(PacketType.TM, True, packets.APID_FRAME)])
     assert not parsed.skipped_ranges
-    pk = parsed.tm_list
+    every = [packets.decode(bytes(p)) for p in parsed.tm_list]
+    pk = [p for p, d in zip(parsed.tm_list, every) if d["kind"] == "attitude"]
     out = load_log(folder / "flatsat.gslog")["outputs"]
     assert res["space_packets"]["dropped"] == 0 and len(pk) == res["space_packets"]["sent"] == len(out)
     assert len(pk) >= 0.98 * 10.0 * 400 and res["samples_lost"] == 0
@@ -104,3 +136,21 @@ def test_space_packets_decode_without_gaps(packet_run):
     tm = timescale.from_meta(load_log(folder / "flatsat.gslog")["meta"]["time"])
     assert np.allclose(tai, tm.tai(out["t"]), atol=2.0 ** -16)
     assert np.allclose([d["q"] for d in dec], out["q"]) and [d["seq"] for d in dec] == list(out["seq"])
+    # one frame packet per image update, at the first output holding it, stamped at mid-exposure
+    frames = [d for d in every if d["kind"] == "frame"]
+    first = np.flatnonzero(np.isfinite(out["t_mid"]) & (out["t_mid"] != np.concatenate([[np.nan], out["t_mid"][:-1]])))
+    assert len(frames) == len(first) == res["space_packets"]["frames_sent"] >= 0.95 * 10.0 * 100
+    assert all(d["apid"] == packets.APID_FRAME for d in frames)
+    assert np.all(np.diff([d["seq_count"] for d in frames]) % packets.SEQ_MODULO == 1)
+    o = out[first]
+    assert [d["seq"] for d in frames] == list(o["seq"])
+    assert np.allclose([d["tai_s"] for d in frames], tm.tai(o["t_mid"]), atol=2.0 ** -16)
+    assert np.allclose([d["q_mid"] for d in frames], o["q_mid"], rtol=0, atol=0)
+    sig = np.sqrt(np.diagonal(o["cov_mid"], axis1=1, axis2=2))
+    assert np.allclose([d["sigma_theta_mid"] for d in frames], sig, rtol=1e-6)
+    smoothed = np.isfinite(o["t_mid_s"])
+    assert smoothed.mean() > 0.95
+    assert np.allclose(np.array([d["tai_mid_s"] for d in frames])[smoothed], tm.tai(o["t_mid_s"][smoothed]),
+                       atol=2.0 ** -16)
+    assert np.allclose(np.array([d["q_mid_s"] for d in frames])[smoothed], o["q_mid_s"][smoothed], rtol=0, atol=0)
+    assert all(d["pointing_bias"] == (0.0, 0.0) for d in frames)      # no camera calibration in this run
