@@ -391,7 +391,8 @@ def run(quick: bool) -> dict:
     wq = np.full(10, 1e8)
     t_nb = _median_us(lambda: _timed(_loop_quest, n_fast // 10, body, ref, wq), rep)
     t_np = _py_us(lambda: np_quest(body, ref, wq), rep, 1000)
-    out["quest"] = _case(t_nb, t_np, "10 stars, with covariance (numba: 4 sequential-rotation candidates)")
+    out["quest"] = _case(t_nb, t_np,
+                         "10 stars, with covariance (numba: one λ, the best of 4 sequential-rotation candidates)")
 
     n = 10
     X, P, act = joint_init(n, np.zeros(3), 1e-3)

@@ -15,7 +15,7 @@
 The largest eigenvalue of Davenport's K matrix comes from Newton–Raphson on QUEST's
 characteristic quartic (start λ = Σ w); near-180° solutions are avoided with Shuster's
 method of sequential rotations (the reference frame is turned 180° about x, y or z and
-the best-conditioned of the four solutions is kept).
+the best-conditioned of the four solutions, the largest |γ| at the shared λ, is built).
 Fewer than two non-parallel vectors is an ill-posed problem: ``cov`` then contains inf.
 """
 
@@ -35,26 +35,37 @@ def _det3(m):
 
 
 @njit(cache=True)
-def _quest_core(b_all, lam0, flip):
-    """Unnormalised QUEST quaternion for the attitude profile matrix ``b_all`` with the
-    references turned 180° about axis ``flip`` (-1: none): B' = B · R_flip."""
-    bm = b_all.copy()
-    if flip >= 0:
-        for j in range(3):
-            if j != flip:
-                for i in range(3):
-                    bm[i, j] = -bm[i, j]
-    s = bm + bm.T
-    sigma = bm[0, 0] + bm[1, 1] + bm[2, 2]
-    z = np.array([bm[1, 2] - bm[2, 1], bm[2, 0] - bm[0, 2], bm[0, 1] - bm[1, 0]])
-    kappa = (s[1, 1] * s[2, 2] - s[1, 2] * s[2, 1] + s[0, 0] * s[2, 2] - s[0, 2] * s[2, 0]
-             + s[0, 0] * s[1, 1] - s[0, 1] * s[1, 0])
-    delta = _det3(s)
-    sz = s @ z
+def _flipped(bm, flip):
+    """S = B' + B'ᵀ (its 6 distinct entries), σ = tr B', z, κ (sum of S's principal 2×2
+    minors) and Δ = det S of the attitude profile matrix with the references turned 180°
+    about axis ``flip`` (-1: none): B' = B · R_flip. Scalars only."""
+    c0 = -1.0 if (flip >= 0 and flip != 0) else 1.0
+    c1 = -1.0 if (flip >= 0 and flip != 1) else 1.0
+    c2 = -1.0 if (flip >= 0 and flip != 2) else 1.0
+    b00, b01, b02 = bm[0, 0] * c0, bm[0, 1] * c1, bm[0, 2] * c2
+    b10, b11, b12 = bm[1, 0] * c0, bm[1, 1] * c1, bm[1, 2] * c2
+    b20, b21, b22 = bm[2, 0] * c0, bm[2, 1] * c1, bm[2, 2] * c2
+    s00, s11, s22 = b00 + b00, b11 + b11, b22 + b22
+    s01, s02, s12 = b01 + b10, b02 + b20, b12 + b21
+    sigma = b00 + b11 + b22
+    z0, z1, z2 = b12 - b21, b20 - b02, b01 - b10
+    kappa = s11 * s22 - s12 * s12 + s00 * s22 - s02 * s02 + s00 * s11 - s01 * s01
+    delta = s00 * (s11 * s22 - s12 * s12) - s01 * (s01 * s22 - s12 * s02) + s02 * (s01 * s12 - s11 * s02)
+    return s00, s01, s02, s11, s12, s22, sigma, z0, z1, z2, kappa, delta
+
+
+@njit(cache=True)
+def _largest_eigenvalue(bm, lam0):
+    """λ_max of Davenport's K: Newton–Raphson on QUEST's characteristic quartic from λ₀ = Σw
+    (the 180° turns of the references leave K's eigenvalues as they are)."""
+    s00, s01, s02, s11, s12, s22, sigma, z0, z1, z2, kappa, delta = _flipped(bm, -1)
+    sz0 = s00 * z0 + s01 * z1 + s02 * z2
+    sz1 = s01 * z0 + s11 * z1 + s12 * z2
+    sz2 = s02 * z0 + s12 * z1 + s22 * z2
     a = sigma * sigma - kappa
-    bb = sigma * sigma + z @ z
-    c = delta + z @ sz
-    d = sz @ sz
+    bb = sigma * sigma + (z0 * z0 + z1 * z1 + z2 * z2)
+    c = delta + (z0 * sz0 + z1 * sz1 + z2 * sz2)
+    d = sz0 * sz0 + sz1 * sz1 + sz2 * sz2
     lam = lam0
     for _ in range(50):
         f = lam ** 4 - (a + bb) * lam ** 2 - c * lam + (a * bb + c * sigma - d)
@@ -65,12 +76,34 @@ def _quest_core(b_all, lam0, flip):
         lam -= step
         if abs(step) <= 1e-15 * max(1.0, abs(lam)):
             break
+    return lam
+
+
+@njit(cache=True)
+def _gamma(bm, lam, flip):
+    """γ = (λ + σ) α − Δ of the references turned about ``flip``: the candidate's
+    unnormalised scalar part."""
+    _, _, _, _, _, _, sigma, _, _, _, kappa, delta = _flipped(bm, flip)
+    return (lam + sigma) * (lam * lam - sigma * sigma + kappa) - delta
+
+
+@njit(cache=True)
+def _quest_core(bm, lam, flip):
+    """Unnormalised QUEST quaternion (x = α z + β S z + S² z, γ) for the attitude profile
+    matrix ``bm`` with the references turned 180° about axis ``flip`` (-1: none), at the
+    largest eigenvalue ``lam``."""
+    s00, s01, s02, s11, s12, s22, sigma, z0, z1, z2, kappa, delta = _flipped(bm, flip)
+    sz0 = s00 * z0 + s01 * z1 + s02 * z2
+    sz1 = s01 * z0 + s11 * z1 + s12 * z2
+    sz2 = s02 * z0 + s12 * z1 + s22 * z2
     alpha = lam * lam - sigma * sigma + kappa
     beta = lam - sigma
-    gamma = (lam + sigma) * alpha - delta
-    x = alpha * z + beta * sz + s @ sz
-    q = np.array([x[0], x[1], x[2], gamma])
-    return q
+    out = np.empty(4)
+    out[0] = alpha * z0 + beta * sz0 + (s00 * sz0 + s01 * sz1 + s02 * sz2)
+    out[1] = alpha * z1 + beta * sz1 + (s01 * sz0 + s11 * sz1 + s12 * sz2)
+    out[2] = alpha * z2 + beta * sz2 + (s02 * sz0 + s12 * sz1 + s22 * sz2)
+    out[3] = (lam + sigma) * alpha - delta
+    return out
 
 
 @njit(cache=True)
@@ -92,16 +125,20 @@ def quest(body_vecs, ref_vecs, weights):
                 bm[j, k] += weights[i] * body_vecs[i, j] * ref_vecs[i, k]
     # The four candidates (no turn, 180° about x, y, z) share one scale factor (the
     # adjugate of λI − K), so the one with the largest |γ| is the best conditioned: its
-    # scalar part is the largest component (≥ 1/2) of the unit quaternion.
-    q = _quest_core(bm, lam0, -1)
-    best = abs(q[3])
+    # scalar part is the largest component (≥ 1/2) of the unit quaternion. They share λ
+    # too: one Newton solve, four γ, one candidate built.
+    lam = _largest_eigenvalue(bm, lam0)
+    best_axis = -1
+    best = abs(_gamma(bm, lam, -1))
     for axis in range(3):
-        qa = _quest_core(bm, lam0, axis)
-        if abs(qa[3]) > best:
-            best = abs(qa[3])
-            flip = np.zeros(4)
-            flip[axis] = 1.0  # 180° about the reference axis: A = A' · R_axis
-            q = quat_mult(qa, flip)
+        g = abs(_gamma(bm, lam, axis))
+        if g > best:
+            best, best_axis = g, axis
+    q = _quest_core(bm, lam, best_axis)
+    if best_axis >= 0:
+        flip = np.zeros(4)
+        flip[best_axis] = 1.0  # 180° about the reference axis: A = A' · R_axis
+        q = quat_mult(q, flip)
     if q @ q == 0.0:  # fully degenerate (one vector): any rotation about it fits
         q = np.array([0.0, 0.0, 0.0, 1.0])
     q = quat_normalize(q)
