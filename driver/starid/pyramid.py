@@ -729,9 +729,9 @@ def pyramid_identify_uv(uv, cam, tiers, lab_nloc, vec, vmag, ids, vstart, vstars
             return none, none.copy(), np.array([0.0, 0.0, 0.0, 1.0]), ST_BAD, np.inf, 0, 0
     b = unproject_many(cam, uv)
     smag = mag[:n] if (mwin > 0.0 and mag.shape[0] == n) else mag[:0]
-    match, q, pf, st, tried = pyramid_core(b, vec, vmag, tiers, lab_nloc, vstart, vstars, vvec, vh, vg, eps, label_tol,
-                                       max_sep, fov_radius, p_false_max, max_triangles, mark, budgets, smag, mwin,
-                                       lab_sorted_v, n_sigma)
+    match, q, pf, st, tried = pyramid_core(b, vec, vmag, tiers, lab_nloc, vstart, vstars, vvec, vh, vg, eps,
+                                           label_tol, max_sep, fov_radius, p_false_max, max_triangles, mark,
+                                           budgets, smag, mwin, lab_sorted_v, n_sigma)
     n_ok = 0
     for i in range(n):
         if match[i] >= 0:
@@ -777,8 +777,8 @@ class Pyramid:
     the brightest k navigation stars per field), searched first — its pair table is a few
     per cent of the full one and its smaller N makes its pyramids more certain — on the
     brightest ``fast_spots`` centroids; the full index follows when it finds nothing. In a
-    field of at most ``fast_spots`` spots the thinned index gets ``fast_triangles`` triangles:
-    there its solves take 1 triangle at the median and ≤ 6 at the 99th percentile (qian2015),
+    field of n ≤ ``fast_spots`` spots the thinned index gets max(``fast_triangles``, C(n,3)/2)
+    triangles: there its solves take 1 at the median and ≤ 6 at the 99th percentile (qian2015),
     and a sparse field next to a denser one, whose stars the thinning left out, would
     otherwise try every triangle there before the full index names it at the first.
     ``check``: the per-star verification stage (any object with ``apply(b, mag, ref, vmag,
