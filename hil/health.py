@@ -12,14 +12,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..loop.record import FLAG_ATTITUDE_VALID, FLAG_LINK_ERROR, MODE_NAMES, MODE_TRACK
+from ..loop.record import FLAG_ATTITUDE_VALID, FLAG_LINK_ERROR, MODE_NAMES, MODE_TRACK, sigma
 
 ARCSEC = 180.0 / np.pi * 3600.0
 DEG = 180.0 / np.pi
-
-
-def _sigmas(out: np.ndarray) -> np.ndarray:
-    return np.sqrt(np.maximum(np.diagonal(out["cov"], axis1=1, axis2=2), 0.0))
 
 
 def health(out: np.ndarray, gyro_hz: float, counters: dict | None = None, link: dict | None = None) -> dict:
@@ -40,7 +36,7 @@ def health(out: np.ndarray, gyro_hz: float, counters: dict | None = None, link: 
     rate = np.linalg.norm(out["omega"], axis=1) * DEG
     res["rate_dps_max"] = float(rate.max())
     res["rate_dps_median"] = float(np.median(rate))
-    sig = _sigmas(out)
+    sig = sigma(out["cov"])
     res["bias_estimate_dps_final"] = [float(v) for v in out["bias"][-1] * DEG]
     res["bias_3sigma_dps_final"] = [float(v) for v in 3.0 * sig[-1, 3:] * DEG]
     if np.any(track & valid):
@@ -79,7 +75,7 @@ def plot_overview(folder: Path, out: np.ndarray) -> Path | None:
     from .plots import shade_modes
 
     t = out["t"] - out["t"][0]
-    sig = _sigmas(out)
+    sig = sigma(out["cov"])
     fig, ax = plt.subplots(4, 1, figsize=(10, 10), sharex=True)
     for a in ax:
         shade_modes(a, t, out["mode"])

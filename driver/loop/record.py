@@ -92,6 +92,12 @@ def empty(n: int = 0) -> np.ndarray:
     return out
 
 
+def sigma(cov: np.ndarray) -> np.ndarray:
+    """1σ per axis (square roots of the diagonal, negatives clipped to 0) of covariances
+    (…, n, n): a record's ``cov`` (rad, rad/s) or ``cov_mid`` (rad)."""
+    return np.sqrt(np.maximum(np.diagonal(cov, axis1=-2, axis2=-1), 0.0))
+
+
 def flag_names(flags: int) -> list[str]:
     return [name for bit, name in FLAG_NAMES.items() if flags & bit]
 

@@ -28,6 +28,7 @@ import numpy as np
 from spacepackets.ccsds.spacepacket import PacketType, SequenceFlags, SpacePacket, SpacePacketHeader
 
 from ..errors import ConfigError
+from ..loop.record import sigma
 
 APID_ATTITUDE = 0x0A1
 SEQ_MODULO = 1 << 14
@@ -40,12 +41,17 @@ FRAME_PAYLOAD = struct.Struct(">IBBH4d3fIH4d3f2f")
 FRAME_PACKET_LEN = 6 + CUC.size + FRAME_PAYLOAD.size
 
 
-def cuc(tai_s: float) -> bytes:
+def cuc_fields(tai_s: float) -> tuple[int, int]:
+    """CUC 4+2 of TAI seconds since 1958: (whole seconds mod 2³², 2⁻¹⁶ s)."""
     coarse = int(np.floor(tai_s))
     fine = int(round((tai_s - coarse) * 65536.0))
     if fine == 65536:
         coarse, fine = coarse + 1, 0
-    return CUC.pack(coarse & 0xFFFFFFFF, fine)
+    return coarse & 0xFFFFFFFF, fine
+
+
+def cuc(tai_s: float) -> bytes:
+    return CUC.pack(*cuc_fields(tai_s))
 
 
 def _packet(apid: int, count: int, sec: bytes, body: bytes) -> bytes:
@@ -54,14 +60,9 @@ def _packet(apid: int, count: int, sec: bytes, body: bytes) -> bytes:
     return SpacePacket(head, sec, body).pack()
 
 
-def _sigma(cov: np.ndarray) -> np.ndarray:
-    """1σ per axis of a stack of covariances (…, n, n)."""
-    return np.sqrt(np.maximum(np.diagonal(cov, axis1=-2, axis2=-1), 0.0))
-
-
 def encode(records: np.ndarray, tai_s: np.ndarray, apid: int = APID_ATTITUDE) -> list[bytes]:
     """One packed Space Packet per output record."""
-    d = _sigma(records["cov"])
+    d = sigma(records["cov"])
     out = []
     for i, r in enumerate(records):
         body = PAYLOAD.pack(int(r["seq"]), int(r["mode"]), int(r["n_stars"]), int(r["flags"]), *r["q"], *r["omega"],
@@ -83,13 +84,13 @@ def encode_frames(records: np.ndarray, tai_mid: np.ndarray, tai_mid_s: np.ndarra
     """One frame packet per record given (each the first output holding its frame's update),
     sequence counts from ``first_count``; ``tai_mid``/``tai_mid_s`` the TAI of their
     ``t_mid``/``t_mid_s`` (NaN: none)."""
-    d, ds = _sigma(records["cov_mid"]), _sigma(records["cov_mid_s"])
+    d, ds = sigma(records["cov_mid"]), sigma(records["cov_mid_s"])
     bx, by = (float(v) for v in pointing_bias_rad)
     out = []
     for i, r in enumerate(records):
-        prev = cuc(float(tai_mid_s[i])) if np.isfinite(tai_mid_s[i]) else CUC.pack(0, 0)
+        prev = cuc_fields(float(tai_mid_s[i])) if np.isfinite(tai_mid_s[i]) else (0, 0)
         body = FRAME_PAYLOAD.pack(int(r["seq"]), int(r["mode"]), int(r["n_stars"]), int(r["flags"]), *r["q_mid"],
-                                  *d[i], *CUC.unpack(prev), *r["q_mid_s"], *ds[i], bx, by)
+                                  *d[i], *prev, *r["q_mid_s"], *ds[i], bx, by)
         out.append(_packet(apid, first_count + i, cuc(float(tai_mid[i])), body))
     return out
 

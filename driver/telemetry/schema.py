@@ -12,6 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..loop.record import sigma
+
 
 @dataclass(frozen=True)
 class Column:
@@ -52,7 +54,7 @@ NAMES = tuple(c.name for c in COLUMNS)
 def table(records: np.ndarray, timemap=None) -> dict[str, np.ndarray]:
     """Column name → array for output records (``tai_s`` NaN without a time map)."""
     t = records["t"].astype(np.float64)
-    d = np.sqrt(np.maximum(np.diagonal(records["cov"], axis1=1, axis2=2), 0.0))
+    d = sigma(records["cov"])
     out = {"t_monotonic_s": t, "tai_s": timemap.tai(t) if timemap is not None else np.full(len(t), np.nan),
            "seq": records["seq"], "mode": records["mode"], "flags": records["flags"], "n_stars": records["n_stars"]}
     for i, a in enumerate("xyzw"):
@@ -68,7 +70,7 @@ def table(records: np.ndarray, timemap=None) -> dict[str, np.ndarray]:
         out["tai_mid_s"] = timemap.tai(records["t_mid"]) if timemap is not None else np.full(len(t), np.nan)
         out["t_mid_s_monotonic_s"] = records["t_mid_s"]
         for key, q, cov in (("", "q_mid", "cov_mid"), ("_s", "q_mid_s", "cov_mid_s")):
-            dm = np.sqrt(np.maximum(np.diagonal(records[cov], axis1=1, axis2=2), 0.0))
+            dm = sigma(records[cov])
             for i, a in enumerate("xyzw"):
                 out[f"q_mid{key}_{a}"] = records[q][:, i]
             for i, a in enumerate("xyz"):
