@@ -98,9 +98,11 @@ def encode_frames(records: np.ndarray, tai_mid: np.ndarray, tai_mid_s: np.ndarra
 def decode(packet: bytes) -> dict:
     """One packet → its header fields, TAI time (s since 1958) and payload fields; ``kind``
     "attitude" (400 Hz output) or "frame" (mid-exposure product), told apart by length."""
+    if len(packet) < 6 + CUC.size:
+        raise ConfigError(f"space packet of {len(packet)} bytes, shorter than its headers")
     head = SpacePacketHeader.unpack(packet)
     if head.packet_type != PacketType.TM or not head.sec_header_flag:
-        raise ConfigError("not a gyrostar attitude telemetry packet")
+        raise ConfigError("not a gyrostar telemetry packet")
     if len(packet) != 6 + head.data_len + 1 or len(packet) not in (PACKET_LEN, FRAME_PACKET_LEN):
         raise ConfigError(f"space packet of {len(packet)} bytes, expected {PACKET_LEN} or {FRAME_PACKET_LEN}")
     coarse, fine = CUC.unpack_from(packet, 6)

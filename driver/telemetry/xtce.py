@@ -1,4 +1,4 @@
-"""XTCE 1.2 definition of the attitude telemetry packets, generated with yamcs-pymdb.
+"""XTCE 1.2 definition of the telemetry packets (attitude and frame), generated with yamcs-pymdb.
 
 The layout is the one :mod:`gyrostar.telemetry.packets` packs (one definition: the payload
 struct there and the parameter list here are checked against each other by the tests).

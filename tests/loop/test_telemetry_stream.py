@@ -9,6 +9,7 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
+from gyrostar.errors import ConfigError
 from gyrostar.hil import config as hc
 from gyrostar.hil.replay import load_log
 from gyrostar.hil.runner import run_flatsat
@@ -85,6 +86,9 @@ def test_frame_packet_round_trip_by_hand():
     assert np.allclose(d["sigma_theta_mid"], [2e-5, 3e-5, 1e-4], rtol=1e-6)
     assert np.isnan(d["tai_mid_s"]) and np.all(np.isnan(d["q_mid_s"]))
     assert np.allclose(d["pointing_bias"], [5e-6, -1e-6], rtol=1e-6)
+    for bad in (pkt[:3], pkt[:-1], b"\x18" + pkt[1:]):      # cut in its header, cut short, a TC
+        with pytest.raises(ConfigError):
+            packets.decode(bad)
     # the rows that open a frame: a finite t_mid unlike the one before (the previous batch's last too)
     t = empty(5)
     t["t_mid"] = [np.nan, 1.0, 1.0, 1.01, 1.01]
