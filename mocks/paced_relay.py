@@ -9,9 +9,12 @@ fill: the head's back-pressure is real) and handed to the receiver when their wi
 and the transfer latency have passed. Bytes move in slices of ``SLICE_S`` of wire time; a
 slice is handed over when its last byte has arrived (so the last byte of a message arrives
 exactly on time, earlier ones up to a slice late: never earlier than on the wire). When the
-relay wakes late while the sender's queue was not empty at its previous read (that read got a
-whole slice), the wire is taken to have kept sending: it reads the bytes of the missed time
-too, so the relay's own scheduling delays (a loaded host) do not lower the line rate.
+relay wakes late while bytes were still waiting in the sender's queue after its previous read
+(measured with ``FIONREAD``, not guessed from a full read), the wire is taken to have kept
+sending those bytes from when it fell free: the relay reads the ones the line would have sent
+in the missed time, so its own scheduling delays (a loaded host) do not lower the line rate.
+Only bytes seen waiting are sent early so; a message written after the last read starts on
+the wire when the relay reads it, never at a time before it was written.
 
 :func:`start_relay` runs it in a forked child process, away from the loop's interpreter
 lock; ``set_faults`` corrupts the head → client bytes (:class:`~gyrostar.mocks.faults.ByteFaults`).
@@ -19,9 +22,12 @@ lock; ``set_faults`` corrupts the head → client bytes (:class:`~gyrostar.mocks
 
 from __future__ import annotations
 
+import fcntl
 import multiprocessing as mp
 import os
 import select
+import struct
+import termios
 import time
 import tty
 from collections import deque
@@ -33,14 +39,44 @@ from gyrostar.transport.linkrate import LinkPreset, Wire, preset
 SLICE_S = 1e-3       # wire time per read from a sender (UART 921k: 92 B; usb-fs: 900 B, one USB frame)
 
 
-class _Direction:
-    def __init__(self, src: int, dst: int, link: LinkPreset):
-        self.src, self.dst = src, dst
+class LinkDirection:
+    """One direction of the relay: reads the sender ``src`` a slice at a time onto a
+    :class:`Wire` and holds each slice (``pending``) until its delivery time."""
+
+    def __init__(self, src: int, dst: int, link: LinkPreset, clock=time.monotonic):
+        self.src, self.dst, self.clock = src, dst, clock
         self.wire = Wire(link)
         self.chunk = max(1, int(link.bytes_per_s * SLICE_S))
         self.pending: deque = deque()       # (delivery time, bytes)
         self.mangle = None
-        self.full = False                    # the last read got all it asked: the sender had more
+        self.backlog = 0                     # bytes left in the sender's queue at the last read
+        self.backlog_t = float("-inf")       # when they were counted (s, monotonic)
+
+    def waiting(self) -> int:
+        """Bytes the sender has written that the relay has not yet read (``FIONREAD``)."""
+        try:
+            return struct.unpack("i", fcntl.ioctl(self.src, termios.FIONREAD, b"\0\0\0\0"))[0]
+        except OSError:
+            return 0
+
+    def take(self, now: float) -> bool:
+        """Read the sender's next slice at ``now`` (s, ``clock``'s timeline) and queue it for
+        delivery at its wire time; ``False`` when the sender has closed."""
+        t, n = now, self.chunk
+        if self.backlog > 0:      # bytes seen waiting at the last read: the line kept sending them
+            start = max(self.wire.busy_until, self.backlog_t)
+            missed = int(max(0.0, now - start) * self.wire.link.bytes_per_s)
+            n = min(self.backlog, self.chunk + min(missed, 1 << 16))
+            t = start
+        try:
+            data = os.read(self.src, n)
+        except OSError:
+            return False
+        if not data:
+            return False
+        self.backlog, self.backlog_t = self.waiting(), self.clock()
+        self.pending.append((self.wire.transmit(len(data), t), data))
+        return True
 
 
 class PacedRelay:
@@ -53,8 +89,8 @@ class PacedRelay:
         self.path = os.ttyname(self.slave)
         self.head = os.open(target, os.O_RDWR | os.O_NOCTTY)
         tty.setraw(self.head)
-        self.up = _Direction(self.master, self.head, self.link)     # client → head
-        self.down = _Direction(self.head, self.master, self.link)   # head → client
+        self.up = LinkDirection(self.master, self.head, self.link)     # client → head
+        self.down = LinkDirection(self.head, self.master, self.link)   # head → client
 
     def run(self, control=None, stop_when=None) -> None:
         """Serve until a side closes, ``control`` (a Connection) says stop, or ``stop_when()``."""
@@ -82,21 +118,8 @@ class PacedRelay:
             if stop_when is not None and stop_when():
                 return
             for d in dirs:
-                if d.src in r:
-                    t = time.monotonic()
-                    late = t - d.wire.busy_until
-                    n = d.chunk
-                    if d.full and late >= 0.0:     # the line kept sending while we slept
-                        n += min(int(late * d.wire.link.bytes_per_s), 1 << 16)
-                        t = d.wire.busy_until
-                    try:
-                        data = os.read(d.src, n)
-                    except OSError:
-                        return
-                    if not data:
-                        return
-                    d.full = len(data) == n
-                    d.pending.append((d.wire.transmit(len(data), t), data))
+                if d.src in r and not d.take(time.monotonic()):
+                    return
             if ctl and control in r:
                 try:
                     cmd, arg = control.recv()

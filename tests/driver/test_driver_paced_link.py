@@ -113,3 +113,73 @@ def test_stream_over_usb_fs_keeps_every_frame(fw):
     assert len(frames) >= 2.0 * 100 - stop["dropped"] - 10
     lag = np.array([f.t_rx - f.t_mid_host for f in frames])
     assert np.median(lag) < 0.005 + preset("usb-fs").wire_time(2100) + 0.002
+
+
+def _pty_pair():
+    import os
+    import tty
+
+    a, b = os.openpty()
+    tty.setraw(a)
+    tty.setraw(b)
+    return a, b
+
+
+def _settle(d, n, timeout=1.0):
+    """Wait until the pty has handed ``n`` written bytes to the reader side."""
+    t_end = time.monotonic() + timeout
+    while d.waiting() < n and time.monotonic() < t_end:
+        time.sleep(0.001)
+
+
+def test_relay_never_sends_a_message_before_it_was_written():
+    """A read that happens to take a whole slice and empty the queue must not make the next
+    message look as if the line had been sending it since (the relay waking late)."""
+    import os
+
+    from gyrostar.mocks.paced_relay import LinkDirection
+
+    link = preset("uart-921k")
+    w, r = _pty_pair()
+    now = [0.0]
+    d = LinkDirection(r, -1, link, clock=lambda: now[0])
+    try:
+        os.write(w, bytes(d.chunk))                 # exactly one slice: the read takes it all
+        _settle(d, d.chunk)
+        assert d.take(0.0) and d.backlog == 0
+        os.write(w, bytes(212))                     # the next message, read 1 s later
+        _settle(d, 212)
+        now[0] = 1.0
+        while d.waiting():
+            assert d.take(now[0])
+            now[0] = max(now[0], d.wire.busy_until)
+        assert d.pending[-1][0] >= 1.0 + link.wire_time(212) - 1e-12
+    finally:
+        os.close(w)
+        os.close(r)
+
+
+def test_relay_keeps_the_line_rate_when_it_wakes_late():
+    """Bytes seen waiting after a read went on the wire when it fell free: a relay that
+    wakes 5 ms late reads them as sent then, so the delivery is the line's, not later."""
+    import os
+
+    from gyrostar.mocks.paced_relay import LinkDirection
+
+    link = preset("uart-921k")
+    w, r = _pty_pair()
+    now = [0.0]
+    d = LinkDirection(r, -1, link, clock=lambda: now[0])
+    try:
+        os.write(w, bytes(1000))
+        _settle(d, 1000)
+        assert d.take(0.0) and d.backlog == 1000 - d.chunk
+        now[0] = d.wire.busy_until + 0.005            # the relay sleeps through five slices
+        while d.waiting():
+            assert d.take(now[0])
+            now[0] = max(now[0], d.wire.busy_until)
+        assert sum(len(p[1]) for p in d.pending) == 1000
+        assert d.pending[-1][0] == pytest.approx(link.wire_time(1000), abs=1e-9)
+    finally:
+        os.close(w)
+        os.close(r)
