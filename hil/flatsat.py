@@ -284,7 +284,7 @@ def gyro_scale_calibrated(calib) -> bool:
 
 
 def make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock=None, e_per_dn=None, irq=None, scen=None,
-              camera_sigma_px=None, scale_calibrated=False, camera_bias_px=(0.0, 0.0)):
+              camera_sigma_px=None, scale_calibrated=False, camera_bias_px=(0.0, 0.0), cpu_clock=time.thread_time):
     from ..catalog import deepest_limit, load_catalog
     from ..loop.coupled import CoupledLoop
     from ..starid.blends import BLEND_DMAG, BLEND_PX, blended
@@ -305,7 +305,7 @@ def make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock=None, e_per_dn=No
         budget = LinkBudget(preset(cfg.head.link), cfg.loop.frame_hz)
     params = loop_params(cfg, e_per_dn, scen, camera_sigma_px, scale_calibrated, camera_bias_px)
     return CoupledLoop(params, clock, gyro, head, camera, idx, ident, sinks,
-                       lat_clock=lat_clock, irq=irq, link_budget=budget, blended=blends)
+                       lat_clock=lat_clock, irq=irq, link_budget=budget, blended=blends, cpu_clock=cpu_clock)
 
 
 # ---------------------------------------------------------------------------- flatsat
@@ -340,7 +340,8 @@ class Flatsat:
     def make_loop(self, sinks):
         return make_loop(self.cfg, self.clock, self.gyro, self.head, self.camera, sinks, self.lat_clock,
                          self.e_per_dn, self.irq, self.scen, camera_sigma(self.cfg, self.scen, self.calibration),
-                         gyro_scale_calibrated(self.calibration), camera_bias(self.calibration))
+                         gyro_scale_calibrated(self.calibration), camera_bias(self.calibration),
+                         cpu_meter_clock(self.simulated_clock))
 
     def clock_now(self) -> float:
         return self.base_clock.now()
@@ -596,7 +597,7 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
         offset = scen.truth.gyro_time_offset_ms * 1e-3   # a sample stamped t measured scenario time t + offset
         model = Bmi088GyroModel(base, StreamRates(gsamp, lambda: truth.t_origin - offset))
         model.truth_log = False    # the run's truth is the simulator's; the model's test log grows ~90 kB/s
-        device_cpu = DeviceCpu()
+        device_cpu = DeviceCpu(cpu_meter_clock(fast))
         if cfg.gyro.emulator_bus == "spi":
             from ..gyro import bmi088
 
@@ -684,14 +685,24 @@ FAST_T0 = 1000.0    # s: start of the simulated clock in fast mode
 GYRO_I2C_HZ = 400e3  # the emulated gyro's I2C clock: the BMI088's fast mode, its highest
 
 
+def cpu_meter_clock(fast: bool):
+    """The clock the loop's CPU meters read (s). Real time: the thread's CPU time, other
+    threads' turns left out. Fast mode: the wall clock — the loop, its emulated devices and
+    the head's inline jobs share the lock-step thread and nothing else of the run is busy
+    (process CPU ≈ 100 % of one core), so it reads the same time without the system call a
+    CPU-time reading costs (µs each on a VM, ~25 per step)."""
+    return time.perf_counter if fast else time.thread_time
+
+
 class DeviceCpu:
     """CPU seconds (thread time) spent inside the in-process emulated gyro — its fake bus,
     register model and truth — by whichever thread called it (the loop's, in a run). A real
     flatsat spends that time in the kernel's I2C/SPI driver and its GPIO edge read instead;
     the run reports it beside the loop's CPU so the flight code's own share is visible."""
 
-    def __init__(self):
+    def __init__(self, cpu_clock=time.thread_time):
         self.cpu_s = 0.0
+        self.cpu_clock = cpu_clock     # fast mode: the lock-step thread's wall clock (see CoupledLoop)
 
     def wrap(self, obj):
         """``obj`` with every public method timed into :attr:`cpu_s`."""
@@ -708,7 +719,7 @@ class _Metered:
         if name.startswith("_") or not callable(attr):
             return attr
         meter = self._meter
-        tt = time.thread_time
+        tt = meter.cpu_clock
 
         def timed(*args, **kwargs):
             c0 = tt()

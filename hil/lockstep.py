@@ -45,8 +45,11 @@ class Lockstep:
     themselves; another thread's waits last until the runner moves the clock past them.
     """
 
-    def __init__(self, clock):
+    def __init__(self, clock, cpu_clock=time.perf_counter):
         self.clock = clock
+        # times the inline jobs (job_cpu_s): they run on the runner's thread with no other
+        # thread of the run busy, so its wall clock reads their CPU without a system call
+        self.cpu_clock = cpu_clock
         self.runner = threading.current_thread()
         self._cv = threading.Condition(threading.Lock())
         self._state = IDLE
@@ -108,12 +111,12 @@ class Lockstep:
         its first step from then on, as it would from a worker woken at the same times —
         without two thread hand-overs per reply."""
         self._job_t = self.clock.now()
-        c0 = time.thread_time()
+        c0 = self.cpu_clock()
         try:
             fn()
         finally:
             t, self._job_t = self._job_t, None
-            self.job_cpu_s += time.thread_time() - c0
+            self.job_cpu_s += self.cpu_clock() - c0
         return t
 
     # -- the runner's side ---------------------------------------------------------------

@@ -509,7 +509,9 @@ def _run_lockstep(fs, loop, duration: float, period: float, step_wall: list, lin
     a streaming port's turns) run at once on their own time line (:meth:`Lockstep.run_job`); a worker
     thread (other head ports) runs between steps at the simulated times its replies (or
     timeouts) are due. The loop's CPU seconds on this thread (its steps and the
-    few µs of scheduling per step, not the head jobs') go to ``cpu_box[0]`` when it ends."""
+    few µs of scheduling per step, not the head jobs') go to ``cpu_box[0]`` when it ends: the
+    thread's CPU time less the inline jobs' time (:attr:`Lockstep.job_cpu_s`, read on the wall
+    clock: nothing else of the run is busy while they run)."""
     lk = fs.lockstep
     clock = fs.base_clock
     head = loop.head

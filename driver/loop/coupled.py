@@ -139,8 +139,13 @@ class CoupledLoop:
     """The loop. ``sinks`` get each step's output records (``put(records, t_ns)``)."""
 
     def __init__(self, params: LoopParams, clock, gyro, head, camera, star_index, identifier, sinks=(),
-                 lat_clock=None, irq=None, link_budget=None, blended=None):
+                 lat_clock=None, irq=None, link_budget=None, blended=None, cpu_clock=time.thread_time):
         from ..gyro import GyroSamples
+
+        # the gyro path's CPU meter (s): the loop thread's CPU time; a run whose loop and devices
+        # share one thread with nothing else running (lock-step) may pass its wall clock, the
+        # same reading there without a system call each time
+        self.cpu_clock = cpu_clock
 
         self.irq = irq           # FIFO-watermark interrupt line: irq.now() = host time of the last edge
         self.p = params
@@ -382,7 +387,7 @@ class CoupledLoop:
         if hi <= lo:
             return
         w0 = time.perf_counter()
-        c0 = time.thread_time()
+        c0 = self.cpu_clock()
         smp = self.samples
         f = self.filter
         base = self.last_image_flags
@@ -400,7 +405,7 @@ class CoupledLoop:
                                        self._out[lo:hi], lo, hi)
         self.flags_pending = 0
         self._uv_dirty = len(uv) > 0     # copied to the tracks when an image stage next looks at them
-        self.gyro_path_cpu_s += time.thread_time() - c0
+        self.gyro_path_cpu_s += self.cpu_clock() - c0
         self.gyro_path_s += time.perf_counter() - w0
 
     def _emit(self, lo: int, hi: int) -> int:
@@ -409,7 +414,7 @@ class CoupledLoop:
         if n <= 0:
             return 0
         w0 = time.perf_counter()
-        c0 = time.thread_time()
+        c0 = self.cpu_clock()
         smp = self.samples
         self.c.gyro_samples += n
         if lo == 0:
@@ -422,7 +427,7 @@ class CoupledLoop:
             # in real time; on a simulated clock it measures host compute, which takes no time there)
             self.n_e2o = _ring_put(self.e2o, self.n_e2o, self.clock.now() - np.asarray(self._mids))
             self._mids.clear()
-        self.gyro_path_cpu_s += time.thread_time() - c0
+        self.gyro_path_cpu_s += self.cpu_clock() - c0
         self.gyro_path_s += time.perf_counter() - w0
         return n
 
