@@ -695,8 +695,9 @@ def cpu_meter_clock(fast: bool):
 
 
 class DeviceCpu:
-    """CPU seconds (thread time) spent inside the in-process emulated gyro — its fake bus,
-    register model and truth — by whichever thread called it (the loop's, in a run). A real
+    """CPU seconds (``cpu_clock``: thread time; fast mode's wall clock, :func:`cpu_meter_clock`)
+    spent inside the in-process emulated gyro — its fake bus, register model and truth — by
+    whichever thread called it (the loop's, in a run). A real
     flatsat spends that time in the kernel's I2C/SPI driver and its GPIO edge read instead;
     the run reports it beside the loop's CPU so the flight code's own share is visible."""
 
