@@ -301,8 +301,7 @@ class CoupledLoop:
             n = self._read_gyro()
             self._split = 0
             self._guarded(self._stream_take, t_step)
-            self._predict(self._split, n)
-            self._emit(self._split, n)
+            self._outputs(self._split, n)
             self._guarded(self._stream_command, t_step)
             return n
         done = self.image.result()       # the readout handed over last step: apply it before this
@@ -343,8 +342,7 @@ class CoupledLoop:
 
     def _gyro_phase(self) -> int:
         n = self._read_gyro()
-        self._predict(0, n)
-        return self._emit(0, n)
+        return self._outputs(0, n)
 
     def _read_gyro(self) -> int:
         """Read the gyro's FIFO into :attr:`samples`; returns the sample count."""
@@ -372,8 +370,7 @@ class CoupledLoop:
         smp = self.samples
         k = int(np.searchsorted(smp.t[:smp.n], t_arrival, side="right"))
         if k > self._split:
-            self._predict(self._split, k)
-            self._emit(self._split, k)          # out before the update: they need nothing from it
+            self._outputs(self._split, k)       # out before the update: they need nothing from it
             self._split = k
 
     def _note_ages(self, lo: int, hi: int) -> None:
@@ -381,13 +378,23 @@ class CoupledLoop:
         wait in the FIFO that a watermark above 1 adds to every output but the newest."""
         self.n_age = _ring_put(self.age, self.n_age, self.t_step_prev - self.samples.t[lo:hi])
 
+    def _outputs(self, lo: int, hi: int) -> int:
+        """Predict samples ``lo:hi`` of this step and emit their outputs; the 400 Hz path's
+        host time (:attr:`gyro_path_s`, :attr:`gyro_path_cpu_s`) is metered here, once per
+        call. Returns the outputs emitted."""
+        if hi <= lo:
+            return 0
+        w0 = time.perf_counter()
+        c0 = self.cpu_clock()
+        self._predict(lo, hi)
+        n = self._emit(lo, hi)
+        self.gyro_path_cpu_s += self.cpu_clock() - c0
+        self.gyro_path_s += time.perf_counter() - w0
+        return n
+
     def _predict(self, lo: int, hi: int) -> None:
         """Predict samples ``lo:hi`` of :attr:`samples` into rows ``lo:hi`` of this step's
         output batch (one compiled call)."""
-        if hi <= lo:
-            return
-        w0 = time.perf_counter()
-        c0 = self.cpu_clock()
         smp = self.samples
         f = self.filter
         base = self.last_image_flags
@@ -405,16 +412,10 @@ class CoupledLoop:
                                        self._out[lo:hi], lo, hi)
         self.flags_pending = 0
         self._uv_dirty = len(uv) > 0     # copied to the tracks when an image stage next looks at them
-        self.gyro_path_cpu_s += self.cpu_clock() - c0
-        self.gyro_path_s += time.perf_counter() - w0
 
     def _emit(self, lo: int, hi: int) -> int:
         """Emit outputs ``lo:hi`` of this step (predicted by :meth:`_predict`; parts in order)."""
         n = hi - lo
-        if n <= 0:
-            return 0
-        w0 = time.perf_counter()
-        c0 = self.cpu_clock()
         smp = self.samples
         self.c.gyro_samples += n
         if lo == 0:
@@ -427,8 +428,6 @@ class CoupledLoop:
             # in real time; on a simulated clock it measures host compute, which takes no time there)
             self.n_e2o = _ring_put(self.e2o, self.n_e2o, self.clock.now() - np.asarray(self._mids))
             self._mids.clear()
-        self.gyro_path_cpu_s += self.cpu_clock() - c0
-        self.gyro_path_s += time.perf_counter() - w0
         return n
 
     # ------------------------------------------------------------------ images
