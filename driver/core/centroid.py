@@ -479,11 +479,20 @@ def smear_fit(spans, values, bg, u0, v0, offsets, sigma_psf, noise_var, e_per_dn
         c1 = max(c1, spans[i, 3])
     nr = r1 - r0 + 1
     nc = c1 - c0
-    # the PSF is separable: per offset, pixel integrals along columns and rows
-    ex = np.empty((m, nc))
-    dx = np.empty((m, nc))
-    ey = np.empty((m, nr))
-    dy = np.empty((m, nr))
+    # the PSF is separable: per offset, pixel integrals along columns and rows (stored pixel
+    # by pixel, the offsets contiguous: the pixel loop reads them in order)
+    ex = np.empty((nc, m))
+    dx = np.empty((nc, m))
+    ey = np.empty((nr, m))
+    dy = np.empty((nr, m))
+    # per pixel, fixed over the iterations: background-subtracted value and its weight
+    npx = values.shape[0]
+    dpx = np.empty(npx)
+    wpx = np.empty(npx)
+    for k in range(npx):
+        d = values[k] - bg
+        dpx[k] = d
+        wpx[k] = 1.0 / (noise_var + max(d, 0.0) / e_per_dn)
     # pixel integral of a Gaussian over [e, e+1): ½[erf((e+1−c)/√2σ) − erf((e−c)/√2σ)], and its
     # derivative in c: pdf(e − c) − pdf(e + 1 − c); erf and pdf are taken once per pixel edge
     e_col = np.empty(nc + 1)
@@ -500,13 +509,13 @@ def smear_fit(spans, values, bg, u0, v0, offsets, sigma_psf, noise_var, e_per_dn
             for c in range(nc + 1):
                 e_col[c], p_col[c] = erf_pdf(c0 + c - 0.5 - cu, inv_s, k_pdf)
             for c in range(nc):
-                ex[j, c] = 0.5 * (e_col[c + 1] - e_col[c])
-                dx[j, c] = p_col[c] - p_col[c + 1]
+                ex[c, j] = 0.5 * (e_col[c + 1] - e_col[c])
+                dx[c, j] = p_col[c] - p_col[c + 1]
             for r in range(nr + 1):
                 e_row[r], p_row[r] = erf_pdf(r0 + r - 0.5 - cv, inv_s, k_pdf)
             for r in range(nr):
-                ey[j, r] = 0.5 * (e_row[r + 1] - e_row[r])
-                dy[j, r] = p_row[r] - p_row[r + 1]
+                ey[r, j] = 0.5 * (e_row[r + 1] - e_row[r])
+                dy[r, j] = p_row[r] - p_row[r + 1]
         a[:, :] = 0.0
         g[:] = 0.0
         k = 0
@@ -519,13 +528,12 @@ def smear_fit(spans, values, bg, u0, v0, offsets, sigma_psf, noise_var, e_per_dn
                 dv = 0.0
                 for j in range(m):
                     wj = wgt[j]
-                    t += wj * ex[j, cc] * ey[j, rr]
-                    du += wj * dx[j, cc] * ey[j, rr]
-                    dv += wj * ex[j, cc] * dy[j, rr]
-                d = values[k] - bg
+                    t += wj * ex[cc, j] * ey[rr, j]
+                    du += wj * dx[cc, j] * ey[rr, j]
+                    dv += wj * ex[cc, j] * dy[rr, j]
+                w = wpx[k]
+                r = dpx[k] - flux * t
                 k += 1
-                w = 1.0 / (noise_var + max(d, 0.0) / e_per_dn)
-                r = d - flux * t
                 j0 = flux * du
                 j1 = flux * dv
                 j2 = t
