@@ -91,6 +91,15 @@ def _unpack_result(payload: bytes) -> ImageResult:
     return res
 
 
+# the frame a window set is commanded for: two after the newest received, or later while the
+# set's wire time (the last set's bytes on the port's link) plus this margin (s: the plan and
+# hand-over on the host) does not fit before its exposure starts; at most MAX_FRAMES_AHEAD
+# after the newest received (the head holds sets for its next two frames, and on a slow link
+# the frame after the newest received is already integrating)
+SET_LEAD_MARGIN_S = 1e-3
+MAX_FRAMES_AHEAD = 3
+
+
 class StreamPort(HeadPort):
     streaming = True
 
@@ -122,6 +131,7 @@ class StreamPort(HeadPort):
         self.stream_starts = 0
         self.wire_bytes = 0                        # FRAME bytes received (head → host)
         self.sent_bytes = 0                        # SET_WINDOWS bytes sent while streaming (host → head)
+        self.last_set_bytes = 0                        # the last set's bytes on the wire (its successor's estimate)
         # first and last frame's mid-exposure (host s, from the head's clock: host scheduling
         # cannot bunch it) and the first frame's bytes (they arrived before the span began)
         self._t_mid = [float("nan"), float("nan")]
@@ -170,6 +180,14 @@ class StreamPort(HeadPort):
             else:
                 k = self.last_frame + 2
                 t = self.t_first_host + (k - self.first_frame) * self.period_s
+                if self.link_preset is not None:
+                    # the set must reach the head before frame k's exposure starts: on a slow
+                    # link (a UART) a set's bytes take longer than two frames ahead leave, and
+                    # a late set is read with the frame before's windows (stale when moving)
+                    need = self.link_preset.wire_time(self.last_set_bytes) + SET_LEAD_MARGIN_S
+                    while t - now < need and k < self.last_frame + MAX_FRAMES_AHEAD:
+                        k += 1
+                        t += self.period_s
         self._log(CH_STREAM_TARGET, _TARGET.pack(k, t))
         return k, t
 
@@ -191,7 +209,8 @@ class StreamPort(HeadPort):
                 raise ReplayDivergence(f"replay: the loop commanded other windows for frame {frame} than logged")
             return frame
         self._log(CH_STREAM_SETS, digest)
-        self.sent_bytes += windows_bytes(len(spans))
+        self.last_set_bytes = windows_bytes(len(spans))
+        self.sent_bytes += self.last_set_bytes
         self._sends.put((spans, frame))
         if self.inline is not None:
             self._inline_turn()

@@ -1,7 +1,7 @@
 """The streaming head port against the head emulator on a paced pty: frames come measured
 by the callback given with their window set, the next frame to command is two ahead of the
-newest one, a set named for a frame is used for exactly that frame, and the port's log
-replays to the same answers without a link."""
+newest one (more only when the set's wire time needs the lead), a set named for a frame is
+used for exactly that frame, and the port's log replays to the same answers without a link."""
 
 import time
 
@@ -61,7 +61,7 @@ def _poll_until(port, pred, seconds=2.0):
 
 
 def test_frames_measured_targets_two_ahead_and_replay(head):
-    from gyrostar.hil.streamport import StreamPort, StreamReplay
+    from gyrostar.hil.streamport import MAX_FRAMES_AHEAD, SET_LEAD_MARGIN_S, StreamPort, StreamReplay
     from gyrostar.transport.linkrate import preset
 
     relay, image = head
@@ -78,8 +78,13 @@ def test_frames_measured_targets_two_ahead_and_replay(head):
         assert first.error is None and first.set_frame == 0
         want_a = np.concatenate([image[r, c0:c1] for _, r, c0, c1 in a])
         assert np.array_equal(first.values, want_a) and first.measured == int(want_a.sum())
-        k, t_exp = port.next_target(time.monotonic())
-        assert k == port.last_frame + 2 >= first.frame + 2
+        last, now = port.last_frame, time.monotonic()
+        k, t_exp = port.next_target(now)
+        # two after the newest frame received, later only when the last set's wire time (plus
+        # the margin) would not fit before the exposure starts, at most MAX_FRAMES_AHEAD after
+        need = preset("usb-fs").wire_time(port.last_set_bytes) + SET_LEAD_MARGIN_S
+        assert k >= first.frame + 2 and last + 2 <= k <= port.last_frame + MAX_FRAMES_AHEAD
+        assert t_exp - now >= need or k >= last + MAX_FRAMES_AHEAD
         assert t_exp == pytest.approx(port.t_first_host + (k - port.first_frame) * 0.010)
         port.submit_windows(b, k, sums)
         got = _poll_until(port, lambda r: r.set_frame == k and r.frame >= k + 2)
@@ -128,3 +133,32 @@ def test_frames_measured_targets_two_ahead_and_replay(head):
         pass
     assert answers[0] == (first.frame, 0, first.measured)
     assert any(sf == k and m == int(want_b.sum()) for _, sf, m in answers)
+
+
+def test_target_frame_leaves_the_window_set_its_wire_time():
+    """A set must reach the head before its frame's exposure starts: two frames after the
+    newest received while the last set's bytes fit the lead on the port's link, one more on
+    a link too slow for that (921.6 kBd UART), never more than three."""
+    from gyrostar.hil.streamport import MAX_FRAMES_AHEAD, SET_LEAD_MARGIN_S, StreamPort
+    from gyrostar.loop.linkbudget import windows_bytes
+    from gyrostar.transport.linkrate import preset
+
+    class _NoLink:
+        def close(self):
+            pass
+
+    def port(link_name, set_spans):
+        p = StreamPort(_NoLink(), MONOTONIC, link_preset=preset(link_name))
+        p.on, p.first_frame, p.t_first_host, p.last_frame = True, 1, 100.0, 10
+        p.last_set_bytes = windows_bytes(set_spans)
+        return p
+
+    now = 100.0 + 9 * 0.010 + 0.018          # frame 10 (exposed from 100.09 s) arrived 18 ms after its start
+    fast = port("usb-hs", 60)
+    assert preset("usb-hs").wire_time(windows_bytes(60)) + SET_LEAD_MARGIN_S < 0.002
+    assert fast.next_target(now) == (12, pytest.approx(100.11))
+    slow = port("uart-921k", 60)             # 60 spans: ~5.3 ms on the UART, more than the 2 ms lead
+    assert preset("uart-921k").wire_time(windows_bytes(60)) > 0.002
+    assert slow.next_target(now) == (13, pytest.approx(100.12))
+    huge = port("uart-921k", 3000)           # no lead is enough: at most MAX_FRAMES_AHEAD after the newest
+    assert huge.next_target(now)[0] == 10 + MAX_FRAMES_AHEAD
