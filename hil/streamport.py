@@ -131,7 +131,7 @@ class StreamPort(HeadPort):
         self.stream_starts = 0
         self.wire_bytes = 0                        # FRAME bytes received (head → host)
         self.sent_bytes = 0                        # SET_WINDOWS bytes sent while streaming (host → head)
-        self.last_set_bytes = 0                        # the last set's bytes on the wire (its successor's estimate)
+        self.last_set_bytes = 0                    # the last set's bytes on the wire (its successor's estimate)
         # first and last frame's mid-exposure (host s, from the head's clock: host scheduling
         # cannot bunch it) and the first frame's bytes (they arrived before the span began)
         self._t_mid = [float("nan"), float("nan")]

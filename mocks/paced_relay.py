@@ -50,7 +50,7 @@ class LinkDirection:
         self.pending: deque = deque()       # (delivery time, bytes)
         self.mangle = None
         self.backlog = 0                     # bytes left in the sender's queue at the last read
-        self.backlog_t = float("-inf")       # when they were counted (s, monotonic)
+        self.backlog_t = float("-inf")       # when they were counted (s, on ``clock``)
 
     def waiting(self) -> int:
         """Bytes the sender has written that the relay has not yet read (``FIONREAD``)."""
