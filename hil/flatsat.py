@@ -230,13 +230,13 @@ def make_head(cfg: hc.FlatsatConfig, link, clock, reconnect=None, head_clock=Non
     a streaming port (:mod:`gyrostar.hil.streamport`) with ``head.mode = "stream"``.
     ``lockstep``: fast mode's schedule, which runs the port's jobs (and stream turns) at once
     on their own simulated time (no worker thread)."""
+    from ..transport.linkrate import PRESETS
     from .headport import HeadPort
 
     if lockstep is not None:
         lockstep.inline_jobs = True
     if cfg.head.mode == "stream":
         from ..protocol.defs import PixelFormat
-        from ..transport.linkrate import PRESETS
         from .streamport import StreamPort, StreamReplay
 
         replay = StreamReplay(replay_records) if replay_records is not None else None
@@ -250,7 +250,8 @@ def make_head(cfg: hc.FlatsatConfig, link, clock, reconnect=None, head_clock=Non
     return HeadPort(link, clock, timeout_s=cfg.head.timeout_s, retries=cfg.head.retries,
                     exposure_s=cfg.head.exposure_ms * 1e-3, gain=cfg.head.gain, reconnect=reconnect,
                     head_clock=head_clock, poll_log=poll_log, replay_polls=replay_polls,
-                    replay_reconnects=replay_reconnects, inline=lockstep, acquire=cfg.head.acquire)
+                    replay_reconnects=replay_reconnects, inline=lockstep, acquire=cfg.head.acquire,
+                    link_preset=PRESETS.get(cfg.head.link))
 
 
 def star_index(cfg: hc.FlatsatConfig, camera):

@@ -84,8 +84,9 @@ class HeadPort:
 
     def __init__(self, link, clock, timeout_s=0.05, retries=2, exposure_s=0.010, gain=1, reconnect=None,
                  head_clock=None, poll_log=None, replay_polls=None, replay_reconnects=None, inline=None,
-                 acquire: str = "spots"):
+                 acquire: str = "spots", link_preset=None):
         self.link = link
+        self.link_preset = link_preset         # gyrostar.transport.linkrate.LinkPreset, or None
         self.clock = clock
         self.head_clock = head_clock if head_clock is not None else clock
         self.timeout_s = timeout_s
@@ -124,7 +125,7 @@ class HeadPort:
         # still differs from the last one, and a replay sends the same bytes
         first = (int(self.head_clock.now() * 1e6) & 0xFFFF) or 1
         self.client = HeadClient(link, timeout=1.0, retries=self.retries, clock=self.head_clock,   # set-up: patient
-                                 first_seq=first)
+                                 first_seq=first, link_preset=self.link_preset)
         self.info = self.client.get_info()
         if getattr(self, "streaming", False):
             self.client.stop_stream()     # a head that kept streaming for an earlier client stops

@@ -42,6 +42,7 @@ import zlib
 import numpy as np
 
 from ..errors import DeviceError
+from ..loop.linkbudget import time_sync_bytes
 from .headport import POLL, HeadPort, ImageResult
 
 CH_STREAM_POLL = 7      # log channels of a streaming port (kind POLL)
@@ -98,6 +99,12 @@ def _unpack_result(payload: bytes) -> ImageResult:
 # the frame after the newest received is already integrating)
 SET_LEAD_MARGIN_S = 1e-3
 MAX_FRAMES_AHEAD = 3
+# A TIME_SYNC exchange while streaming goes right after a frame has arrived, when the head's
+# downlink is idle until the next readout: a reply queued behind frame bytes would make the
+# exchange one-sided (its delay all on the way down), and on a busy UART nearly every
+# exchange was. It waits for such a gap while this much overdue (s), then goes anyway.
+SYNC_OVERDUE_S = 2.0
+SYNC_GAP_MARGIN_S = 1e-3   # the gap must hold both wire times plus this (host and head turnaround)
 
 
 class StreamPort(HeadPort):
@@ -105,12 +112,11 @@ class StreamPort(HeadPort):
 
     def __init__(self, link, clock, pixel_format: int = 1, frame_hz: float = 100.0, link_preset=None,
                  replay: StreamReplay | None = None, stream_clock=None, **kw):
-        super().__init__(link, clock, **kw)
+        super().__init__(link, clock, link_preset=link_preset, **kw)
         self.replay = replay
         # the stream's timing clock, kept off the recorded head clock: host monotonic, or in
         # fast mode the lock-step schedule's simulated time
         self.stream_clock = stream_clock
-        self.link_preset = link_preset             # gyrostar.transport.linkrate.LinkPreset (utilisation)
         self.pixel_format = pixel_format
         self.period_us = int(round(1e6 / frame_hz))
         self._results: collections.deque = collections.deque()
@@ -331,7 +337,8 @@ class StreamPort(HeadPort):
     def _turn_idle(self) -> bool:
         """Fast mode: a stream turn now would do nothing — no set or period change to send,
         no frame waiting, no byte arriving and no head stream step by the end of its read
-        (:data:`_READ_ARRIVED_S`), no time sync due, no head fault or eclipse that its wait
+        (:data:`_READ_ARRIVED_S`), no time sync overdue (one that is only due goes with a
+        frame, :meth:`sync_fits`), no head fault or eclipse that its wait
         would switch (``Lockstep.on_time_due``) — so it is not run. Its only trace would be
         the link tap's timeout record."""
         c = self.client
@@ -342,7 +349,7 @@ class StreamPort(HeadPort):
             return False
         lk = self.inline
         end = lk.now() + _READ_ARRIVED_S
-        if quiet() <= end or c.frames_waiting or not self._sends.empty() or c.sync_due(end) or (
+        if quiet() <= end or c.frames_waiting or not self._sends.empty() or c.sync_due(end - SYNC_OVERDUE_S) or (
                 self._want_period is not None and self._want_period != self.period_us):
             return False
         return lk.on_time is None or (lk.on_time_due is not None and not lk.on_time_due(end))
@@ -405,16 +412,30 @@ class StreamPort(HeadPort):
             # wait of 1 µs of the turn's own time reads the link once)
             more = _READ_ARRIVED_S if self.inline is not None else 0.0
             fr = c.next_frame(more if self.inline is not None else min(0.001, self.period_s))
+            took = fr is not None
             while fr is not None:
                 self._take(fr)
                 if not self._sends.empty():
                     break
                 fr = c.next_frame(more)
-            c.maybe_sync(1)
+            now = c.clock.now()
+            if c.sync_due(now) and ((took and self.sync_fits(now)) or c.sync_due(now - SYNC_OVERDUE_S)):
+                c.sync(1)
         except Exception as exc:  # noqa: BLE001 - the link failed: the loop sees an error result
             with self._lock:
                 self.on = False
             self._results.append(ImageResult("windows", np.nan, np.nan, np.nan, error=exc))
+
+    def sync_fits(self, now: float) -> bool:
+        """A TIME_SYNC exchange started at ``now`` (host s, once this client's queued bytes
+        are on the wire) ends before the head reads out the frame after the newest received."""
+        with self._lock:
+            t_first, n = self.t_first_host, self.last_frame + 1 - self.first_frame
+        if t_first != t_first:
+            return False
+        readout = t_first + n * self.period_s + self.exposure_s
+        wire = self.link_preset.wire_time(time_sync_bytes()) if self.link_preset is not None else 0.0
+        return readout - max(now, self.client.uplink_idle_at) >= wire + SYNC_GAP_MARGIN_S
 
     def _start(self, spans, frame: int) -> None:
         """Start the stream with the set the loop planned for ``frame`` (0 or a frame of a

@@ -44,6 +44,7 @@ from ..protocol.defs import LIMITS, REPLY_FLAG
 from ..protocol.errors import FrameError
 from ..protocol.framing import decode_frame, encode_frame
 from ..protocol.payloads import decode_reply, encode_request, encode_spans
+from ..transport.linkrate import Wire
 from .stream import FrameAssembler, FrameQueue, StreamFrame
 from .timesync import ClockSync
 
@@ -99,8 +100,15 @@ def spot_spans(spots: np.ndarray, box: int, width: int, height: int) -> np.ndarr
 class HeadClient:
     spot_scan_s = 1.0        # allowance (s) for the head's FIND_SPOTS scan of a whole frame
     def __init__(self, link, timeout: float = 0.5, retries: int = 2, sync: ClockSync | None = None,
-                 sync_every_s: float = 1.0, depth: int = 4, first_seq: int | None = None, clock=None):
+                 sync_every_s: float = 1.0, depth: int = 4, first_seq: int | None = None, clock=None,
+                 link_preset=None):
         self.link = link
+        # the link's line rate (gyrostar.transport.linkrate.LinkPreset, or None: unknown). On a
+        # slow wire a TIME_SYNC request waits behind the bytes this client sent before it (a
+        # window set), and its reply is longer than it: both would bias the clock offset
+        self.link_preset = link_preset
+        self._uplink = Wire(link_preset) if link_preset is not None else None
+        self._wire_start = 0.0     # when the last request's first byte went on the wire (host s)
         self.clock = MONOTONIC if clock is None else clock
         self.timeout = timeout
         self.retries = retries
@@ -131,6 +139,11 @@ class HeadClient:
         seq = self._next_seq()
         data = encode_frame(msg_type, seq, payload)
         t = self.link.send(data)
+        if self._uplink is not None:
+            self._wire_start = max(t, self._uplink.busy_until)
+            self._uplink.transmit(len(data), t)
+        else:
+            self._wire_start = t
         self.stats["requests"] += 1
         self.stats["tx_bytes"] += len(data)
         return seq, t
@@ -292,7 +305,9 @@ class HeadClient:
 
     def _sync_once(self) -> None:
         host_us = int(self.clock.now() * 1e6) & 0xFFFFFFFFFFFFFFFF
-        seq, t1 = self._send(MsgType.TIME_SYNC, encode_request(MsgType.TIME_SYNC, host_us=host_us))
+        request = encode_request(MsgType.TIME_SYNC, host_us=host_us)
+        seq, _ = self._send(MsgType.TIME_SYNC, request)
+        t1 = self._wire_start
         deadline = self.clock.now() + self.timeout
         while True:
             got = self._await({seq: int(MsgType.TIME_SYNC)}, deadline)
@@ -305,8 +320,19 @@ class HeadClient:
             # the seq matched but the echo is another request's: a late reply to someone else
             self.stats["sync_echo_mismatch"] += 1
             self.stats["stale"] += 1
-        self.sync_state.add(t1, f["mcu_rx_us"], f["mcu_tx_us"], t4)
+        asym_us = 0.0
+        if self.link_preset is not None:   # the two frames' serialisation times, as sent (µs)
+            extra = len(encode_frame(frame.type, frame.seq, frame.payload)) - len(encode_frame(
+                MsgType.TIME_SYNC, seq, request))
+            asym_us = extra / self.link_preset.bytes_per_s * 1e6
+        self.sync_state.add(t1, f["mcu_rx_us"], f["mcu_tx_us"], t4, asym_us)
         self._last_sync = self.clock.now()
+
+    @property
+    def uplink_idle_at(self) -> float:
+        """When the bytes this client has sent are all on the wire (host s; -inf with no
+        link preset: unknown, taken as at once)."""
+        return self._uplink.busy_until if self._uplink is not None else float("-inf")
 
     def sync_due(self, t: float) -> bool:
         """:meth:`maybe_sync` at client time ``t`` (s) would exchange TIME_SYNCs."""

@@ -1,18 +1,34 @@
 """Clock synchronisation between the head MCU's microsecond clock and the host monotonic clock.
 
 One TIME_SYNC exchange gives four times: host send ``t1`` and receive ``t4`` (host
-monotonic, s) and MCU receive ``rx`` and transmit ``tx`` (MCU µs). As in NTP,
+monotonic, s) and MCU receive ``rx`` and transmit ``tx`` (MCU µs). With θ the MCU − host
+offset, each exchange measures both one-way delays, each plus or minus θ:
 
-    offset θ = ((rx − t1) + (tx − t4)) / 2      (MCU − host, µs, at host time (t1 + t4)/2)
-    delay  δ = (t4 − t1) − (tx − rx)            (round-trip link time, µs)
+    u = rx − t1 = θ + up        d = t4 − tx = down − θ        (µs)
+    delay δ = u + d = up + down (the round trip, µs)
 
-Link jitter and queueing only ever add delay, and an exchange whose delay exceeds the
-smallest by ``e`` has an offset error of at most ``e/2``, so :class:`ClockSync` keeps the
-last ``window`` exchanges and fits ``θ(t) = offset + drift·(t − t_ref)`` by weighted least
-squares with weights ``1/(e² + slack_us²)``: the offset (µs) and the drift
-(MCU rate error against the host, dimensionless, ×1e6 for ppm) are estimated continuously
-as exchanges arrive. :meth:`mcu_to_host` maps MCU µs (e.g. an exposure mid-time) into
-host monotonic seconds.
+Queueing, jitter and late reading only ever *add* delay, and often on one side only (a
+reply waiting behind frame bytes, a host thread that reads it late): the NTP midpoint
+``(u − d)/2`` of such an exchange is off by half that extra delay, always the same way. So
+:class:`ClockSync` keeps the last ``window`` exchanges and uses each direction's *minimum*:
+with θ(t) = offset + b·(t − t_ref), the lower envelopes ``min(u − b·dt) = offset + up_min``
+and ``min(d + b·dt) = down_min − offset`` give
+
+    offset = (min(u − b·dt) − min(d + b·dt)) / 2        (up_min = down_min)
+
+The drift b (µs/s = ppm) is a quantile regression: one slope, fitted to the lower tenth
+of each direction's delays at once (pinball loss, convex in b), so that neither a single
+lucky exchange nor the one-sided tail sets it; ``slack_us`` of envelope per
+``drift_sigma_ppm`` of drift (the MCU oscillator's tolerance) is its prior, so a baseline
+that a few exchanges leave undetermined does not tilt the line. Each direction's minimum may come from a
+different exchange: a reply that waited does not spoil its request's clean trip. With
+symmetric jitter the minima converge on the true delays; with one-sided delays the
+midpoint's bias (half of them) never enters.
+
+A reply longer than its request spends longer on a slow wire: :meth:`add` takes that
+known down − up difference (``asym_us``, the two frames' serialisation times; link latency
+is the same both ways) and removes it from ``d``. :meth:`mcu_to_host` maps MCU µs (e.g.
+an exposure mid-time) into host monotonic seconds.
 """
 
 from __future__ import annotations
@@ -20,16 +36,56 @@ from __future__ import annotations
 from collections import deque
 
 import numpy as np
+from numba import njit
 
 from ..errors import DeviceError
 
+_DRIFT_SEARCH_PPM = 2000.0   # the drift is searched in ±this (an MCU oscillator is far better)
+DRIFT_QUANTILE = 0.1         # the drift fits each direction's lower tenth, not its single minimum
+
+
+@njit(cache=True)
+def _pinball(r, q, k):
+    """Pinball loss of ``r`` about its ``k``-th smallest value (the q-quantile)."""
+    qv = np.sort(r)[k]
+    c = 0.0
+    for x in r:
+        e = x - qv
+        c += q * e if e >= 0.0 else (q - 1.0) * e
+    return c
+
+
+@njit(cache=True)
+def drift_fit(dt, u, d, q, penalty, search_ppm):
+    """The drift b (µs/s) minimising both directions' pinball loss about their q-quantile
+    lines ``u − b·dt`` and ``d + b·dt`` plus ``penalty·|b|`` (convex in b): golden-section
+    search over ±``search_ppm``. ``dt`` s from the reference time, ``u``/``d`` µs."""
+    k = int(q * (dt.shape[0] - 1))
+    gr = 0.6180339887498949
+    a, b = -search_ppm, search_ppm
+    c, e = b - gr * (b - a), a + gr * (b - a)
+    fc = penalty * abs(c) + _pinball(u - c * dt, q, k) + _pinball(d + c * dt, q, k)
+    fe = penalty * abs(e) + _pinball(u - e * dt, q, k) + _pinball(d + e * dt, q, k)
+    for _ in range(50):
+        if fc > fe:            # the minimum is in [c, b]
+            a, c, fc = c, e, fe
+            e = a + gr * (b - a)
+            fe = penalty * abs(e) + _pinball(u - e * dt, q, k) + _pinball(d + e * dt, q, k)
+        else:                  # in [a, e]
+            b, e, fe = e, c, fc
+            c = b - gr * (b - a)
+            fc = penalty * abs(c) + _pinball(u - c * dt, q, k) + _pinball(d + c * dt, q, k)
+    return 0.5 * (a + b)
+
 
 class ClockSync:
-    def __init__(self, window: int = 256, slack_us: float = 20.0, min_span_s: float = 0.5):
+    def __init__(self, window: int = 256, slack_us: float = 20.0, min_span_s: float = 0.5,
+                 drift_sigma_ppm: float = 200.0):
         self.window = window
         self.slack_us = slack_us
         self.min_span_s = min_span_s
-        self._ex: deque = deque(maxlen=window)  # (t_mid_s, theta_us, delay_us)
+        self.drift_sigma_ppm = drift_sigma_ppm
+        self._ex: deque = deque(maxlen=window)  # (t_mid_s, u_us, d_us)
         self.offset_us = 0.0      # θ at t_ref
         self.drift = 0.0          # dθ/dt (µs per µs)
         self.t_ref = 0.0          # host s
@@ -40,34 +96,34 @@ class ClockSync:
     def ready(self) -> bool:
         return self.count > 0
 
-    def add(self, t1: float, rx_us: int, tx_us: int, t4: float) -> None:
-        """One exchange: host send/receive times (s), MCU receive/transmit times (µs)."""
+    def add(self, t1: float, rx_us: int, tx_us: int, t4: float, asym_us: float = 0.0) -> None:
+        """One exchange: host send/receive times (s), MCU receive/transmit times (µs), and the
+        known excess of the reply's transit over the request's (µs; 0 when unknown)."""
         if not (t4 >= t1 and tx_us >= rx_us):
             self.rejected += 1
             return
-        t1_us, t4_us = t1 * 1e6, t4 * 1e6
-        theta = ((rx_us - t1_us) + (tx_us - t4_us)) / 2.0
-        delay = (t4_us - t1_us) - (tx_us - rx_us)
-        if delay < 0:  # impossible unless the clocks stepped
+        u = rx_us - t1 * 1e6
+        d = t4 * 1e6 - tx_us - asym_us
+        if u + d + asym_us < 0:  # a negative round trip: impossible unless the clocks stepped
             self.rejected += 1
             return
-        self._ex.append((0.5 * (t1 + t4), theta, delay))
+        self._ex.append((0.5 * (t1 + t4), u, d))
         self.count += 1
         self._fit()
 
     def _fit(self) -> None:
         ex = np.array(self._ex)
-        t, theta, delay = ex[:, 0], ex[:, 1], ex[:, 2]
-        extra = delay - delay.min()
-        w = 1.0 / (extra * extra + self.slack_us * self.slack_us)
-        sw = w.sum()
-        self.t_ref = float(np.dot(w, t) / sw)
-        th_mean = float(np.dot(w, theta) / sw)
+        t, u, d = ex[:, 0], ex[:, 1], ex[:, 2]
+        self.t_ref = float(t.mean())
         dt = t - self.t_ref
+        b = self.drift * 1e6                        # µs/s; kept while the baseline is too short
         if t.max() - t.min() >= self.min_span_s:
-            self.drift = float(np.dot(w * dt, theta - th_mean) / np.dot(w * dt, dt)) * 1e-6
-        # else: keep the previous drift estimate; a short baseline cannot resolve it
-        self.offset_us = th_mean
+            # a drift of drift_sigma_ppm costs as much as the envelope's share of points each
+            # slack_us off it
+            penalty = DRIFT_QUANTILE * len(t) * self.slack_us / self.drift_sigma_ppm
+            b = drift_fit(dt, u, d, DRIFT_QUANTILE, penalty, _DRIFT_SEARCH_PPM)
+        self.drift = b * 1e-6
+        self.offset_us = 0.5 * (float(np.min(u - b * dt)) - float(np.min(d + b * dt)))
 
     def offset_at(self, t_host: float) -> float:
         """Estimated MCU − host offset (µs) at host time ``t_host`` (s)."""
@@ -85,5 +141,15 @@ class ClockSync:
         return t_host * 1e6 + self.offset_at(t_host)
 
     @property
+    def exchanges(self) -> np.ndarray:
+        """The exchanges in the window, one row each: (host mid-time s, u µs, d µs)."""
+        return np.array(self._ex).reshape(-1, 3)
+
+    @property
     def min_delay_us(self) -> float:
-        return min(d for _, _, d in self._ex) if self._ex else float("nan")
+        """The round trip of the two minimum one-way delays (µs): the link's clean delay."""
+        if not self._ex:
+            return float("nan")
+        ex = np.array(self._ex)
+        dt = (ex[:, 0] - self.t_ref) * self.drift * 1e6
+        return float(np.min(ex[:, 1] - dt) + np.min(ex[:, 2] + dt))

@@ -799,6 +799,7 @@ def warmup() -> dict:
     from ..core.motion import substeps_for
     from ..gyro.convert import convert_frames
     from ..gyro.timebase import polygon_centroid
+    from ..head.timesync import drift_fit
     from ..protocol.payloads import unpack10_kernel, windows_tail_decode
     from ..starid.verify import consistent
     from . import acquire, image_kernels, kernels, update_kernel
@@ -828,6 +829,7 @@ def warmup() -> dict:
         (unpack10_kernel, (np.frombuffer(bytes(20), np.uint8), 16)),   # full-frame chunks (head worker)
         (windows_tail_decode, (np.frombuffer(bytes(8), np.uint8), 1, False)),   # every streamed frame
         (substeps_for, (rates, 0.0025, 6666.0, 0.25)),
+        (drift_fit, (np.array([-0.5, 0.5]), np.zeros(2), np.zeros(2), 0.1, 0.02, 2000.0)),   # each TIME_SYNC
         (acquire.detect_spots, (img, 6.0, 40, 7)),
         (acquire.window_moments, (spans.astype(np.int64), vals, 1, 2.0, 1.0)),    # the head's spot list
         (convert_frames, (np.frombuffer(bytes(12), np.uint8), 2, 1e-3, np.eye(3), 0.0, 0.0025, 0.0, 0, 0,

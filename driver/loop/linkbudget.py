@@ -43,6 +43,12 @@ def windows_bytes(n_spans: int) -> int:
     return _framed(SET_WINDOWS_FIXED + SPAN_BYTES * n_spans)
 
 
+def time_sync_bytes() -> int:
+    """Bytes on the wire of one TIME_SYNC exchange: the request up plus the reply down."""
+    return (_framed(struct.calcsize("<" + REQUEST_LAYOUT[MsgType.TIME_SYNC][0]))
+            + _framed(struct.calcsize("<" + REPLY_LAYOUT[MsgType.TIME_SYNC][0])))
+
+
 class LinkBudget:
     """Per-frame budgets for ``link`` (a LinkPreset) at ``frame_hz`` and the degrade state."""
 

@@ -183,3 +183,68 @@ def test_relay_keeps_the_line_rate_when_it_wakes_late():
     finally:
         os.close(w)
         os.close(r)
+
+
+def test_time_sync_behind_a_window_set_on_a_slow_uart(fw):
+    """A TIME_SYNC sent right after a 3.6 kB window set waits ~39 ms on a 921.6 kBd wire
+    before its first byte goes out. A client that knows its link counts its request from
+    then (and the reply's longer wire time): the head's clock (the firmware host program's,
+    CLOCK_MONOTONIC µs: offset 0) comes out within a relay slice. One that does not is off
+    by half the wait."""
+    from gyrostar.mocks.paced_relay import RelayProcess
+
+    uart = preset("uart-921k")
+    spans = np.array([[w, 10 * w + r, 100, 116] for w in range(64) for r in range(7)])   # 448 spans
+    errors = {}
+    for name, link_preset in (("knows its link", uart), ("does not", None)):
+        relay = RelayProcess(fw.path, uart)
+        serial = SerialLink(relay.path)
+        try:
+            head = HeadClient(serial, timeout=1.0, link_preset=link_preset)
+            head.ping(b"")                            # the relay's first bytes through
+            head.send_windows(spans, frame=1)         # not waited for: on the wire meanwhile
+            head.sync(1)
+            errors[name] = head.sync_state.offset_us
+        finally:
+            serial.close()
+            relay.close()
+    wait_us = uart.wire_time(448 * 8 + 20) * 1e6
+    print(f"offset error: {errors}, set on the wire {wait_us:.0f} µs")
+    assert abs(errors["knows its link"]) < 1000.0     # relay slices of 1 ms, host wake-ups
+    assert errors["does not"] > 0.4 * wait_us         # the request's wait counted as link delay
+
+
+
+def test_time_sync_replies_behind_streamed_frames_on_a_slow_uart(fw):
+    """A stream twice what a 921.6 kBd UART carries keeps the head's transmitter busy: some
+    TIME_SYNC replies wait behind frame bytes, and the firmware stamps them when built, so
+    that wait is link delay on the way down only. Their NTP midpoints are off by ms, all one
+    way; the clock (the host program's CLOCK_MONOTONIC µs: offset 0) must come out within a
+    relay slice all the same (this client is not told its link: the reply's 16 more bytes
+    leave -87 µs of it)."""
+    from gyrostar.head import ClockSync
+
+    uart = preset("uart-921k")
+    spans = np.array([[w, 200 + r, 50 * w, 50 * w + 20] for w in range(10) for r in range(8)], np.int32)
+    relay, serial, head = _client(fw, "uart-921k")
+    try:
+        head.set_windows(spans)
+        head.start_stream(10_000, 10_000, PixelFormat.PACKED10)
+        head.next_frame(1.0)
+        head.sync_state = ClockSync()           # only exchanges made while streaming
+        for _ in range(30):
+            head.next_frame(0.05)
+            head.sync(1)
+        head.stop_stream()
+    finally:
+        serial.close()
+        relay.close()
+    ex = head.sync_state.exchanges
+    midpoints = (ex[:, 1] - ex[:, 2]) / 2
+    offset = head.sync_state.offset_us
+    print(f"offset error {offset:.0f} µs; midpoints median {np.median(midpoints):.0f} µs, "
+          f"min {midpoints.min():.0f} µs, {np.sum(midpoints < -2000.0)} below -2 ms of {len(ex)} exchanges; "
+          f"line {uart.name}")
+    assert len(ex) >= 25
+    assert np.sum(midpoints < -2000.0) >= 3     # replies that waited: one-sided, ms
+    assert abs(offset) < 500.0

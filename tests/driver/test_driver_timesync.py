@@ -94,3 +94,74 @@ def test_offset_with_200us_jitter_on_a_pty_and_exposure_mid_time():
     finally:
         link.close()
         em.stop()
+
+
+def _exchange(sync, mcu, t, up_s, down_s, turn_s=25e-6, asym_us=0.0):
+    """One TIME_SYNC at host time ``t`` with the given one-way delays (s), into ``sync``."""
+    rx = mcu(t + up_s)
+    tx = mcu(t + up_s + turn_s)
+    sync.add(t, int(round(rx)), int(round(tx)), t + up_s + turn_s + down_s, asym_us)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_one_sided_queueing_on_a_busy_link_does_not_bias_the_offset(seed):
+    """A streaming UART: most replies wait behind frame bytes (0-7 ms, down only), some
+    requests behind a window set (0-6 ms, up only). The NTP midpoint of such exchanges is
+    off by half the wait, always the same way; the estimate must not be."""
+    rng = np.random.default_rng(seed)
+    off_us, drift = 1.0e8 * rng.random(), rng.uniform(-50e-6, 50e-6)
+
+    def mcu(t):
+        return off_us + t * 1e6 * (1 + drift)
+
+    sync, errors, midpoints = ClockSync(), [], []
+    t = 500.0
+    for i in range(300):           # 1 Hz for 300 s (the window keeps the last 256)
+        up = 250e-6 + rng.uniform(0, 50e-6) + (rng.uniform(0, 6e-3) if rng.random() < 0.3 else 0.0)
+        down = 250e-6 + rng.uniform(0, 50e-6) + (rng.uniform(0, 7e-3) if rng.random() < 0.7 else 0.0)
+        _exchange(sync, mcu, t, up, down)
+        midpoints.append((up - down) / 2 * 1e6)
+        if i >= 30:
+            errors.append(sync.offset_at(t) - (mcu(t) - t * 1e6))
+        t += 1.0
+    errors = np.abs(errors)
+    print(f"seed {seed}: max |offset error| {errors.max():.1f} µs (mean midpoint error "
+          f"{np.mean(midpoints):.0f} µs), drift error {(sync.drift - drift) * 1e6:.3f} ppm")
+    assert np.mean(midpoints) < -500.0           # the one-sided waits bias a midpoint by ~0.7 ms
+    assert errors.max() < 30.0
+    assert abs(sync.drift - drift) < 0.5e-6
+
+
+def test_one_late_exchange_after_a_clean_start_does_not_tilt_the_drift():
+    """Eight clean exchanges at start, then one a second later whose reply waited 4.6 ms: a
+    least-squares line through them took its slope from that one (-1200 ppm); the estimate
+    a second on must stay within a few µs."""
+    off_us = 123_456_789.0
+
+    def mcu(t):
+        return off_us + t * 1e6
+
+    sync = ClockSync()
+    for k in range(8):
+        _exchange(sync, mcu, 100.0 + k * 0.0015, 500e-6, 500e-6)
+    _exchange(sync, mcu, 101.0, 500e-6, 5.1e-3)
+    assert abs(sync.offset_at(102.0) - off_us) < 5.0
+    assert abs(sync.drift) < 5e-6
+
+
+def test_a_reply_longer_than_its_request_on_a_slow_wire():
+    """921.6 kBd 8N1: the 20-byte request takes 217 µs, the 36-byte reply 391 µs. Without the
+    difference the offset is off by half of it, (36 - 20) / 92160 / 2 = 86.8 µs."""
+    rate = 92_160.0
+    up, down = 20 / rate, 36 / rate
+
+    def mcu(t):
+        return 5_000_000.0 + t * 1e6
+
+    plain, known = ClockSync(), ClockSync()
+    for k in range(20):
+        t = 10.0 + 0.05 * k
+        _exchange(plain, mcu, t, up, down)
+        _exchange(known, mcu, t, up, down, asym_us=(36 - 20) / rate * 1e6)
+    assert plain.offset_at(11.0) - 5_000_000.0 == pytest.approx(-86.8, abs=1.0)
+    assert known.offset_at(11.0) - 5_000_000.0 == pytest.approx(0.0, abs=1.0)

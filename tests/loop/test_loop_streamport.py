@@ -162,3 +162,33 @@ def test_target_frame_leaves_the_window_set_its_wire_time():
     assert slow.next_target(now) == (13, pytest.approx(100.12))
     huge = port("uart-921k", 3000)           # no lead is enough: at most MAX_FRAMES_AHEAD after the newest
     assert huge.next_target(now)[0] == 10 + MAX_FRAMES_AHEAD
+
+
+def test_time_sync_waits_for_the_downlink_gap_after_a_frame():
+    """While streaming, a TIME_SYNC goes only when its request and reply both fit between
+    now (or when this client's queued bytes are on the wire) and the head's next readout:
+    a reply queued behind frame bytes would make the exchange one-sided."""
+    from gyrostar.hil.streamport import SYNC_GAP_MARGIN_S, StreamPort
+    from gyrostar.loop.linkbudget import time_sync_bytes
+    from gyrostar.transport.linkrate import preset
+
+    class _NoLink:
+        def close(self):
+            pass
+
+    class _Client:
+        uplink_idle_at = float("-inf")
+
+    uart = preset("uart-921k")
+    assert time_sync_bytes() == 20 + 36                   # request 6+8+4 B, reply 6+24+4 B, COBS +1, 0x00
+    need = uart.wire_time(56) + SYNC_GAP_MARGIN_S         # 0.64 ms on the wire + 1 ms: 1.64 ms
+    p = StreamPort(_NoLink(), MONOTONIC, link_preset=uart, exposure_s=0.005)
+    p.client = _Client()
+    p.on, p.first_frame, p.t_first_host, p.last_frame = True, 1, 100.0, 10
+    readout_11 = 100.0 + 10 * 0.010 + 0.005               # frame 11: exposed from 100.10 s, read out 5 ms later
+    assert p.sync_fits(readout_11 - need - 1e-6)
+    assert not p.sync_fits(readout_11 - need + 1e-6)
+    p.client.uplink_idle_at = readout_11 - need + 1e-6    # a window set still on the wire
+    assert not p.sync_fits(readout_11 - 0.005)
+    p.t_first_host = float("nan")                         # before the stream's first frame time
+    assert not p.sync_fits(readout_11 - 0.005)
