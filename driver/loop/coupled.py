@@ -838,7 +838,7 @@ def warmup() -> dict:
         (image_kernels.plan_windows, (np.array([[20.0, 20.0]]), np.array([0], np.int64), rates, 0.0025, w, cam,
                                       MODEL, 1, 0, 6, 1024, 1024, 8192, 2048, 512)),
         (image_kernels.plan_tracked, (np.ones(2, np.bool_), np.array([0, 1], np.int64), np.array([5.0, 6.0]), ref, q,
-                                      af.ts[1:4], w, 4, 1, 0.0025, cam, MODEL, 6, 1024, 1024, 8192, 2048, 512)),
+                                      af.ts[1:4], w, 4, 0.0025, 0.0025, cam, MODEL, 6, 1024, 1024, 8192, 2048, 512)),
         (image_kernels.measure_windows, (spans, vals, np.array([0], np.int64), np.zeros((2, 2)),
                                          np.array([0], np.int64), np.array([2], np.int64), cam, 0.85, 4.0, 30.0,
                                          5.0, 10, 1e-3)),

@@ -114,26 +114,35 @@ def plan_windows(uv, slots, rates, dt, bias, cam, model, substeps, skip, k, n_ro
 
 
 @njit(cache=True)
-def plan_tracked(active, nav, vmag, refs, q, omega, bias, m, m_lat, dt, cam, model, k, n_rows, n_cols,
+def plan_tracked(active, nav, vmag, refs, q, omega, bias, m, lag_s, dt, cam, model, k, n_rows, n_cols,
                  pixel_budget, max_window_pixels, max_spans):
     """:func:`plan_windows` for the tracked slots (``active``), brightest first (``vmag`` of
-    their navigation stars ``nav``, ties in slot order), at their places under attitude ``q``,
-    with the rate ``omega + bias`` held over ``m`` exposure and ``m_lat`` lag samples of
-    ``dt`` s. Returns plan_windows' arrays and the chosen slots' navigation stars."""
+    their navigation stars ``nav``, ties in slot order), at their places under attitude ``q``
+    moved on by the rate ``omega`` over the lag ``lag_s`` (s, to the exposure start: exact,
+    not in whole gyro samples — at 10 °/s one sample is 2.9 px), with ``omega + bias`` held
+    over ``m`` exposure samples of ``dt`` s. Returns plan_windows' arrays and the chosen
+    slots' navigation stars."""
     act = np.flatnonzero(active)
     mags = np.empty(act.shape[0])
     for i in range(act.shape[0]):
         mags[i] = vmag[nav[act[i]]]
     order = act[np.argsort(mags, kind="mergesort")].astype(np.int64)
     uv, _ = project_refs(cam, q, np.ascontiguousarray(refs[order]))
-    rates = np.empty((m + m_lat, 3))
-    meas = np.empty((m + m_lat, 3))
-    for i in range(m + m_lat):
+    rates = np.empty((m, 3))
+    meas = np.empty((m, 3))
+    for i in range(m):
         for j in range(3):
             rates[i, j] = omega[j] + bias[j]
             meas[i, j] = rates[i, j] - bias[j]
+    if lag_s > 0.0:
+        sub_lag = substeps_for(meas[:1], lag_s, cam[P_F], 0.5)
+        for j in range(uv.shape[0]):
+            tr = predict_trajectory(uv[j, 0] - cam[P_CX], uv[j, 1] - cam[P_CY], rates[:1], lag_s, bias, cam[P_F],
+                                    model, sub_lag)
+            uv[j, 0] = tr[-1, 0] + cam[P_CX]
+            uv[j, 1] = tr[-1, 1] + cam[P_CY]
     sub = substeps_for(meas, dt, cam[P_F], 0.5)
-    spans, wins, off, off_start, off_len = plan_windows(uv, order, rates, dt, bias, cam, model, sub, m_lat * sub, k,
+    spans, wins, off, off_start, off_len = plan_windows(uv, order, rates, dt, bias, cam, model, sub, 0, k,
                                                         n_rows, n_cols, pixel_budget, max_window_pixels, max_spans)
     nav_wins = np.empty(wins.shape[0], nav.dtype)
     for i in range(wins.shape[0]):

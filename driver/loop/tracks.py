@@ -29,6 +29,7 @@ MODEL = 1                # core.motion.MODEL_PINHOLE
 BLEND_ADMIT_BELOW = 4    # blended stars are tracked only while fewer clean ones than this are tracked
 BAN_FIRST_S = 1.0        # a star dropped as a wrong identification stays out this long (s),
 BAN_MAX_S = 32.0         # twice as long after each further such drop, at most this long
+STREAK_BORDER_PX = 2     # px of background kept on each side of a streak longer than the window square
 
 
 class StarTracks:
@@ -179,19 +180,23 @@ class StarTracks:
             return None
         p = self.p
         m = max(1, int(round(p.exposure_s * odr_hz)))
-        m_lat = int(round(lag_s * odr_hz))
         sig_px = sigma_att_rad * self.f_px
         speed = math.sqrt(float(omega @ omega)) * self.f_px          # px/s near the boresight
         margin = 3.0 * sig_px + speed * lag_jitter_s
-        k = min(p.window_k + 2 * int(math.ceil(margin)), 40)
+        # a streak longer than the square fills about half of its window's pixels, and the
+        # window's median background then sits on the star: its faint stars go undetected (10 °/s
+        # on a UART with tightened windows: 2 of 8 measured). Such windows keep a border.
+        k_base = p.window_k + (2 * STREAK_BORDER_PX if speed * p.exposure_s > p.window_k else 0)
+        k = min(k_base + 2 * int(math.ceil(margin)), 40)
         pixel_budget, max_spans = p.pixel_budget, p.max_spans
         if budget is not None:
             if not budget.margin_allowed():
-                k = p.window_k                      # degrade step 2: tighter windows
+                k = k_base                          # degrade step 2: tighter windows
             px, sp = budget.limits(n_stars)
             pixel_budget, max_spans = min(pixel_budget, px), min(max_spans, sp)
         spans, wins, off, off_start, off_len, nav = plan_tracked(
-            self.active, self.nav, self.index.vmag, self.ref, q, omega, bias, m, m_lat, p.exposure_s / m, self.cam,
+            self.active, self.nav, self.index.vmag, self.ref, q, omega, bias, m, max(float(lag_s), 0.0),
+            p.exposure_s / m, self.cam,
             MODEL, k, self.camera.height_px, self.camera.width_px, pixel_budget, p.max_window_pixels, max_spans)
         if not len(wins):
             return None

@@ -59,3 +59,19 @@ def test_a_star_off_the_sensor_is_not_the_links_doing():
     b = LinkBudget(preset("usb-fs"), 100.0)
     assert b.after_plan(0.0, 12, 11, 500, 60) is None        # budget far from used: not cut
     assert b.frames_cut == 0 and b.margin_allowed()
+
+
+def test_smeared_windows_that_leave_less_than_one_window_are_cut():
+    """10 °/s on a 921.6 kBd UART (a measured plan): 12 stars tracked, two windows of
+    ~195 px planned, 390 of the 524 px a two-window frame may carry. That is 74 % of the
+    budget, but the 134 px left cannot hold a third such window: the link cut the stars.
+    Windows tighten, and when even then fewer than 4 stars fit for `patience` frames the
+    frame rate halves, which doubles each frame's budget."""
+    b = LinkBudget(preset("uart-921k"), 100.0, patience=3)
+    px, _ = b.limits(2)
+    assert 520 <= px <= 528 and 390 < 0.8 * px          # not cut by the 80 % rule
+    assert b.after_plan(0.0, 12, 2, 390, 30) is None
+    assert b.frames_cut == 1 and not b.margin_allowed()
+    got = [b.after_plan(0.01 * i, 12, 2, 390, 30) for i in range(1, 3)]   # 3 frames short in all
+    assert got[-1] == 2 and b.frame_hz == 50.0
+    assert b.limits(4, 50.0)[0] > 2 * b.limits(4, 100.0)[0]

@@ -65,9 +65,10 @@ def test_consistent_drops_the_star_that_disagrees():
 
 
 def test_plan_tracked_equals_its_parts():
-    """The tracked slots brightest first (ties in slot order), projected, with the held rate,
-    through plan_windows: the one-call plan gives the same arrays as the parts called one by one."""
-    from gyrostar.core.motion import substeps_for
+    """The tracked slots brightest first (ties in slot order), projected, moved on by the held
+    rate over the lag (5.3 ms: not a whole number of 2.5 ms gyro samples), through
+    plan_windows: the one-call plan gives the same arrays as the parts called one by one."""
+    from gyrostar.core.motion import predict_trajectory, substeps_for
     from gyrostar.loop.image_kernels import plan_tracked, plan_windows
     from gyrostar.loop.kernels import project_refs
 
@@ -82,16 +83,54 @@ def test_plan_tracked_equals_its_parts():
     nav = rng.permutation(40)[:S].astype(np.int64)
     vmag = np.round(rng.uniform(2.0, 6.0, 40), 1)            # rounded: equal magnitudes occur
     omega, bias = np.radians([0.4, -0.2, 0.1]), np.radians([0.01, 0.0, -0.02])
-    m, m_lat, dt = 4, 2, 0.0025
-    got = plan_tracked(active, nav, vmag, ref, q, omega, bias, m, m_lat, dt, cam, 1, 8, 1024, 1024, 4000, 2048, 400)
+    m, lag, dt = 4, 0.0053, 0.0025
+    got = plan_tracked(active, nav, vmag, ref, q, omega, bias, m, lag, dt, cam, 1, 8, 1024, 1024, 4000, 2048, 400)
     act = np.flatnonzero(active)
     order = act[np.argsort(vmag[nav[act]], kind="stable")]
     uv, _ = project_refs(cam, q, ref[order])
-    rates = np.repeat((omega + bias)[None, :], m + m_lat, axis=0)
+    rates = np.repeat((omega + bias)[None, :], m, axis=0)
+    sub_lag = substeps_for(rates[:1] - bias, lag, cam[0], 0.5)
+    for j in range(len(uv)):
+        end = predict_trajectory(uv[j, 0] - cam[1], uv[j, 1] - cam[2], rates[:1], lag, bias, cam[0], 1, sub_lag)[-1]
+        uv[j] = end + cam[1:3]
     sub = substeps_for(rates - bias, dt, cam[0], 0.5)
-    want = plan_windows(uv, order.astype(np.int64), rates, dt, bias, cam, 1, sub, m_lat * sub, 8, 1024, 1024, 4000,
-                        2048, 400)
+    want = plan_windows(uv, order.astype(np.int64), rates, dt, bias, cam, 1, sub, 0, 8, 1024, 1024, 4000, 2048, 400)
     for g, w in zip(got[:5], want):
         assert np.array_equal(g, w)
     assert np.array_equal(got[5], nav[want[1]]) and len(want[1]) >= 5
     assert len(set(vmag[nav[act]])) < len(act)              # the field had ties to order
+
+
+def test_plan_moves_the_stars_over_the_exact_lag():
+    """At 10 °/s a gyro sample (2.5 ms) is 2.9 px of star motion: the plan must move the stars
+    over the lag to the exposure start as it is (6.2 ms), not rounded to whole samples (5 ms,
+    1.4 px short). Truth: the same plan with no lag from the attitude rotated exactly over
+    6.2 ms (attitude.quat_propagate) gives the same windows."""
+    from gyrostar.attitude import quat_propagate
+    from gyrostar.loop.image_kernels import plan_tracked
+
+    rng = np.random.default_rng(7)
+    cam = np.array([6666.67, 511.5, 511.5, 0, 0, 0, 0, 0, 1024, 1024])
+    q = quat_from_boresight(1.1, 0.4, 0.2)
+    a = quat_to_dcm(q)
+    S = 10
+    ref = rng.standard_normal((S, 3)) * 0.02 + a[2]
+    ref /= np.linalg.norm(ref, axis=1)[:, None]
+    active, nav, vmag = np.ones(S, np.bool_), np.arange(S, dtype=np.int64), np.linspace(3.0, 6.0, S)
+    omega, bias = np.radians([6.0, 8.0, 0.0]), np.zeros(3)
+    m, dt, lag = 4, 0.0025, 0.0062
+    got = plan_tracked(active, nav, vmag, ref, q, omega, bias, m, lag, dt, cam, 1, 6, 1024, 1024, 8192, 2048, 512)
+    truth = plan_tracked(active, nav, vmag, ref, quat_propagate(q, omega, lag), omega, bias, m, 0.0, dt, cam, 1, 6,
+                         1024, 1024, 8192, 2048, 512)
+    rounded = plan_tracked(active, nav, vmag, ref, quat_propagate(q, omega, 0.005), omega, bias, m, 0.0, dt, cam, 1,
+                           6, 1024, 1024, 8192, 2048, 512)
+    assert np.array_equal(got[1], truth[1]) and len(got[1]) >= 8
+    # window by window: the same rows and columns within a pixel (a square's edge may round
+    # the other way), and far from the plan a whole-sample lag gives
+    def box(spans, w):
+        s = spans[spans[:, 0] == w]
+        return np.array([s[:, 1].min(), s[:, 1].max(), s[:, 2].min(), s[:, 3].max()])
+
+    for w in got[1]:
+        assert np.abs(box(got[0], w) - box(truth[0], w)).max() <= 1
+    assert max(np.abs(box(rounded[0], w) - box(truth[0], w)).max() for w in truth[1]) >= 1
