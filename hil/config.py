@@ -139,7 +139,7 @@ class SimConfig:
 @dataclass
 class LoopConfig:
     frame_hz: float = 100.0
-    window_k: int = 6                  # k×k squares along the predicted trajectory (paper 000)
+    window_k: int = 6                  # k×k squares on the predicted trajectory (paper 000); +4 px for long streaks
     max_stars: int = 12                # stars tracked at once (≤ gyrostar.loop.record.MAX_STARS)
     min_stars: int = 2                 # fewer valid stars than this → COAST
     coast_timeout_s: float = 5.0       # COAST longer than this → ACQUIRE (full frame)
