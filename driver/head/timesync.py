@@ -16,14 +16,15 @@ and ``min(d + b·dt) = down_min − offset`` give
 
     offset = (min(u − b·dt) − min(d + b·dt)) / 2        (up_min = down_min)
 
-The drift b (µs/s = ppm) is a quantile regression: one slope, fitted to the lower tenth
-of each direction's delays at once (pinball loss, convex in b), so that neither a single
-lucky exchange nor the one-sided tail sets it; ``slack_us`` of envelope per
-``drift_sigma_ppm`` of drift (the MCU oscillator's tolerance) is its prior, so a baseline
-that a few exchanges leave undetermined does not tilt the line. Each direction's minimum may come from a
-different exchange: a reply that waited does not spoil its request's clean trip. With
-symmetric jitter the minima converge on the true delays; with one-sided delays the
-midpoint's bias (half of them) never enters.
+Each direction's minimum may come from a different exchange: a reply that waited does not
+spoil its request's clean trip. With symmetric jitter the minima converge on the true
+delays; with one-sided delays the midpoint's bias (half of them) never enters.
+
+The drift b (µs/s = ppm) is a quantile regression (:func:`drift_fit`): one slope, fitted to
+the lower tenth of each direction's delays at once (pinball loss, convex in b), so that
+neither a single lucky exchange nor the one-sided tail sets it. Its prior costs ``slack_us``
+of envelope per ``drift_sigma_ppm`` of drift (the MCU oscillator's tolerance), so a
+baseline that a few exchanges leave undetermined does not tilt the line.
 
 A reply longer than its request spends longer on a slow wire: :meth:`add` takes that
 known down − up difference (``asym_us``, the two frames' serialisation times; link latency
