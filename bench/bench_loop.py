@@ -188,7 +188,9 @@ def run(quick: bool) -> dict:
     in_run_us = res["host_us_per_gyro_sample"]            # CPU of the loop thread in the path
     in_run_wall_us = res["host_us_per_gyro_sample_wall"]  # wall: with the turns other threads took in it
     dev = res.get("device_emulation_cpu_percent")
-    dev_note = f" (of which {dev:.1f} % inside the emulated gyro)" if dev is not None else ""
+    thread = res.get("loop_thread_cpu_percent")
+    dev_note = (f" (of which {dev:.1f} % inside the emulated gyro)" if dev is not None else "") + (
+        f"; {thread:.1f} % with the scheduler's idle ticks" if thread is not None else "")
     proc = res.get("process_cpu_percent")
     proc_note = f", the process (loop, head worker, link reader, log writer) {proc:.1f} %" if proc is not None else ""
     sched = (f"{res['loop_steps']} loop steps, {sps:.2f} gyro samples per step (FIFO watermark "
@@ -205,7 +207,8 @@ def run(quick: bool) -> dict:
     out = {
         "latency_p99": {"us": p99_us, "baseline_us": py_us, "ratio": py_us / p99_us, "note": note,
                         "cpu_percent": res["cpu_percent"], "device_emulation_cpu_percent": dev,
-                        "process_cpu_percent": proc, "overruns": res["overruns"], "frames": res["frames"],
+                        "loop_thread_cpu_percent": thread, "process_cpu_percent": proc,
+                        "overruns": res["overruns"], "frames": res["frames"],
                         "gyro_samples": res["gyro_samples"], "samples_lost": res["samples_lost"],
                         "step_wall_p99_ms": res["step_wall_p99_ms"], "mode_seconds": res["mode_seconds"],
                         "attitude_error_arcsec_1sigma": res["attitude_error_arcsec_1sigma"],
@@ -223,6 +226,7 @@ def run(quick: bool) -> dict:
             "isolated_paced_us": paced_us, "host_floor_us": floor_us, "host_floor_us_one_sample_per_wake": floor_1_us,
             "samples_per_step": sps,
             "cpu_percent": res["cpu_percent"], "device_emulation_cpu_percent": dev,
+            "loop_thread_cpu_percent": thread,
             "note": (f"gyro path after the FIFO read (batch kernel, output stage, sinks), {sps:.2f} samples per "
                      f"step: {in_run_us:.1f} µs CPU ({in_run_wall_us:.1f} µs wall, with other threads' turns) in the "
                      f"{duration:.0f} s real-time run, {stage_us:.1f} µs isolated back to back, {paced_us:.1f} µs "

@@ -252,7 +252,9 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
     wiring = fs.wiring
     line = StatusLine(enabled=status)
     step_wall: list[float] = []
-    cpu_box: list = [None]     # the loop's CPU seconds, written by the runner as it goes (a run stopped early too)
+    # the loop's CPU seconds in its steps, and (real time) the loop thread's with its idle ticks,
+    # written by the runner as it goes (a run stopped early too)
+    cpu_box: list = [None, None]
     t_wall0 = time.perf_counter()
     cpu0 = time.process_time()
     # the head worker's Python work stays out of the steps (it shares the interpreter lock)
@@ -292,7 +294,7 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
             if not interrupt.seen():
                 raise
             interrupted = True
-        cpu_loop = cpu_box[0]
+        cpu_loop, cpu_thread = cpu_box
         # from here to summary.json a second Ctrl-C or SIGTERM waits (raised once it is on disk)
         hold = interrupt.SignalHold()
     finally:
@@ -349,6 +351,10 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
             # fast mode: loop CPU per second of flatsat time (the share of a core it needs in real time)
             "cpu_percent": (100.0 * cpu_loop / (ran_s if fast else wall)) if wall > 0 and ran_s > 0
             and cpu_loop is not None else None,
+            # real time: the loop thread with the scheduler's ticks that found no step due (400 a
+            # second wake it; the status line's drawing left out)
+            "loop_thread_cpu_percent": 100.0 * cpu_thread / wall if wall > 0 and cpu_thread is not None
+            and not fast else None,
             # of which inside the in-process emulated gyro (fake bus, register model, its truth): on a real
             # flatsat the kernel's I2C driver and a GPIO edge read take this part
             "device_emulation_cpu_percent": (100.0 * fs.device_cpu.cpu_s / (ran_s if fast else wall))
@@ -466,40 +472,47 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
 def _run_realtime(fs, loop, gate, sched, duration: float, step_wall: list, line, probe, boundary, writer,
                   cpu_box) -> None:
     """Real time: a tick every gyro period on the monotonic clock, a loop step at each tick the
-    loop says is due (:meth:`CoupledLoop.step_due`). The loop's CPU seconds go to
-    ``cpu_box[0]`` after every step (a run stopped early keeps them)."""
-    cpu = 0.0
+    loop says is due (:meth:`CoupledLoop.step_due`). The loop's CPU seconds in its steps go to
+    ``cpu_box[0]`` after every step, and the thread's with its idle ticks (less the status
+    line's drawing) to ``cpu_box[1]`` (a run stopped early keeps them)."""
+    cpu = line_cpu = 0.0
+    thread0 = time.thread_time()
     if probe is not None:
         probe.start(duration)
     sched.start()
     t_start = t_start_of(fs)
-    while True:
-        sched.wait()
-        t = fs.clock_now() - t_start
-        if t >= duration:
-            break
-        # an injected "loop does not read the FIFO" fault, or no step due at this tick
-        if fs.loop_stalled(t) or not loop.step_due(t + t_start):
+    try:
+        while True:
+            sched.wait()
+            t = fs.clock_now() - t_start
+            if t >= duration:
+                break
+            # an injected "loop does not read the FIFO" fault, or no step due at this tick
+            if fs.loop_stalled(t) or not loop.step_due(t + t_start):
+                sched.done()
+                gate.loop_exit(sched.deadline)
+                continue
+            c0 = time.thread_time()
+            w0 = time.perf_counter()
+            gate.loop_enter()
+            boundary.inside = True
+            loop.step()
+            step_wall.append(time.perf_counter() - w0)
+            cpu += time.thread_time() - c0
+            cpu_box[0] = cpu
             sched.done()
             gate.loop_exit(sched.deadline)
-            continue
-        c0 = time.thread_time()
-        w0 = time.perf_counter()
-        gate.loop_enter()
-        boundary.inside = True
-        loop.step()
-        step_wall.append(time.perf_counter() - w0)
-        cpu += time.thread_time() - c0
-        cpu_box[0] = cpu
-        sched.done()
-        gate.loop_exit(sched.deadline)
-        boundary.step_done()
-        if writer is not None and writer.error is not None:
-            raise writer.failure()
-        if line is not None and loop.last_output is not None and line.due():
-            # the truth row (an attitude integration) only when the line redraws, not every step
-            line.update(loop.last_output, fs.truth_at(loop.last_output["t"]), step_wall[-1] * 1e6,
-                        sched.overruns, duration, t0=t_start)
+            boundary.step_done()
+            if writer is not None and writer.error is not None:
+                raise writer.failure()
+            if line is not None and loop.last_output is not None and line.due():
+                # the truth row (an attitude integration) only when the line redraws, not every step
+                l0 = time.thread_time()
+                line.update(loop.last_output, fs.truth_at(loop.last_output["t"]), step_wall[-1] * 1e6,
+                            sched.overruns, duration, t0=t_start)
+                line_cpu += time.thread_time() - l0
+    finally:
+        cpu_box[1] = time.thread_time() - thread0 - line_cpu
 
 
 def _run_lockstep(fs, loop, duration: float, period: float, step_wall: list, line, boundary, writer,
@@ -624,7 +637,9 @@ def human_summary(r: dict) -> str:
         f"  latency p99 {f(r['latency_p99_ms'], '.3f')} ms ({r['latency_clock']}), loop CPU "
         f"{f(r['cpu_percent'], '.1f')}{' %' if r['cpu_percent'] is not None else ''} of a core"
         + (f" ({r['device_emulation_cpu_percent']:.1f} % in the emulated gyro)"
-           if r.get("device_emulation_cpu_percent") is not None else "") + ", "
+           if r.get("device_emulation_cpu_percent") is not None else "")
+        + (f", {r['loop_thread_cpu_percent']:.1f} % with its idle ticks"
+           if r.get("loop_thread_cpu_percent") is not None else "") + ", "
         f"overruns {r['overruns']}",
         f"  numba start-up {r['numba_startup']['seconds']:.2f} s ({r['numba_startup']['cache_hits']} cached, "
         f"{r['numba_startup']['compiled']} compiled)",
