@@ -108,7 +108,6 @@ class HeadClient:
         # window set), and its reply is longer than it: both would bias the clock offset
         self.link_preset = link_preset
         self._uplink = Wire(link_preset) if link_preset is not None else None
-        self._wire_start = 0.0     # when the last request's first byte went on the wire (host s)
         self.clock = MONOTONIC if clock is None else clock
         self.timeout = timeout
         self.retries = retries
@@ -140,10 +139,7 @@ class HeadClient:
         data = encode_frame(msg_type, seq, payload)
         t = self.link.send(data)
         if self._uplink is not None:
-            self._wire_start = max(t, self._uplink.busy_until)
             self._uplink.transmit(len(data), t)
-        else:
-            self._wire_start = t
         self.stats["requests"] += 1
         self.stats["tx_bytes"] += len(data)
         return seq, t
@@ -306,8 +302,9 @@ class HeadClient:
     def _sync_once(self) -> None:
         host_us = int(self.clock.now() * 1e6) & 0xFFFFFFFFFFFFFFFF
         request = encode_request(MsgType.TIME_SYNC, host_us=host_us)
-        seq, _ = self._send(MsgType.TIME_SYNC, request)
-        t1 = self._wire_start
+        queued_until = self.uplink_idle_at          # the request's first byte goes out after these
+        seq, t_write = self._send(MsgType.TIME_SYNC, request)
+        t1 = max(t_write, queued_until)
         deadline = self.clock.now() + self.timeout
         while True:
             got = self._await({seq: int(MsgType.TIME_SYNC)}, deadline)
@@ -322,9 +319,8 @@ class HeadClient:
             self.stats["stale"] += 1
         asym_us = 0.0
         if self.link_preset is not None:   # the two frames' serialisation times, as sent (µs)
-            extra = len(encode_frame(frame.type, frame.seq, frame.payload)) - len(encode_frame(
-                MsgType.TIME_SYNC, seq, request))
-            asym_us = extra / self.link_preset.bytes_per_s * 1e6
+            # same framing both ways (header, CRC, one COBS byte below 254 B): the payloads differ
+            asym_us = (len(frame.payload) - len(request)) / self.link_preset.bytes_per_s * 1e6
         self.sync_state.add(t1, f["mcu_rx_us"], f["mcu_tx_us"], t4, asym_us)
         self._last_sync = self.clock.now()
 
