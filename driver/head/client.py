@@ -33,6 +33,7 @@ for its reply (the reply, giving the frame it applies to, is taken in by later r
 from __future__ import annotations
 
 import dataclasses
+import logging
 import secrets
 
 import numpy as np
@@ -47,6 +48,8 @@ from ..protocol.payloads import decode_reply, encode_request, encode_spans
 from ..transport.linkrate import Wire
 from .stream import FrameAssembler, FrameQueue, StreamFrame
 from .timesync import ClockSync
+
+log = logging.getLogger(__name__)
 
 
 class HeadTimeoutError(DeviceError):
@@ -321,7 +324,12 @@ class HeadClient:
         if self.link_preset is not None:   # the two frames' serialisation times, as sent (µs)
             # same framing both ways (header, CRC, one COBS byte below 254 B): the payloads differ
             asym_us = (len(frame.payload) - len(request)) / self.link_preset.bytes_per_s * 1e6
-        self.sync_state.add(t1, f["mcu_rx_us"], f["mcu_tx_us"], t4, asym_us)
+        s = self.sync_state
+        steps, before = s.steps, (s.offset_at(t4) if s.ready else 0.0)
+        s.add(t1, f["mcu_rx_us"], f["mcu_tx_us"], t4, asym_us)
+        if s.steps != steps:
+            log.warning("head on %s: its clock stepped by %+.3f s against the host's; clock model restarted",
+                        getattr(self.link, "url", "?"), (s.offset_at(t4) - before) * 1e-6)
         self._last_sync = self.clock.now()
 
     @property

@@ -26,6 +26,12 @@ neither a single lucky exchange nor the one-sided tail sets it. Its prior costs 
 of envelope per ``drift_sigma_ppm`` of drift (the MCU oscillator's tolerance), so a
 baseline that a few exchanges leave undetermined does not tilt the line.
 
+A clock that steps (a host suspend stops CLOCK_MONOTONIC while the MCU counts on; an MCU
+reset behind a UART the host keeps open) makes one direction's delay, against the model,
+more than :data:`STEP_US` below zero — faster than instantaneous, which no queueing does.
+The exchanges before it describe another clock, so the window restarts from that exchange
+(:attr:`ClockSync.steps` counts it; the drift, the oscillator's, is kept).
+
 A reply longer than its request spends longer on a slow wire: :meth:`add` takes that
 known down − up difference (``asym_us``, the two frames' serialisation times; link latency
 is the same both ways) and removes it from ``d``. :meth:`mcu_to_host` maps MCU µs (e.g.
@@ -43,6 +49,9 @@ from ..errors import DeviceError
 
 _DRIFT_SEARCH_PPM = 2000.0   # the drift is searched in ±this (an MCU oscillator is far better)
 DRIFT_QUANTILE = 0.1         # the drift fits each direction's lower tenth, not its single minimum
+# µs: a one-way delay this far below zero against the model is a clock step. Queueing only adds
+# delay; the model's own error is tens of µs (a drift off by 10 ppm over the 256 s window: 2.6 ms)
+STEP_US = 20_000.0
 
 
 @njit(cache=True)
@@ -92,6 +101,7 @@ class ClockSync:
         self.t_ref = 0.0          # host s
         self.count = 0
         self.rejected = 0
+        self.steps = 0            # clock steps seen (the window restarted at each)
 
     @property
     def ready(self) -> bool:
@@ -108,7 +118,13 @@ class ClockSync:
         if u + d + asym_us < 0:  # a negative round trip: impossible unless the clocks stepped
             self.rejected += 1
             return
-        self._ex.append((0.5 * (t1 + t4), u, d))
+        t_mid = 0.5 * (t1 + t4)
+        if self._ex:
+            theta = self.offset_at(t_mid)
+            if min(u - theta, d + theta) < -STEP_US:
+                self._ex.clear()          # the old exchanges describe the clock before the step
+                self.steps += 1
+        self._ex.append((t_mid, u, d))
         self.count += 1
         self._fit()
 

@@ -165,3 +165,89 @@ def test_a_reply_longer_than_its_request_on_a_slow_wire():
         _exchange(known, mcu, t, up, down, asym_us=(36 - 20) / rate * 1e6)
     assert plain.offset_at(11.0) - 5_000_000.0 == pytest.approx(-86.8, abs=1.0)
     assert known.offset_at(11.0) - 5_000_000.0 == pytest.approx(0.0, abs=1.0)
+
+
+@pytest.mark.parametrize("step_s", [3.0, -40.0])
+def test_a_clock_step_restarts_the_model(step_s):
+    """The MCU clock jumps by ``step_s`` against the host's while the link stays open: +3 s
+    is a host suspend (CLOCK_MONOTONIC stops, the MCU counts on), −40 s an MCU reset behind
+    a UART. The exchanges before the step describe another clock; kept in the window, their
+    minima would hold the offset half-way between the two (±1.5 s, ±20 s) until 256 newer
+    ones had pushed them out. Truth by hand: after the step the offset is off_us + step."""
+    off_us = 7_000_000_000.0
+    step_us = step_s * 1e6
+    t_step = 160.0
+
+    def mcu(t):
+        return off_us + t * 1e6 + (step_us if t >= t_step else 0.0)
+
+    sync = ClockSync()
+    rng = np.random.default_rng(1)
+    t = 100.0
+    while t < t_step - 0.5:           # 1 Hz, with one-sided waits as on a busy link
+        _exchange(sync, mcu, t, 250e-6 + rng.uniform(0, 50e-6),
+                  250e-6 + rng.uniform(0, 50e-6) + (rng.uniform(0, 5e-3) if rng.random() < 0.5 else 0.0))
+        t += 1.0
+    assert abs(sync.offset_at(t) - off_us) < 30.0 and sync.steps == 0
+    t = t_step + 0.25
+    for k in range(5):
+        _exchange(sync, mcu, t, 250e-6 + rng.uniform(0, 50e-6), 250e-6 + rng.uniform(0, 50e-6))
+        # from the first exchange after the step on: the new clock's offset
+        assert abs(sync.offset_at(t) - (off_us + step_us)) < 60.0, k
+        t += 1.0
+    assert sync.steps == 1
+    assert abs(sync.drift) < 5e-6            # the oscillator's drift is kept: a step is not a slope
+    assert abs(sync.mcu_to_host(mcu(t)) - t) < 60e-6
+
+
+def test_queueing_never_counts_as_a_step():
+    """A reply that waited 40 ms behind a long frame on a slow wire (or a host that read it
+    late) is a one-sided delay: it only adds, so it never looks like a clock step."""
+    off_us = 1_000_000.0
+
+    def mcu(t):
+        return off_us + t * 1e6
+
+    sync = ClockSync()
+    for k in range(20):
+        _exchange(sync, mcu, 10.0 + k, 300e-6, 300e-6 + (40e-3 if k % 3 == 0 else 0.0))
+        _exchange(sync, mcu, 10.5 + k, 300e-6 + (40e-3 if k % 4 == 0 else 0.0), 300e-6)
+    assert sync.steps == 0 and sync.count == 40
+    assert abs(sync.offset_at(30.0) - off_us) < 1.0
+
+
+def test_client_follows_a_head_clock_step_and_says_so(caplog):
+    """End to end on the simulated link at its line rate (uart-921k): the head emulator's MCU
+    clock jumps 3 s ahead (a host suspend) while the link stays open. The next exchange
+    restarts the model — the emulator's own offset is the truth — and the client logs one
+    warning with the step."""
+    import logging
+
+    from gyrostar.clock import SimulatedClock
+    from gyrostar.hil.lockstep import Lockstep, SimHead
+    from gyrostar.mocks.head_emulator import HeadEmulator
+    from gyrostar.transport.linkrate import preset
+
+    class _Sky:
+        class camera:
+            width_px = height_px = 64
+
+    clock, dev = SimulatedClock(100.0), SimulatedClock(100.0)
+    emu = HeadEmulator(_Sky(), scene=None, clock=dev, mcu_offset_us=50_000_000, drift_ppm=30.0)
+    head = SimHead(emu, dev, preset("uart-921k"), Lockstep(clock))
+    head.start()
+    client = HeadClient(head.open_link(), timeout=0.05, clock=clock, sync_every_s=1e9,
+                        link_preset=preset("uart-921k"))
+    for _ in range(20):
+        client.sync(1)
+        clock.set(clock.now() + 0.5)
+    t = clock.now()
+    assert abs(client.sync_state.offset_at(t) - emu.mcu_offset_us_at(t)) < 5.0
+    emu.mcu_offset_us += 3_000_000
+    with caplog.at_level(logging.WARNING, logger="gyrostar.head.client"):
+        client.sync(1)
+    t = clock.now()
+    assert client.sync_state.steps == 1
+    assert abs(client.sync_state.offset_at(t) - emu.mcu_offset_us_at(t)) < 5.0
+    steps = [r.getMessage() for r in caplog.records if "stepped" in r.getMessage()]
+    assert len(steps) == 1 and "+3.000 s" in steps[0], steps
