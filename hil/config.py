@@ -283,17 +283,29 @@ class Segment:
 
 @dataclass
 class Fault:
-    """A fault injected at ``at_s`` for ``seconds``: see hil/scenarios/README in FLATSAT.md."""
+    """A fault injected at ``at_s`` for ``seconds`` (a clock step: at ``at_s``, for good): see
+    the scenarios paragraph in FLATSAT.md."""
 
-    kind: Literal["head-disconnect", "link-corruption", "gyro-fifo-overrun", "gyro-nack"]
+    kind: Literal["head-disconnect", "link-corruption", "gyro-fifo-overrun", "gyro-nack", "head-clock-step"]
     at_s: float
     seconds: float = 0.0
     rate: float = 0.01                 # link-corruption: fraction of bytes corrupted
+    step_s: float = 0.0                # head-clock-step: s the head MCU's clock jumps by, the link open
+                                       # (+ ahead, as across a host suspend of the flight computer; − back)
+
+    @property
+    def end_s(self) -> float:
+        """Scenario time the fault ends (s): a clock step never ends (the clock stays where it jumped)."""
+        return math.inf if self.kind == "head-clock-step" else self.at_s + self.seconds
 
     def validate(self):
         if self.at_s < 0:
             raise ValueError(f"at_s = {self.at_s} must be ≥ 0 (s from the start of the run)")
-        if not self.seconds > 0:
+        if self.kind == "head-clock-step":
+            if not (math.isfinite(self.step_s) and abs(self.step_s) >= 0.1):
+                raise ValueError(f"step_s = {self.step_s} must be a finite jump of at least 0.1 s either way "
+                                 "(head-clock-step: what the head MCU's clock jumps by)")
+        elif not self.seconds > 0:
             raise ValueError(f"seconds = {self.seconds} must be > 0 (a fault of 0 s never fires)")
         if not 0.0 <= self.rate <= 1.0:
             raise ValueError(f"rate = {self.rate} must be in [0, 1] (link-corruption: the fraction of bytes corrupted)")

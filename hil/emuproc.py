@@ -53,6 +53,9 @@ def _child(conn, make, parent_pid):
             elif cmd == "eclipse":
                 emu.eclipse(bool(arg))
                 reply = None
+            elif cmd == "clock_step":
+                emu.step_clock(float(arg))
+                reply = None
             elif cmd == "origin":
                 truth.restart(arg)
                 reply = None
@@ -133,6 +136,10 @@ class EmulatorProcess:
 
     def eclipse(self, on: bool) -> None:
         self._call("eclipse", bool(on))
+
+    def step_clock(self, step_s: float) -> None:
+        """The emulated MCU's clock jumps by ``step_s`` (the link stays open)."""
+        self._call("clock_step", float(step_s))
 
     def set_origin(self, t0: float) -> None:
         self._call("origin", float(t0))

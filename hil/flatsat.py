@@ -451,7 +451,7 @@ def with_hot_pixels(head, calib, camera, wiring: dict):
     return HotPixelRepair(head, hot, camera.width_px)
 
 
-HEAD_FAULTS = ("head-disconnect", "link-corruption")
+HEAD_FAULTS = ("head-disconnect", "link-corruption", "head-clock-step")
 GYRO_FAULTS = ("gyro-nack",)
 
 
@@ -486,6 +486,9 @@ def preflight(cfg: hc.FlatsatConfig, scen: hc.Scenario, simulated_clock: bool = 
         if f.kind in GYRO_FAULTS and not emulated_gyro(cfg):
             raise ConfigError(f"scenario '{scen.name}' injects '{f.kind}', which needs the emulated gyro "
                               f"(gyro.kind = '{cfg.gyro.kind}')")
+        if f.kind == "head-clock-step" and cfg.head.kind != "emulator":
+            raise ConfigError(f"scenario '{scen.name}' injects 'head-clock-step', which needs the head emulator "
+                              f"(head.kind = \"emulator\"; the firmware host program keeps its own clock)")
         if f.kind == "gyro-nack" and emulated_gyro(cfg) and cfg.gyro.emulator_bus == "spi":
             raise ConfigError(f"scenario '{scen.name}' injects 'gyro-nack', which an SPI bus cannot give (it has "
                               "no acknowledge): set gyro.emulator_bus = \"i2c\"")
@@ -835,7 +838,7 @@ class FaultPlan:
         self.in_eclipse = False
         self._head_t = -math.inf     # the head's faults are applied up to here (only forward)
         # the times a head fault or an eclipse starts or ends, sorted (head_events_due)
-        edges = {x for f in self.faults if f.kind in HEAD_FAULTS for x in (f.at_s, f.at_s + f.seconds)}
+        edges = {x for f in self.faults if f.kind in HEAD_FAULTS for x in (f.at_s, f.end_s) if x < math.inf}
         self._head_edges = sorted(edges | {x for a, b in self.eclipse for x in (a, b)})
 
     def start(self, t0: float, clock) -> None:
@@ -894,7 +897,7 @@ class FaultPlan:
         for i, f in enumerate(self.faults):
             if (f.kind in HEAD_FAULTS) != head:
                 continue
-            on = f.at_s <= t < f.at_s + f.seconds
+            on = f.at_s <= t < f.end_s
             if on and i not in self.active:
                 self.active.add(i)
                 self._set(f, True)
@@ -920,6 +923,8 @@ class FaultPlan:
             dev = self.head_emulator or self.firmware_head
             if dev is not None:
                 dev.set_corruption(f.rate if on else None)
+        elif f.kind == "head-clock-step" and on and self.head_emulator is not None:
+            self.head_emulator.step_clock(f.step_s)
 
     def _set_eclipse(self, on: bool) -> None:
         """No starlight reaches the sensor (stars' signal 0; background and noise stay)."""

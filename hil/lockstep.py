@@ -235,6 +235,9 @@ class SimHead:
     def eclipse(self, on: bool) -> None:
         self.emu.eclipse(bool(on))
 
+    def step_clock(self, step_s: float) -> None:
+        self.emu.step_clock(step_s)
+
     def set_origin(self, t0: float) -> None:
         """The scenario truth is shared in-process: nothing to forward."""
 

@@ -105,6 +105,12 @@ MAX_FRAMES_AHEAD = 3
 # exchange was. It waits for such a gap while this much overdue (s), then goes anyway.
 SYNC_OVERDUE_S = 2.0
 SYNC_GAP_MARGIN_S = 1e-3   # the gap must hold both wire times plus this (host and head turnaround)
+# A frame's exposure ends before its bytes arrive (by the readout and the wire time: ≤ ~0.1 s
+# for the largest window set on the slowest link). Mapped through the clock model, an end more
+# than FRAME_CLOCK_TOL_S after the arrival or FRAME_AGE_MAX_S before it means the model no longer
+# fits the head's clock (it stepped): the frame is not used and a time sync goes at once
+FRAME_CLOCK_TOL_S = 2e-3
+FRAME_AGE_MAX_S = 0.5
 
 
 class StreamPort(HeadPort):
@@ -462,6 +468,13 @@ class StreamPort(HeadPort):
             got = self._sets.get(key)
         self.frames_received += 1
         self.wire_bytes += fr.wire_bytes
+        if fr.t_mid_host == fr.t_mid_host:
+            age = fr.t_rx - (fr.t_mid_host + 0.5 * fr.exposure_us * 1e-6)      # exposure end → arrival (s)
+            if not -FRAME_CLOCK_TOL_S <= age <= FRAME_AGE_MAX_S:
+                self.frames_unmatched += 1
+                self.unmatched_why["clock"] += 1
+                self.client.request_sync()
+                return
         t_mid = fr.t_mid_host if fr.t_mid_host == fr.t_mid_host else fr.t_rx     # nan before time sync
         if self._t_mid[0] != self._t_mid[0]:
             self._t_mid[0] = t_mid

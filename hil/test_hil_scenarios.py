@@ -144,3 +144,25 @@ def test_bench_without_truth(flatsat_config, run_dir):
     # at rest the 3σ attitude bound holds a few arcsec to tens of arcsec, not degrees
     assert 0 < h["attitude_3sigma_arcsec_cross_median"] < 120.0
     _check_replay(res)
+
+
+def test_head_clock_steps_keep_tracking(flatsat_config, run_dir):
+    """The head MCU's clock jumps 3 s ahead and 1.5 s back with the link open: each jump
+    costs the one frame stamped outside its arrival, a TIME_SYNC restarts the clock model,
+    and the loop stays in TRACK with its mid-exposure times on the new clock."""
+    if flatsat_config.head.kind != "emulator":
+        pytest.skip("the clock step is the head emulator's (the firmware host program keeps its own clock)")
+    scen, res, log = _run(flatsat_config, "clock_step", run_dir)
+    out = log["outputs"]
+    t = out["t"] - log["t0"]
+    assert res["link"]["clock_steps"] == 2 and res["counters"]["head_reconnects"] == 0
+    if "stream" in res:     # the frames stamped outside their arrival are not used
+        assert 1 <= res["stream"]["unmatched_why"].get("clock", 0) <= 4
+    changes = [(round(tc - log["t0"], 3), a, b) for tc, a, b in res["counters"]["mode_changes"]]
+    assert np.all(out["mode"][t > 2.0] == R.MODE_TRACK), changes
+    assert res["attitude_error_arcsec_1sigma"] <= ARCSEC_TRACK_MAX, res
+    for f in scen.faults:
+        mid = out[(t > f.at_s + 0.5) & (t < f.at_s + 1.5) & np.isfinite(out["t_mid"])]
+        assert len(mid) and np.all((mid["t"] - mid["t_mid"] > 0.0) & (mid["t"] - mid["t_mid"] < 0.1))
+    assert res["samples_lost"] == 0
+    _check_replay(res)

@@ -150,6 +150,12 @@ class HeadEmulator:
         self.cnt = dict(rx_frames=0, crc_errors=0, framing_errors=0, overruns=0, rejected=0, last_error=0)
         self._boot_us = self.mcu_us()
 
+    def step_clock(self, step_s: float) -> None:
+        """The MCU clock jumps by ``step_s`` (s) against the host's and runs on from there, the
+        link open (+: a host suspend, CLOCK_MONOTONIC stopped while the MCU counted on; −:
+        set back). :meth:`mcu_offset_us_at` is the truth after it."""
+        self.mcu_offset_us += int(round(step_s * 1e6))
+
     def eclipse(self, on: bool) -> None:
         """No starlight reaches the sensor while ``on`` (stars' signal 0; background and noise stay)."""
         sky = self._sky_for(self.exposure_us)

@@ -51,6 +51,8 @@ from .timesync import ClockSync
 
 log = logging.getLogger(__name__)
 
+RESYNC_AFTER_STEP = 4     # TIME_SYNC exchanges due at once after the clock model restarts at a step
+
 
 class HeadTimeoutError(DeviceError):
     """The head did not give a valid reply in time, after every retry."""
@@ -123,9 +125,11 @@ class HeadClient:
             first_seq = getattr(link, "recorded_first_seq", lambda: None)()
         self._seq = (secrets.randbits(16) if first_seq is None else int(first_seq) - 1) & 0xFFFF
         self._last_sync = -1e300
+        self._resync = 0          # exchanges still due at once: the model restarted from one exchange
         self.info: dict | None = None
         self.stats = {"requests": 0, "retries": 0, "corrupt": 0, "stale": 0, "pipeline_fallbacks": 0,
-                      "sync_echo_mismatch": 0, "tx_bytes": 0, "rx_bytes": 0, "window_sets_rejected": 0}
+                      "sync_echo_mismatch": 0, "tx_bytes": 0, "rx_bytes": 0, "window_sets_rejected": 0,
+                      "clock_steps": 0}
         self._stream_seq: int | None = None
         self._assembler = FrameAssembler()
         self._frames = FrameQueue()
@@ -328,8 +332,14 @@ class HeadClient:
         steps, before = s.steps, (s.offset_at(t4) if s.ready else 0.0)
         s.add(t1, f["mcu_rx_us"], f["mcu_tx_us"], t4, asym_us)
         if s.steps != steps:
+            # the model now rests on this one exchange, one-sided more often than not on a busy
+            # link: the next few are due at once (a streaming caller sends each in a quiet gap)
+            self._resync = RESYNC_AFTER_STEP
+            self.stats["clock_steps"] += 1
             log.warning("head on %s: its clock stepped by %+.3f s against the host's; clock model restarted",
                         getattr(self.link, "url", "?"), (s.offset_at(t4) - before) * 1e-6)
+        elif self._resync:
+            self._resync -= 1
         self._last_sync = self.clock.now()
 
     @property
@@ -338,9 +348,15 @@ class HeadClient:
         link preset: unknown, taken as at once)."""
         return self._uplink.busy_until if self._uplink is not None else float("-inf")
 
+    def request_sync(self) -> None:
+        """Make a TIME_SYNC due (and overdue) now: a caller that found an MCU time it cannot
+        believe (a frame stamped after it arrived) wants the clock model checked at once."""
+        self._last_sync = -1e300
+
     def sync_due(self, t: float) -> bool:
-        """:meth:`maybe_sync` at client time ``t`` (s) would exchange TIME_SYNCs."""
-        return t - self._last_sync >= self.sync_every_s
+        """:meth:`maybe_sync` at client time ``t`` (s) would exchange TIME_SYNCs (at once
+        after a clock step, for :data:`RESYNC_AFTER_STEP` exchanges)."""
+        return t - self._last_sync >= (0.0 if self._resync else self.sync_every_s)
 
     def maybe_sync(self, n: int = 2) -> None:
         if self.sync_due(self.clock.now()):

@@ -251,3 +251,10 @@ def test_client_follows_a_head_clock_step_and_says_so(caplog):
     assert abs(client.sync_state.offset_at(t) - emu.mcu_offset_us_at(t)) < 5.0
     steps = [r.getMessage() for r in caplog.records if "stepped" in r.getMessage()]
     assert len(steps) == 1 and "+3.000 s" in steps[0], steps
+    # the model rests on one exchange: the next RESYNC_AFTER_STEP are due at once, then 1 Hz again
+    from gyrostar.head.client import RESYNC_AFTER_STEP
+
+    for _ in range(RESYNC_AFTER_STEP):
+        assert client.sync_due(clock.now())
+        client.sync(1)
+    assert not client.sync_due(clock.now()) and len(client.sync_state.exchanges) == 5

@@ -50,6 +50,8 @@ def test_missing_i2c_bus_exits_3_naming_it(tmp_path):
     ({"kind": "serial", "url": "socket://127.0.0.1:9"}, {"kind": "emulator"}, "disconnect", "head-disconnect"),
     ({"kind": "serial", "url": "socket://127.0.0.1:9"}, {"kind": "emulator"}, "corruption", "link-corruption"),
     ({"kind": "serial", "url": "socket://127.0.0.1:9"}, {"kind": "emulator"}, "eclipse", "eclipse"),
+    ({"kind": "serial", "url": "socket://127.0.0.1:9"}, {"kind": "emulator"}, "clock_step", "head-clock-step"),
+    ({"kind": "firmware-host"}, {"kind": "emulator"}, "clock_step", "keeps its own clock"),
     ({"kind": "emulator"}, {"kind": "emulator", "model": "l3gd20h"}, "sim2", "l3gd20h"),
 ])
 def test_impossible_mix_refused_at_load(tmp_path, head, gyro, scenario, words):
