@@ -232,7 +232,7 @@ def test_time_sync_replies_behind_streamed_frames_on_a_slow_uart(fw):
         head.start_stream(10_000, 10_000, PixelFormat.PACKED10)
         head.next_frame(1.0)
         head.sync_state = ClockSync()           # only exchanges made while streaming
-        for _ in range(30):
+        for _ in range(60):                     # ~1 in 6 replies waits ms behind frame bytes
             head.next_frame(0.05)
             head.sync(1)
         head.stop_stream()
@@ -245,6 +245,6 @@ def test_time_sync_replies_behind_streamed_frames_on_a_slow_uart(fw):
     print(f"offset error {offset:.0f} µs; midpoints median {np.median(midpoints):.0f} µs, "
           f"min {midpoints.min():.0f} µs, {np.sum(midpoints < -2000.0)} below -2 ms of {len(ex)} exchanges; "
           f"line {uart.name}")
-    assert len(ex) >= 25
+    assert len(ex) >= 50
     assert np.sum(midpoints < -2000.0) >= 3     # replies that waited: one-sided, ms
     assert abs(offset) < 500.0
