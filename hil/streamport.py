@@ -108,9 +108,10 @@ SYNC_GAP_MARGIN_S = 1e-3   # the gap must hold both wire times plus this (host a
 # A frame's exposure ends before its bytes arrive (by the readout and the wire time: ≤ ~0.1 s
 # for the largest window set on the slowest link). Mapped through the clock model, an end more
 # than FRAME_CLOCK_TOL_S after the arrival or FRAME_AGE_MAX_S before it means the model no longer
-# fits the head's clock (it stepped): the frame is not used and a time sync goes at once
+# fits the head's clock (it stepped): the frame is not used and a time sync goes at once. (A host
+# that stalls the reading for longer loses its frames to this too; they would be a second old.)
 FRAME_CLOCK_TOL_S = 2e-3
-FRAME_AGE_MAX_S = 0.5
+FRAME_AGE_MAX_S = 1.0
 
 
 class StreamPort(HeadPort):
