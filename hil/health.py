@@ -50,6 +50,7 @@ def health(out: np.ndarray, gyro_hz: float, counters: dict | None = None, link: 
     if link:
         res["link_corrupt_frames"] = int(link.get("corrupt", 0))
         res["link_timeouts_retries"] = int(link.get("retries", 0))
+        res["head_clock_steps"] = int(link.get("clock_steps", 0))
     return res
 
 

@@ -665,7 +665,8 @@ def human_summary(r: dict) -> str:
                      f"stars tracked median {h['stars_tracked_median']:.0f}, frames "
                      f"{h.get('frames_hz', 0):.1f} Hz, attitude 3σ (cross, median) "
                      f"{f(h.get('attitude_3sigma_arcsec_cross_median'), '.1f')}″, "
-                     f"link errors {h['link_error_outputs']}")
+                     f"link errors {h['link_error_outputs']}"
+                     + (f", head clock steps {h['head_clock_steps']}" if h.get("head_clock_steps") else ""))
     cal = r.get("calibration")
     lines.append(f"  calibration: {cal['path']} (sha256 {cal['sha256'][:16]})" if cal else
                  "  calibration: none (nominal camera and gyro mounting)")

@@ -198,7 +198,7 @@ def test_fast_head_clock_steps_keep_tracking(tmp_path):
     scen = hc.load_scenario("clock_step")
     res = run_flatsat(hc.load_flatsat(), scen, duration=scen.duration_s, seed=3, folder=tmp_path, plots=False,
                       status=False, fast=True)
-    assert res["link"]["clock_steps"] == 2
+    assert res["link"]["clock_steps"] == 2 and res["health"]["head_clock_steps"] == 2     # the summary says so
     assert res["stream"]["unmatched_why"] == {"clock": 2}
     assert res["samples_lost"] == 0 and res["counters"]["head_reconnects"] == 0
     log = load_log(res["log"])
