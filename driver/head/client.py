@@ -52,6 +52,7 @@ from .timesync import ClockSync
 log = logging.getLogger(__name__)
 
 RESYNC_AFTER_STEP = 4     # TIME_SYNC exchanges due at once after the clock model restarts at a step
+_NEVER = -1e300           # host s of the last TIME_SYNC before any (a sync is due and overdue)
 
 
 class HeadTimeoutError(DeviceError):
@@ -124,7 +125,7 @@ class HeadClient:
         if first_seq is None:
             first_seq = getattr(link, "recorded_first_seq", lambda: None)()
         self._seq = (secrets.randbits(16) if first_seq is None else int(first_seq) - 1) & 0xFFFF
-        self._last_sync = -1e300
+        self._last_sync = _NEVER
         self._resync = 0          # exchanges still due at once: the model restarted from one exchange
         self.info: dict | None = None
         self.stats = {"requests": 0, "retries": 0, "corrupt": 0, "stale": 0, "pipeline_fallbacks": 0,
@@ -351,7 +352,7 @@ class HeadClient:
     def request_sync(self) -> None:
         """Make a TIME_SYNC due (and overdue) now: a caller that found an MCU time it cannot
         believe (a frame stamped after it arrived) wants the clock model checked at once."""
-        self._last_sync = -1e300
+        self._last_sync = _NEVER
 
     def sync_due(self, t: float) -> bool:
         """:meth:`maybe_sync` at client time ``t`` (s) would exchange TIME_SYNCs (at once
