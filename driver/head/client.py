@@ -53,10 +53,19 @@ log = logging.getLogger(__name__)
 
 RESYNC_AFTER_STEP = 4     # TIME_SYNC exchanges due at once after the clock model restarts at a step
 _NEVER = -1e300           # host s of the last TIME_SYNC before any (a sync is due and overdue)
+# A capture's exposure and readout happen after its request left and before its reply came:
+# mapped by the clock model more than this outside them (s), the model is stale (the head's
+# clock stepped) and the client re-synchronises before it gives the capture a host time
+CAPTURE_CLOCK_TOL_S = 2e-3
 
 
 class HeadTimeoutError(DeviceError):
     """The head did not give a valid reply in time, after every retry."""
+
+
+class HeadClockError(DeviceError):
+    """A capture's MCU times lie outside its own request and reply even after the clock
+    model was re-synchronised: no host time can be given to it."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -130,7 +139,7 @@ class HeadClient:
         self.info: dict | None = None
         self.stats = {"requests": 0, "retries": 0, "corrupt": 0, "stale": 0, "pipeline_fallbacks": 0,
                       "sync_echo_mismatch": 0, "tx_bytes": 0, "rx_bytes": 0, "window_sets_rejected": 0,
-                      "clock_steps": 0}
+                      "clock_steps": 0, "capture_clock_resyncs": 0}
         self._stream_seq: int | None = None
         self._assembler = FrameAssembler()
         self._frames = FrameQueue()
@@ -373,9 +382,9 @@ class HeadClient:
         self.maybe_sync()
         msg = MsgType.DARK if dark else MsgType.CAPTURE
         # A lost reply means another exposure on retry: the new capture_no tells them apart.
-        f, _, _ = self.request(msg, timeout=self.timeout + self._exposure_s)
+        f, t_sent, t_rx = self.request(msg, timeout=self.timeout + self._exposure_s)
         windows = self.window_data(pixel_format, f["capture_no"]) if fetch else None
-        return self._capture_of(f, windows)
+        return self._capture_of(f, windows, t_sent, t_rx)
 
     def capture_windows(self, spans, pixel_format: int = PixelFormat.U16) -> Capture:
         """SET_WINDOWS, CAPTURE and the first WINDOW_DATA page sent back to back, then their
@@ -389,16 +398,22 @@ class HeadClient:
         for msg, payload in ((MsgType.SET_WINDOWS, encode_spans(spans)), (MsgType.CAPTURE, b""),
                              (MsgType.WINDOW_DATA, encode_request(MsgType.WINDOW_DATA, start=0,
                                                                   pixel_format=pixel_format))):
-            seqs[self._send(msg, payload)[0]] = int(msg)
+            seq, t_write = self._send(msg, payload)
+            seqs[seq] = int(msg)
+            if msg == MsgType.CAPTURE:
+                t_sent = t_write
         pending = dict(seqs)
         replies = {}
+        t_rx = float("nan")
         deadline = self.clock.now() + self.timeout + self._exposure_s
         while pending:
             got = self._await(pending, deadline)
             if got is None:
                 break
-            frame, _ = got
+            frame, t_got = got
             msg = pending.pop(frame.seq)
+            if msg == MsgType.CAPTURE:
+                t_rx = t_got
             try:
                 replies[msg] = decode_reply(frame, expect=msg)
             except DeviceError:
@@ -412,7 +427,7 @@ class HeadClient:
         windows = list(w["windows"])
         if w["count"] < w["total"]:
             windows += self.window_data(pixel_format, c["capture_no"], start=w["count"])
-        return self._capture_of(c, windows)
+        return self._capture_of(c, windows, t_sent, t_rx)
 
     def find_spots(self, n_sigma: float = 6.0, max_spots: int = 40, box: int = 7,
                    pixel_format: int = PixelFormat.PACKED10) -> SpotCapture:
@@ -421,7 +436,8 @@ class HeadClient:
         (rounded to 1/16), ``box`` the window side (px, odd)."""
         self.maybe_sync()
         req = encode_request(MsgType.FIND_SPOTS, n_sigma_x16=int(round(n_sigma * 16)), max_spots=max_spots, box=box)
-        f, _, _ = self.request(MsgType.FIND_SPOTS, req, timeout=self.timeout + self._exposure_s + self.spot_scan_s)
+        f, t_sent, t_rx = self.request(MsgType.FIND_SPOTS, req,
+                                       timeout=self.timeout + self._exposure_s + self.spot_scan_s)
         f = dict(f, plane=Plane.LIGHT)
         windows = self.window_data(pixel_format, f["capture_no"]) if f["n_windows"] else []
         ids = [w.window_id for w in windows]
@@ -434,15 +450,44 @@ class HeadClient:
             if int(np.sum(rows[:, 3] - rows[:, 2])) != len(w.pixels):
                 raise DeviceError(f"FIND_SPOTS: window {w.window_id} has {len(w.pixels)} pixels, its box "
                                   f"{int(np.sum(rows[:, 3] - rows[:, 2]))}")
-        return SpotCapture(self._capture_of(f, windows), f["spots"], box, spans, f["background_x16"] / 16.0,
-                           f["sigma_x16"] / 16.0, f["threshold_x16"] / 16.0, f["candidates"])
+        return SpotCapture(self._capture_of(f, windows, t_sent, t_rx), f["spots"], box, spans,
+                           f["background_x16"] / 16.0, f["sigma_x16"] / 16.0, f["threshold_x16"] / 16.0,
+                           f["candidates"])
 
-    def _capture_of(self, f: dict, windows) -> Capture:
+    def _capture_of(self, f: dict, windows, t_sent: float, t_rx: float) -> Capture:
+        """The capture of reply ``f`` to a request sent at ``t_sent`` and answered at
+        ``t_rx`` (host s), its mid-time mapped to the host clock."""
         self._exposure_s = f["exposure_us"] * 1e-6
-        mid = 0.5 * (f["t_start_us"] + f["t_end_us"])
-        t_mid = self.sync_state.mcu_to_host(mid) if self.sync_state.ready else float("nan")
+        t_mid = self._mid_within(f, t_sent, t_rx)
         return Capture(f["capture_no"], f["sensor_frame"], f["t_start_us"], f["t_end_us"], f["exposure_us"],
                        f["gain_x16"], f["n_windows"], f["n_pixels"], f["plane"], t_mid, windows)
+
+    def _mid_within(self, f: dict, t_sent: float, t_rx: float) -> float:
+        """Host mid-time (s) of the capture ``f`` (nan before any time sync). Its MCU times
+        must map between its request and its reply: a model that puts them elsewhere is
+        stale (a head clock step the 1 Hz exchanges have not seen yet), so the client
+        re-synchronises at once, on a link that is idle between requests, and maps again;
+        :class:`HeadClockError` if they still fall outside."""
+        s = self.sync_state
+        if not s.ready:
+            return float("nan")
+        t0_us, t1_us = f["t_start_us"], f["t_end_us"]
+
+        def inside() -> bool:
+            return (s.mcu_to_host(t0_us) >= t_sent - CAPTURE_CLOCK_TOL_S
+                    and s.mcu_to_host(t1_us) <= t_rx + CAPTURE_CLOCK_TOL_S)
+
+        if not inside():
+            self.stats["capture_clock_resyncs"] += 1
+            off = s.mcu_to_host(t0_us) - t_sent
+            self.request_sync()
+            self.sync(2)
+            if not inside():
+                raise HeadClockError(
+                    f"head on {getattr(self.link, 'url', '?')}: capture {f['capture_no']} was stamped "
+                    f"{off:+.3f} s from its request, and still {s.mcu_to_host(t0_us) - t_sent:+.3f} s "
+                    "after a time sync")
+        return s.mcu_to_host(0.5 * (t0_us + t1_us))
 
     _exposure_s = LIMITS["exposure_default_us"] * 1e-6
 

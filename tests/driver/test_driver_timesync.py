@@ -260,3 +260,100 @@ def test_client_follows_a_head_clock_step_and_says_so(caplog):
         assert client.sync_due(clock.now())
         client.sync(1)
     assert not client.sync_due(clock.now()) and len(client.sync_state.exchanges) == 5
+
+
+@pytest.fixture(scope="module")
+def sky():
+    from gyrostar.catalog import load_catalog
+    from gyrostar.mocks.sky import Sky
+
+    return Sky(load_catalog("hip2", 7.5), "xing2012", seed=3)
+
+
+def _stepping_head(sky, link_wrap=None):
+    """A head emulator on the simulated uart-921k link in lock-step (MCU clock 50 s ahead,
+    30 ppm fast), a client with a model from 10 exchanges and 1 Hz syncs turned off."""
+    from gyrostar.clock import SimulatedClock
+    from gyrostar.hil.lockstep import Lockstep, SimHead
+    from gyrostar.mocks.head_emulator import ConstantRateScene, HeadEmulator
+    from gyrostar.transport.linkrate import preset
+
+    q0 = np.array([0.0, 0.0, 0.0, 1.0])
+    clock, dev = SimulatedClock(100.0), SimulatedClock(100.0)
+    emu = HeadEmulator(sky, ConstantRateScene(q0, t0=100.0), clock=dev, mcu_offset_us=50_000_000, drift_ppm=30.0,
+                       noise=False)
+    head = SimHead(emu, dev, preset("uart-921k"), Lockstep(clock))
+    head.start()
+    link = head.open_link()
+    client = HeadClient(link if link_wrap is None else link_wrap(link), timeout=0.05, clock=clock,
+                        sync_every_s=1e9, link_preset=preset("uart-921k"))
+    for _ in range(10):
+        client.sync(1)
+        clock.set(clock.now() + 0.5)
+    client.set_windows(np.array([[1, 10, 10, 20], [1, 11, 10, 20]], np.int32))
+    return clock, emu, client
+
+
+def _true_host_s(emu, mcu_us: float, t_near: float) -> float:
+    return (mcu_us - emu.mcu_offset_us_at(t_near)) * 1e-6
+
+
+@pytest.mark.parametrize("how", ["capture", "capture_windows"])
+def test_a_capture_after_a_head_clock_step_gets_its_own_time(sky, how):
+    """Request mode: the head's clock jumps 3 s ahead between two captures, with the 1 Hz
+    time sync far off. The capture's MCU times then map 3 s after its own reply; the client
+    re-synchronises on the spot and gives the exposure its true host time (truth: the
+    emulator's offset), between the request and the reply."""
+    clock, emu, client = _stepping_head(sky)
+    before = client.capture()
+    assert abs(before.t_mid_host - _true_host_s(emu, 0.5 * (before.t_start_us + before.t_end_us),
+                                                before.t_mid_host)) < 20e-6
+    clock.set(clock.now() + 0.3)
+    emu.mcu_offset_us += 3_000_000
+    t_ask = clock.now()
+    cap = client.capture() if how == "capture" else client.capture_windows(
+        np.array([[1, 10, 10, 20], [1, 11, 10, 20]], np.int32))
+    mid_mcu = 0.5 * (cap.t_start_us + cap.t_end_us)
+    assert t_ask < cap.t_mid_host < clock.now()
+    assert abs(cap.t_mid_host - _true_host_s(emu, mid_mcu, cap.t_mid_host)) < 20e-6
+    assert client.stats["capture_clock_resyncs"] == 1 and client.sync_state.steps == 1
+    after = client.capture()          # mapped by the restarted model, no further resync
+    assert client.stats["capture_clock_resyncs"] == 1
+    assert abs(after.t_mid_host - _true_host_s(emu, 0.5 * (after.t_start_us + after.t_end_us),
+                                               after.t_mid_host)) < 20e-6
+
+
+def test_a_capture_that_no_time_sync_explains_is_refused(sky):
+    """The same step with every TIME_SYNC reply lost on the way back: the model cannot be
+    mended, so the capture is refused with HeadClockError (a DeviceError: one frame lost in
+    the loop) instead of being given a time 3 s off."""
+    from gyrostar.errors import DeviceError
+    from gyrostar.head import HeadClockError
+    from gyrostar.protocol import MsgType
+    from gyrostar.protocol.defs import REPLY_FLAG
+    from gyrostar.protocol.framing import decode_frame
+
+    class DropSyncReplies:
+        """The link, less the TIME_SYNC replies once ``on``."""
+        on = False
+
+        def __init__(self, link):
+            self.link = link
+
+        def recv(self, timeout):
+            got = self.link.recv(timeout)
+            if self.on and got is not None and decode_frame(got[1]).type == (MsgType.TIME_SYNC | REPLY_FLAG):
+                return None
+            return got
+
+        def __getattr__(self, name):
+            return getattr(self.link, name)
+
+    wrap = []
+    clock, emu, client = _stepping_head(sky, lambda link: wrap.append(DropSyncReplies(link)) or wrap[0])
+    client.capture()
+    emu.mcu_offset_us += 3_000_000
+    wrap[0].on = True
+    with pytest.raises(HeadClockError, match=r"capture \d+ was stamped \+3\.0\d\d s from its request") as e:
+        client.capture()
+    assert isinstance(e.value, DeviceError) and client.stats["capture_clock_resyncs"] == 1
