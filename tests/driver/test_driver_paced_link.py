@@ -100,17 +100,29 @@ def test_stream_over_a_slow_uart_drops_at_the_head_never_queues(fw):
 
 
 def test_stream_over_usb_fs_keeps_every_frame(fw):
+    """2.1 kB in 2.4 ms of a 10 ms period: nothing to drop. The relay and the head are
+    processes of their own on a shared machine, and one held up for tens of ms makes the head
+    drop frames for backpressure (15 of 200 with two busy loops beside the test): the 2 s
+    stream is run up to 3 times and one must keep within the bounds. A link or a head that
+    drops frames of its own fails all three."""
     spans = np.array([[w, 200 + r, 50 * w, 50 * w + 20] for w in range(10) for r in range(8)], np.int32)
-    relay, serial, head = _client(fw, "usb-fs")
-    try:
-        frames, stop = _stream(head, spans, 2.0)
-    finally:
-        serial.close()
-        relay.close()
-    # 2.1 kB in 2.4 ms of a 10 ms period: nothing to drop, but a shared, loaded machine may
-    # hold the relay or the head up now and then (then the simulation is slower, never faster)
+    runs = []
+    for _ in range(3):
+        relay, serial, head = _client(fw, "usb-fs")
+        try:
+            frames, stop = _stream(head, spans, 2.0)
+            while (fr := head.next_frame(0.05)) is not None:      # sent before the stop, still on the way
+                frames.append(fr)
+        finally:
+            serial.close()
+            relay.close()
+        runs.append((stop["backpressure"], stop["dropped"], stop["frames"], len(frames)))
+        if stop["backpressure"] <= 6 and stop["dropped"] <= 8:
+            break
+    print(f"runs (backpressure, dropped, frames sent, frames received): {runs}")
     assert stop["backpressure"] <= 6 and stop["dropped"] <= 8
-    assert len(frames) >= 2.0 * 100 - stop["dropped"] - 10
+    assert stop["frames"] >= 2.0 * 100 - stop["dropped"] - 10
+    assert len(frames) == stop["frames"]                     # every frame the head sent came through
     lag = np.array([f.t_rx - f.t_mid_host for f in frames])
     assert np.median(lag) < 0.005 + preset("usb-fs").wire_time(2100) + 0.002
 
