@@ -144,7 +144,8 @@ def test_ctrl_c_during_start_up(tmp_path):
 
 
 @pytest.mark.parametrize("to_thread", [False, True])
-def test_ctrl_c_held_while_the_log_is_created_is_recorded(tmp_path, monkeypatch, to_thread, ctrl_c_raises):
+def test_ctrl_c_held_while_the_log_is_created_is_recorded(tmp_path, monkeypatch, to_thread, ctrl_c_raises,
+                                                          wait_signal_held):
     """A Ctrl-C that arrives while the log and its META come into being is held until META is
     on disk, then delivered where the log records it: the log says the run was interrupted
     (once the held signal was delivered outside that guard and the log said nothing). The
@@ -169,7 +170,7 @@ def test_ctrl_c_held_while_the_log_is_created_is_recorded(tmp_path, monkeypatch,
                 signal.pthread_kill(other.ident, signal.SIGINT)
             else:
                 os.kill(os.getpid(), signal.SIGINT)     # held here until the guard lifts
-            time.sleep(0.05)        # the receiving thread has run the C handler by now
+            assert wait_signal_held()   # recorded by the run's hold, not raised here
 
     monkeypatch.setattr(lf.LogWriter, "flush", flush_then_ctrl_c)
     try:

