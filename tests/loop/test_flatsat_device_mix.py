@@ -164,11 +164,12 @@ def test_real_serial_head_with_emulated_gyro_runs(tmp_path):
         cfg = hc.load_flatsat(_cfg({"kind": "serial", "url": fw.path}, {"kind": "emulator"}, tmp_path / "f.toml"))
         cfg.calibration = str(_camera_cal(tmp_path))
         (tmp_path / "run").mkdir()
-        res = run_flatsat(cfg, hc.load_scenario("bench"), duration=2.0, seed=1, folder=tmp_path / "run",
+        res = run_flatsat(cfg, hc.load_scenario("bench"), duration=3.0, seed=1, folder=tmp_path / "run",
                           plots=False, status=False)
     # every sample of the emulated gyro read or counted lost (a loaded host may stall the real-time loop)
-    assert res["gyro_samples"] + res["samples_lost"] >= 0.9 * 2.0 * 400 and res["gyro_samples"] >= 0.5 * 2.0 * 400
+    assert res["gyro_samples"] + res["samples_lost"] >= 0.9 * 3.0 * 400 and res["gyro_samples"] >= 0.5 * 3.0 * 400
     # lost-in-space attempts over the pty: FIND_SPOTS on the host program's frame, every 0.5 s
+    # (3 s leaves room for a slow start and a timed-out attempt on a loaded machine)
     assert res["counters"]["acquisitions"] >= 2 and res["link"]["requests"] >= res["counters"]["acquisitions"]
     assert res["attitude_error_arcsec_1sigma"] is None          # no truth for a half-real flatsat
     assert "no truth" in res["wiring"]["sky"]
