@@ -14,7 +14,9 @@ Fault kinds (:class:`FaultEvent`):
   arguments such as ``corrupt_p``, ``drop_p``, ``garbage_p``);
 * ``disconnect`` — the head's pty closes for ``seconds`` and a new one opens;
 * ``gyro-nack`` — every gyro bus transaction NACKs for ``seconds``;
-* ``gyro-stall`` — the loop does not run for ``seconds`` (the FIFO overruns).
+* ``gyro-stall`` — the loop does not run for ``seconds`` (the FIFO overruns);
+* ``clock-step`` — the head MCU's clock jumps by ``settings["step_s"]`` at ``at_s``, the link
+  open (``seconds`` is 0: a step, not a span).
 """
 
 from __future__ import annotations
@@ -28,12 +30,13 @@ import numpy as np
 
 log = logging.getLogger(__name__)
 
-FAULT_KINDS = ("bytes", "disconnect", "gyro-nack", "gyro-stall")
+FAULT_KINDS = ("bytes", "disconnect", "gyro-nack", "gyro-stall", "clock-step")
 
 TRACE_DTYPE = np.dtype([
     ("t", "<f8"), ("mode", "u1"), ("flags", "<u2"), ("q", "<f8", (4,)), ("frames", "<i8"),
     ("frames_failed", "<i8"), ("head_errors", "<i8"), ("head_reconnects", "<i8"), ("gyro_errors", "<i8"),
     ("samples_lost", "<i8"), ("overruns", "<i8"), ("link_corrupt", "<i8"), ("link_retries", "<i8"),
+    ("link_clock_steps", "<i8"),
 ])
 """One row per kept loop step: last output (host s, mode, flags, q ICRS→body) and counters."""
 
@@ -48,6 +51,8 @@ class FaultEvent:
     def __post_init__(self):
         if self.kind not in FAULT_KINDS:
             raise ValueError(f"fault kind must be one of {FAULT_KINDS}, got {self.kind!r}")
+        if self.kind == "clock-step" and not abs(float(self.settings.get("step_s", 0.0))) >= 0.1:
+            raise ValueError(f"a clock-step needs settings step_s of at least 0.1 s either way, got {self.settings}")
 
 
 def rss_bytes(pid: int | str = "self") -> int:
@@ -64,6 +69,7 @@ class _Faults:
         self.emu = fs.faults.head_emulator
         self.bus = fs.faults.gyro_bus
         self.on: set[int] = set()
+        self.stepped: set[int] = set()
         self.byte_counts: list[dict] = [{} for _ in self.events]
 
     def stalled(self, t: float) -> bool:
@@ -71,6 +77,12 @@ class _Faults:
 
     def apply(self, t: float) -> None:
         for i, e in enumerate(self.events):
+            if e.kind == "clock-step":
+                if t >= e.at_s and i not in self.stepped:
+                    self.stepped.add(i)
+                    log.info("fault clock-step %+.3f s at %.2f s", e.settings["step_s"], e.at_s)
+                    self.emu.step_clock(float(e.settings["step_s"]))
+                continue
             active = e.at_s <= t < e.at_s + e.seconds
             if active and i not in self.on:
                 self.on.add(i)
@@ -175,7 +187,8 @@ def run_campaign(events, duration: float, seed: int = 1, keep_hz: float = 400.0,
                 ls = client.stats if client is not None else {}
                 trace[state["n"]] = (last["t"], last["mode"], last["flags"], last["q"], c.frames, c.frames_failed,
                                      c.head_errors, c.head_reconnects, c.gyro_errors, c.samples_lost,
-                                     sched.overruns, ls.get("corrupt", 0), ls.get("retries", 0))
+                                     sched.overruns, ls.get("corrupt", 0), ls.get("retries", 0),
+                                     ls.get("clock_steps", 0))
                 state["n"] += 1
         faults.close(t)
         rss[n_rss] = (t, rss_bytes(), rss_bytes(emu_pid))

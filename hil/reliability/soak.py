@@ -4,7 +4,8 @@
 (``make soak``). The body rate changes every 2 min (uniform ±0.4 °/s per axis); faults
 arrive as a Poisson process (mean every ``--fault-every`` s): reply-stream corruption
 (1 %), dropped bytes (0.1 %), garbage bursts, a head disconnect (1–3 s), gyro NACK bursts
-(20–200 ms) and loop stalls that overrun the gyro FIFO (0.1–0.5 s). Prints one JSON
+(20–200 ms), loop stalls that overrun the gyro FIFO (0.1–0.5 s) and head clock steps (the MCU
+clock jumps 0.1–5 s ahead or back, the link open). Prints one JSON
 object: RSS of the loop process and of the head-emulator process at the start (after the
 first minute) and at the end, plus the series; overruns per 10-minute window (first vs
 last); exceptions escaping the loop; attitude error (cross-boresight, TRACK) per window;
@@ -33,7 +34,7 @@ def random_schedule(duration: float, seed: int, every_s: float = 45.0, quiet_sta
     t = quiet_start_s
     while True:
         t += rng.expovariate(1.0 / every_s)
-        kind = rng.choice(["corrupt", "drop", "garbage", "disconnect", "gyro-nack", "gyro-stall"])
+        kind = rng.choice(["corrupt", "drop", "garbage", "disconnect", "gyro-nack", "gyro-stall", "clock-step"])
         if kind in ("corrupt", "drop", "garbage"):
             secs = rng.uniform(1.0, 3.0)
             settings = {"corrupt": {"corrupt_p": 0.01}, "drop": {"drop_p": 0.001},
@@ -43,6 +44,8 @@ def random_schedule(duration: float, seed: int, every_s: float = 45.0, quiet_sta
             ev = FaultEvent("disconnect", t, rng.uniform(1.0, 3.0))
         elif kind == "gyro-nack":
             ev = FaultEvent("gyro-nack", t, rng.uniform(0.02, 0.2))
+        elif kind == "clock-step":
+            ev = FaultEvent("clock-step", t, 0.0, {"step_s": rng.choice((-1.0, 1.0)) * rng.uniform(0.1, 5.0)})
         else:
             ev = FaultEvent("gyro-stall", t, rng.uniform(0.1, 0.5))
         if t + ev.seconds >= duration - 5.0:
@@ -64,6 +67,7 @@ def run(duration: float = 3600.0, seed: int = 1, fault_every_s: float = 45.0, ma
         progress: bool = True) -> dict:
     from ...loop.record import MODE_NAMES, MODE_TRACK
     from .campaign import cross_boresight_error_arcsec, run_campaign
+    from .linkfaults import cumulative
 
     faults = random_schedule(duration, seed, fault_every_s)
 
@@ -115,6 +119,8 @@ def run(duration: float = 3600.0, seed: int = 1, fault_every_s: float = 45.0, ma
                          for m, name in MODE_NAMES.items()},
         "counters": {k: v for k, v in res["counters"].items() if k != "mode_changes"},
         "mode_changes": len(res["counters"]["mode_changes"]),
+        # found by the clock model; a step while the head is away meets a new client's model
+        "head_clock_steps_detected": int(cumulative(tr["link_clock_steps"])[-1]) if len(tr) else 0,
         "gyro_bus_injected": res["gyro_bus"],
     }
     summary["pass"] = bool(
