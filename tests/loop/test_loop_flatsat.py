@@ -34,13 +34,20 @@ def demo_run(tmp_path_factory):
     cfg.outputs.udp = True
     cfg.outputs.udp_port = rx.getsockname()[1]
     rx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 23)
-    res = run_flatsat(cfg, hc.load_scenario("sim2"), duration=6.0, seed=5, folder=folder, plots=True, status=False)
     got = []
-    while True:
-        try:
-            got.append(decode_datagram(rx.recv(65535)))
-        except BlockingIOError:
-            break
+
+    def drain(_records=None):
+        # read as the run goes: ~2 MB of datagrams would overflow a receive buffer capped by
+        # a stock kernel's net.core.rmem_max (208 kB, so 416 kB) if read only at the end
+        while True:
+            try:
+                got.append(decode_datagram(rx.recv(65535)))
+            except BlockingIOError:
+                return
+
+    res = run_flatsat(cfg, hc.load_scenario("sim2"), duration=6.0, seed=5, folder=folder, plots=True, status=False,
+                      on_output=drain)
+    drain()
     rx.close()
     return res, folder, np.concatenate(got) if got else None
 
