@@ -129,8 +129,7 @@ class ClockSync:
         self._fit()
 
     def _fit(self) -> None:
-        ex = np.array(self._ex)
-        t, u, d = ex[:, 0], ex[:, 1], ex[:, 2]
+        t, u, d = np.array(self._ex).T.copy()       # contiguous rows: the signature warm-up compiled
         self.t_ref = float(t.mean())
         dt = t - self.t_ref
         b = self.drift * 1e6                        # µs/s; kept while the baseline is too short
