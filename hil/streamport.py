@@ -42,6 +42,7 @@ import zlib
 import numpy as np
 
 from ..errors import DeviceError
+from ..head.timesync import CLOCK_CHECK_TOL_S
 from ..loop.linkbudget import time_sync_bytes
 from .headport import POLL, HeadPort, ImageResult
 
@@ -107,10 +108,9 @@ SYNC_OVERDUE_S = 2.0
 SYNC_GAP_MARGIN_S = 1e-3   # the gap must hold both wire times plus this (host and head turnaround)
 # A frame's exposure ends before its bytes arrive (by the readout and the wire time: ≤ ~0.1 s
 # for the largest window set on the slowest link). Mapped through the clock model, an end more
-# than FRAME_CLOCK_TOL_S after the arrival or FRAME_AGE_MAX_S before it means the model no longer
+# than CLOCK_CHECK_TOL_S after the arrival or FRAME_AGE_MAX_S before it means the model no longer
 # fits the head's clock (it stepped): the frame is not used and a time sync goes at once. (A host
 # that stalls the reading for longer loses its frames to this too; they would be a second old.)
-FRAME_CLOCK_TOL_S = 2e-3
 FRAME_AGE_MAX_S = 1.0
 
 
@@ -471,7 +471,7 @@ class StreamPort(HeadPort):
         self.wire_bytes += fr.wire_bytes
         if fr.t_mid_host == fr.t_mid_host:
             age = fr.t_rx - (fr.t_mid_host + 0.5 * fr.exposure_us * 1e-6)      # exposure end → arrival (s)
-            if not -FRAME_CLOCK_TOL_S <= age <= FRAME_AGE_MAX_S:
+            if not -CLOCK_CHECK_TOL_S <= age <= FRAME_AGE_MAX_S:
                 self.frames_unmatched += 1
                 self.unmatched_why["clock"] += 1
                 self.client.request_sync()

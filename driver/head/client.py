@@ -47,16 +47,12 @@ from ..protocol.framing import decode_frame, encode_frame
 from ..protocol.payloads import decode_reply, encode_request, encode_spans
 from ..transport.linkrate import Wire
 from .stream import FrameAssembler, FrameQueue, StreamFrame
-from .timesync import ClockSync
+from .timesync import CLOCK_CHECK_TOL_S, ClockSync
 
 log = logging.getLogger(__name__)
 
 RESYNC_AFTER_STEP = 4     # TIME_SYNC exchanges due at once after the clock model restarts at a step
 _NEVER = -1e300           # host s of the last TIME_SYNC before any (a sync is due and overdue)
-# A capture's exposure and readout happen after its request left and before its reply came:
-# mapped by the clock model more than this outside them (s), the model is stale (the head's
-# clock stepped) and the client re-synchronises before it gives the capture a host time
-CAPTURE_CLOCK_TOL_S = 2e-3
 
 
 class HeadTimeoutError(DeviceError):
@@ -474,8 +470,8 @@ class HeadClient:
         t0_us, t1_us = f["t_start_us"], f["t_end_us"]
 
         def inside() -> bool:
-            return (s.mcu_to_host(t0_us) >= t_sent - CAPTURE_CLOCK_TOL_S
-                    and s.mcu_to_host(t1_us) <= t_rx + CAPTURE_CLOCK_TOL_S)
+            return (s.mcu_to_host(t0_us) >= t_sent - CLOCK_CHECK_TOL_S
+                    and s.mcu_to_host(t1_us) <= t_rx + CLOCK_CHECK_TOL_S)
 
         if not inside():
             self.stats["capture_clock_resyncs"] += 1

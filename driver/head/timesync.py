@@ -52,6 +52,10 @@ DRIFT_QUANTILE = 0.1         # the drift fits each direction's lower tenth, not 
 # µs: a one-way delay this far below zero against the model is a clock step. Queueing only adds
 # delay; the model's own error is tens of µs (a drift off by 10 ppm over the 256 s window: 2.6 ms)
 STEP_US = 20_000.0
+# An MCU time the model maps more than this (s) outside the host times that bound it (a capture
+# between its request and its reply, a streamed frame's exposure end before its arrival) means
+# the model no longer fits the head's clock (it stepped): callers re-synchronise
+CLOCK_CHECK_TOL_S = 2e-3
 
 
 @njit(cache=True)
