@@ -71,13 +71,14 @@ def _gyro_path_us(n_steps=4000) -> tuple[float, float, float]:
     smp.rate[0] = [1e-3, -2e-3, 5e-4]
     f = AttitudeFilter(1.7e-4, 1e-6, 0.02, 0.0025)
     o = OutputStage([Sink()], MONOTONIC)
-    uv = np.zeros((12, 2))
+    slots = np.arange(12)
+    uv = np.zeros((R.MAX_STARS, 2))
 
     def stage_step(k):
         smp.t[0] = 1.0 + k * 0.0025
         t_read = MONOTONIC.now()
         out = o.batch(smp.n)
-        f.predict(smp, 0, R.FLAG_ATTITUDE_VALID, R.MODE_TRACK, refs, ids, cam, uv, out)
+        f.predict(smp, 0, R.FLAG_ATTITUDE_VALID, R.MODE_TRACK, refs, ids, cam, slots, uv, out)
         o.emit(out, t_read, f.t_last)
 
     buf = R.empty(256)

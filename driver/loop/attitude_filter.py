@@ -73,15 +73,17 @@ class AttitudeFilter:
         t = self.ts[0]
         return None if t != t else float(t)
 
-    def predict(self, smp, flags_first: int, flags_base: int, mode: int, refs, ids, cam, uv_last, out,
+    def predict(self, smp, flags_first: int, flags_base: int, mode: int, refs, ids, cam, slots, uv_track, out,
                 lo: int = 0, hi: int | None = None) -> int:
         """Predict samples ``lo:hi`` (default: all) of a FIFO batch and write their output
         records into ``out`` (its first ``hi − lo`` rows; one numba call); returns the count
-        of stuck-axis samples."""
+        of stuck-axis samples. ``refs`` (k, 3), ``ids`` (k,): the tracked stars, in track
+        ``slots`` (k,); rows ``slots`` of ``uv_track`` (S, 2) get their centroids (px) at the
+        batch's last sample."""
         hi = smp.n if hi is None else hi
         t, rate, flags = (smp.t, smp.rate, smp.flags) if lo == 0 else (smp.t[lo:], smp.rate[lo:], smp.flags[lo:])
         return predict_batch(t, rate, flags, hi - lo, *self._state, flags_first, flags_base, mode, refs, ids, cam,
-                             uv_last, self.mid, self.smoothed, out)
+                             slots, uv_track, self.mid, self.smoothed, out)
 
     def q_at(self, t: float) -> np.ndarray:
         """Attitude estimate at host time ``t`` (s): the newest sample at or before it,

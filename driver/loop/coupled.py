@@ -39,6 +39,7 @@ import numpy as np
 
 from ..errors import DeviceError, GyrostarError, LinkLostError
 from ..head.client import HeadTimeoutError
+from ..starid.verify import consistent
 from . import modes
 from . import record as R
 from .attitude_filter import GATE, QD_MARGIN, SMOOTH_GAP_S, AttitudeFilter, fix_covariance
@@ -189,9 +190,7 @@ class CoupledLoop:
         self._refs = np.zeros((0, 3))  # tracked stars' catalog vectors / ids in slot order (kernel inputs)
         self._ids = np.zeros(0, np.int32)
         self._slots = np.zeros(0, np.int64)
-        self._uv = np.zeros((0, 2))
         self._tracks_version = -1
-        self._uv_dirty = False         # the kernel's predicted centroids are not yet in self.tracks.uv
         self.gyro_path_s = 0.0         # host s in the 400 Hz path after the FIFO read (filter, outputs, sinks)
         self.gyro_path_cpu_s = 0.0     # ... its CPU seconds on the loop's thread (without other threads' turns)
         self.floor = FloorInputs()     # what the run's attitude floor depends on (per update)
@@ -330,15 +329,7 @@ class CoupledLoop:
             self._slots = tr.tracked()
             self._refs = np.ascontiguousarray(tr.ref[self._slots])
             self._ids = np.ascontiguousarray(tr.ids[self._slots])
-            self._uv = np.zeros((len(self._slots), 2))
-        return self._refs, self._ids, self._uv
-
-    def _sync_uv(self) -> None:
-        """Put the last batch's predicted centroids (the kernel's ``uv``) into the tracks:
-        once before an image stage reads or changes them, not on every gyro step."""
-        if self._uv_dirty:
-            self._uv_dirty = False
-            self.tracks.uv[self._slots] = self._uv
+        return self._refs, self._ids, self._slots
 
     def _gyro_phase(self) -> int:
         n = self._read_gyro()
@@ -405,13 +396,13 @@ class CoupledLoop:
         if self.head_down_since is not None:
             base |= R.FLAG_HEAD_LOST
         if f.valid:
-            refs, ids, uv = self._kernel_stars()
+            refs, ids, slots = self._kernel_stars()
         else:
-            refs, ids, uv = _NO_REFS, _NO_IDS, _NO_UV
-        self.c.gyro_stuck += f.predict(smp, self.flags_pending, base, self.state.mode, refs, ids, self.cam, uv,
-                                       self._out[lo:hi], lo, hi)
+            refs, ids, slots = _NO_REFS, _NO_IDS, _NO_SLOTS
+        # the tracked stars' predicted centroids go straight into the tracks' table (uv)
+        self.c.gyro_stuck += f.predict(smp, self.flags_pending, base, self.state.mode, refs, ids, self.cam, slots,
+                                       self.tracks.uv, self._out[lo:hi], lo, hi)
         self.flags_pending = 0
-        self._uv_dirty = len(uv) > 0     # copied to the tracks when an image stage next looks at them
 
     def _emit(self, lo: int, hi: int) -> int:
         """Emit outputs ``lo:hi`` of this step (predicted by :meth:`_predict`; parts in order)."""
@@ -432,7 +423,6 @@ class CoupledLoop:
 
     # ------------------------------------------------------------------ images
     def _image_phase(self) -> None:
-        self._sync_uv()
         now = self.clock.now()
         res = self.head.poll()
         if res is not None and res.kind == "reconnect":
@@ -493,7 +483,6 @@ class CoupledLoop:
 
     def _stream_take(self, now: float) -> None:
         """Streaming head: take in the frames the port has measured (their updates)."""
-        self._sync_uv()
         head = self.head
         while True:
             res = head.poll()
@@ -633,7 +622,6 @@ class CoupledLoop:
         """Plan and command windows: for the next CAPTURE, or (streaming) for stream frame
         ``frame`` whose exposure starts at host time ``t_exp`` (on the head's own timer: no
         command-to-exposure jitter to cover)."""
-        self._sync_uv()
         f = self.filter
         if f.valid:
             self.tracks.fill_from_catalog(f.q, now)
@@ -664,7 +652,6 @@ class CoupledLoop:
         self.pending = plan
 
     def _process_windows(self, pend: dict, res, measured: tuple, now: float) -> None:
-        self._sync_uv()
         self.c.frames += 1
         lag = res.t_start - pend["t_submit"]
         if 0.0 <= lag < 0.1:
@@ -696,11 +683,14 @@ class CoupledLoop:
                 self.state.mode == R.MODE_COAST
                 and math.sqrt(max(self.filter.P[0, 0], self.filter.P[1, 1])) * self.f_px > CONFIRM_PRIOR_PX)
             min_used = max(CONFIRM_MIN_STARS, self.p.min_stars) if wide else self.p.min_stars
-            if np.any(ok):
-                sub = np.zeros(int(ok.sum()), np.uint8)
+            n_ok = int(np.count_nonzero(ok))
+            if n_ok == len(slots):           # the usual case: every star agrees (no copies)
+                updated = self.filter.update(res.t_mid, b_use, r_use, s_use, acc, min_used)
+            elif n_ok:
+                sub = np.zeros(n_ok, np.uint8)
                 updated = self.filter.update(res.t_mid, b_use[ok], r_use[ok], s_use[ok], sub, min_used)
                 acc[ok] = sub
-            self.c.inconsistent_stars += int(np.count_nonzero(~ok))
+            self.c.inconsistent_stars += len(slots) - n_ok
             self.c.updates += updated
             good = acc.astype(np.bool_)
             if updated:
@@ -724,8 +714,6 @@ class CoupledLoop:
         ``CONSISTENT_SIGMA`` × the median centroid σ (at least ``CONSISTENT_MIN_PX``): a window
         that caught another star, a hot pixel or a smeared neighbour is dropped before the
         χ² gates see it — right after an acquisition those gates are wide enough to take it."""
-        from ..starid.verify import consistent
-
         return consistent(np.ascontiguousarray(b_mid, np.float64), np.ascontiguousarray(refs, np.float64),
                           np.ascontiguousarray(sig, np.float64), CONSISTENT_SIGMA, CONSISTENT_MIN_PX / self.f_px)
 
@@ -786,7 +774,7 @@ STREAM_FEW_FRAMES = 3       # streaming: consecutive images with too few stars b
 
 _NO_REFS = np.zeros((0, 3))
 _NO_IDS = np.zeros(0, np.int32)
-_NO_UV = np.zeros((0, 2))
+_NO_SLOTS = np.zeros(0, np.int64)
 
 
 def warmup() -> dict:
@@ -801,7 +789,6 @@ def warmup() -> dict:
     from ..gyro.timebase import polygon_centroid
     from ..head.timesync import drift_fit
     from ..protocol.payloads import unpack10_kernel, windows_tail_decode
-    from ..starid.verify import consistent
     from . import acquire, image_kernels, kernels, update_kernel
     from .warmup import warm
 
@@ -818,7 +805,7 @@ def warmup() -> dict:
     calls = [
         (kernels.predict_batch, (np.zeros(4), np.zeros((4, 3)), np.zeros(4, np.uint8), 1, af.q, af.b, af.P, af.ts,
                                  af.hist_t, af.hist_q, af.ih, af.prm, 0, 0, 0, ref, ref[:, 0].astype(np.int32), cam,
-                                 np.zeros((2, 2)), af.mid, af.smoothed, R.empty(4))),
+                                 np.arange(2), np.zeros((R.MAX_STARS, 2)), af.mid, af.smoothed, R.empty(4))),
         (mekf_update, (q, b, P, ref, ref, np.array([1e-5, 1e-5]), GATE, np.zeros(2, np.uint8))),
         (kernels.project_refs, (cam, q, ref)),
         (quat_propagate, (q, w, 0.001)),
@@ -849,6 +836,10 @@ def warmup() -> dict:
         (consistent, (ref, ref, np.ones(2), 6.0, 1e-4)),
         (unproject_many, (cam, np.zeros((2, 2)))),                            # lost-in-space spots (head worker)
         (polygon_centroid, (np.arange(4.0), np.arange(4.0) * 0.0025, 0.0024, 0.0026)),   # gyro timebase, no irq
+        (image_kernels.score_slots, (np.array([0, 1], np.int64), np.ones(2, np.bool_), np.zeros(2, np.int64),
+                                     np.zeros(2, np.int64), 3)),
+        (image_kernels.lost_slots, (np.ones(2, np.bool_), np.zeros((2, 2)), np.zeros(2, np.int64), 1024, 1024, 3,
+                                    True)),
         (image_kernels.select_measured, (np.array([0], np.int64), np.array([0], np.int64), np.zeros(1, np.int8),
                                          np.zeros((1, 3)), np.ones(1), np.ones(1, np.bool_), np.zeros(1, np.int64),
                                          np.zeros(1, np.int64), np.zeros((1, 3)), 0.0, False)),

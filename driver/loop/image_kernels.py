@@ -235,3 +235,44 @@ def select_measured(wins, nav_planned, state, b_mid, sig, active, nav, misses, r
             sg[j] = math.sqrt(sig[i] * sig[i] + cam_var) if cam_var > 0 else sig[i]
             j += 1
     return slots, b, r, sg
+
+
+@njit(cache=True)
+def lost_slots(active, uv, misses, width, height, max_misses, tracking):
+    """Tracked slots whose star has left the sensor (its predicted centroid ``uv`` (S, 2) px
+    within 2 px of an edge of the ``width`` × ``height`` px sensor) or, when ``tracking``,
+    missed more than ``max_misses`` images in a row. Returns the slots (k,) int64, ascending."""
+    n = active.shape[0]
+    gone = np.empty(n, np.int64)
+    k = 0
+    for s in range(n):
+        if not active[s]:
+            continue
+        u = uv[s, 0]
+        v = uv[s, 1]
+        if u < 2 or v < 2 or u > width - 3 or v > height - 3 or (tracking and misses[s] > max_misses):
+            gone[k] = s
+            k += 1
+    return gone[:k]
+
+
+@njit(cache=True)
+def score_slots(slots, accepted, misses, rejects, wrong_id_rejects):
+    """Record the filter's verdict on the measured ``slots`` (k,): an accepted star's miss and
+    reject counts restart, a rejected one's reject count grows (``misses``, ``rejects`` (S,)
+    in place). Returns the rejected slots that have now failed ``wrong_id_rejects`` times in a
+    row (int64, in ``slots`` order)."""
+    k = slots.shape[0]
+    wrong = np.empty(k, np.int64)
+    n = 0
+    for i in range(k):
+        s = slots[i]
+        if accepted[i]:
+            misses[s] = 0
+            rejects[s] = 0
+        else:
+            rejects[s] += 1
+            if rejects[s] >= wrong_id_rejects:
+                wrong[n] = s
+                n += 1
+    return wrong[:n]

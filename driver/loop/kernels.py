@@ -29,7 +29,7 @@ def project_refs(params, q, refs):
 
 @njit(cache=True)
 def predict_batch(smp_t, smp_rate, smp_flags, n, q, b, P, ts, hist_t, hist_q, ih, prm, flags_first, flags_base,
-                  mode, refs, ids, cam, uv_last, mid, smoothed, out):
+                  mode, refs, ids, cam, slots, uv_track, mid, smoothed, out):
     """One FIFO batch through the 400 Hz path: for every sample predict the attitude MEKF
     (:func:`gyrostar.core.mekf.mekf_predict_blocks`), keep the attitude history, project the
     tracked stars and write the output record — no Python object per sample.
@@ -47,11 +47,11 @@ def predict_batch(smp_t, smp_rate, smp_flags, n, q, b, P, ts, hist_t, hist_q, ih
     with the current rate (``t`` stays the sample's stamp). flags_first: flags only the
     first output carries (overrun, gyro gap); flags_base: flags every output carries.
     refs (k, 3), ids (k,): tracked stars' catalog vectors and ids (k = 0 when the attitude is
-    not valid); cam: camera array. uv_last (k, 2):
-    their centroids at the last sample (px). mid (14,): the mid-exposure product
-    [t_mid, q_mid, cov_mid] copied to every record; smoothed (14,): the frame before,
-    smoothed with it (``*_mid_s`` fields). out: OUTPUT_DTYPE records, first ``n`` written
-    (every field but ``latency_us``).
+    not valid); cam: camera array. slots (k,) int64: their track slots; uv_track (S, 2):
+    the tracks' centroid table, rows ``slots`` set to their centroids at the last sample
+    (px). mid (14,): the mid-exposure product [t_mid, q_mid, cov_mid] copied to every record;
+    smoothed (14,): the frame before, smoothed with it (``*_mid_s`` fields). out:
+    OUTPUT_DTYPE records, first ``n`` written (every field but ``latency_us``).
     Returns the count of samples with a stuck gyro axis.
     """
     period = prm[0]
@@ -133,8 +133,8 @@ def predict_batch(smp_t, smp_rate, smp_flags, n, q, b, P, ts, hist_t, hist_q, ih
                 r.centroid_px[s, 0] = u
                 r.centroid_px[s, 1] = v
                 if i == n - 1:
-                    uv_last[s, 0] = u
-                    uv_last[s, 1] = v
+                    uv_track[slots[s], 0] = u
+                    uv_track[slots[s], 1] = v
         for s in range(k, r.star_id.shape[0]):
             r.star_id[s] = -1
             r.centroid_px[s, 0] = 0.0

@@ -21,8 +21,9 @@ import math
 
 import numpy as np
 
+from ..attitude import quat_to_dcm
 from . import record as R
-from .image_kernels import plan_tracked
+from .image_kernels import lost_slots, plan_tracked, score_slots
 from .kernels import project_refs
 
 MODEL = 1                # core.motion.MODEL_PINHOLE
@@ -89,8 +90,6 @@ class StarTracks:
         first, skipping one closer than ``neighbour_sep_px`` to a tracked star and one kept
         out until after ``now`` (s) by :meth:`drop_wrong`; blended stars after all clean ones,
         and only up to ``BLEND_ADMIT_BELOW`` tracked stars."""
-        from ..attitude import quat_to_dcm
-
         free = [s for s in range(self.p.max_stars) if not self.active[s]]
         if not free:
             return
@@ -147,24 +146,14 @@ class StarTracks:
     def drop_lost(self, tracking: bool) -> None:
         """Drop stars that left the sensor, or (``tracking``) missed more than ``max_misses``
         images in a row while others were measured."""
-        w, h = self.camera.width_px, self.camera.height_px
-        act = self.tracked()
-        u, v = self.uv[act, 0], self.uv[act, 1]
-        gone = (u < 2) | (v < 2) | (u > w - 3) | (v > h - 3)
-        if tracking:
-            gone |= self.misses[act] > self.p.max_misses
-        for s in act[gone]:
+        for s in lost_slots(self.active, self.uv, self.misses, self.camera.width_px, self.camera.height_px,
+                            self.p.max_misses, tracking):
             self.drop(int(s))
 
     def score(self, slots, accepted) -> list[int]:
         """Record the filter's verdict on measured ``slots``; returns the slots that failed
         the gate ``wrong_id_rejects`` times in a row (a wrong or lost identification)."""
-        good = slots[accepted]
-        self.misses[good] = 0
-        self.rejects[good] = 0
-        bad = slots[~accepted]
-        self.rejects[bad] += 1
-        return [int(s) for s in bad[self.rejects[bad] >= self.p.wrong_id_rejects]]
+        return [int(s) for s in score_slots(slots, accepted, self.misses, self.rejects, self.p.wrong_id_rejects)]
 
     # -- windows -------------------------------------------------------------------------
     def plan(self, q, omega, bias, sigma_att_rad: float, lag_s: float, lag_jitter_s: float, odr_hz: float,

@@ -31,13 +31,14 @@ def test_batch_matches_per_sample_predict_and_projection():
     f.ts[0] = 10.0 - 0.0025
     q, b, P = f.q.copy(), f.b.copy(), f.P.copy()
     out = R.empty(n)
-    uv_last = np.zeros((5, 2))
+    uv_track = np.full((R.MAX_STARS, 2), -7.0)
+    slots = np.array([1, 3, 4, 6, 9])     # the stars' track slots: their rows of uv_track are written
 
     class Smp:
         pass
     smp = Smp()
     smp.t, smp.rate, smp.flags, smp.n = t, rate, flags, n
-    stuck = f.predict(smp, R.FLAG_OVERRUN, R.FLAG_ATTITUDE_VALID, R.MODE_TRACK, refs, ids, cam, uv_last, out)
+    stuck = f.predict(smp, R.FLAG_OVERRUN, R.FLAG_ATTITUDE_VALID, R.MODE_TRACK, refs, ids, cam, slots, uv_track, out)
     assert stuck == 1
     t_prev = 10.0 - 0.0025
     for i in range(n):
@@ -51,7 +52,9 @@ def test_batch_matches_per_sample_predict_and_projection():
         assert list(out["star_id"][i][:5]) == list(ids) and out["n_stars"][i] == 5
         assert out["seq"][i] == i and out["mode"][i] == R.MODE_TRACK
     np.testing.assert_allclose(f.q, q, rtol=0, atol=1e-15)
-    np.testing.assert_allclose(uv_last, uv, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(uv_track[slots], uv, rtol=0, atol=1e-9)
+    others = np.setdiff1d(np.arange(R.MAX_STARS), slots)
+    assert np.all(uv_track[others] == -7.0)
     fl = out["flags"]
     assert all(x & R.FLAG_ATTITUDE_VALID for x in fl)
     assert [bool(x & R.FLAG_OVERRUN) for x in fl] == [True] + [False] * (n - 1)
@@ -66,6 +69,7 @@ def test_batch_matches_per_sample_predict_and_projection():
 def test_batch_without_stars_writes_no_centroids():
     f = AttitudeFilter(1.7e-4, 1e-6, 0.02, 0.0025)
     out = R.empty(2)
+    uv_track = np.full((R.MAX_STARS, 2), 5.0)
 
     class Smp:
         t = np.array([1.0, 1.0025])
@@ -73,8 +77,9 @@ def test_batch_without_stars_writes_no_centroids():
         flags = np.zeros(2, np.uint8)
         n = 2
     f.predict(Smp, 0, 0, R.MODE_ACQUIRE, np.zeros((0, 3)), np.zeros(0, np.int32),
-              np.array([6666.6, 511.5, 511.5, 0, 0, 0, 0, 0, 1024, 1024]), np.zeros((0, 2)), out)
+              np.array([6666.6, 511.5, 511.5, 0, 0, 0, 0, 0, 1024, 1024]), np.zeros(0, np.int64), uv_track, out)
     assert list(out["n_stars"]) == [0, 0] and (out["star_id"] == -1).all()
+    assert np.all(uv_track == 5.0)          # no tracked star: the tracks' table is left alone
     assert list(out["seq"]) == [0, 1]
 
 
@@ -109,7 +114,8 @@ def test_gyro_delay_shifts_the_history_and_carries_outputs_on():
         flags = np.zeros(3, np.uint8)
         n = 3
     f.predict(Smp, 0, 0, R.MODE_TRACK, np.zeros((0, 3)), np.zeros(0, np.int32),
-              np.array([6666.6, 511.5, 511.5, 0, 0, 0, 0, 0, 1024, 1024]), np.zeros((0, 2)), out)
+              np.array([6666.6, 511.5, 511.5, 0, 0, 0, 0, 0, 1024, 1024]), np.zeros(0, np.int64),
+              np.zeros((R.MAX_STARS, 2)), out)
     assert list(out["t"]) == list(Smp.t)                       # stamps unchanged
     assert f.t_last == pytest.approx(1.005 - tau)              # the filter runs on t − τ
     np.testing.assert_allclose(out["q"][2], quat_propagate(f.q, f.omega, tau), atol=1e-12)
@@ -132,8 +138,8 @@ def test_rate_proportional_error_grows_linearly_from_the_last_fix():
         smp = type("Smp", (), {})()
         smp.t = 20.0 + np.arange(1, n + 1) * 0.0025
         smp.rate, smp.flags, smp.n = np.tile([0.0, 0.0, w], (n, 1)), np.zeros(n, np.uint8), n
-        f.predict(smp, 0, 0, R.MODE_COAST, np.zeros((0, 3)), np.zeros(0, np.int32), cam, np.zeros((0, 2)),
-                  R.empty(n))
+        f.predict(smp, 0, 0, R.MODE_COAST, np.zeros((0, 3)), np.zeros(0, np.int32), cam, np.zeros(0, np.int64),
+                  np.zeros((R.MAX_STARS, 2)), R.empty(n))
         return np.diag(f.P[:3, :3])
 
     for n in (4, 400, 2000):                            # 10 ms, 1 s, 5 s

@@ -22,7 +22,8 @@ class _Samples:
 def _run(f, t0, n):
     t = t0 + np.arange(n) * PERIOD
     f.predict(_Samples(t, np.tile(W, (n, 1))), 0, R.FLAG_ATTITUDE_VALID, R.MODE_TRACK,
-              np.zeros((0, 3)), np.zeros(0, np.int32), np.zeros(10), np.zeros((0, 2)), R.empty(n))
+              np.zeros((0, 3)), np.zeros(0, np.int32), np.zeros(10), np.zeros(0, np.int64),
+              np.zeros((R.MAX_STARS, 2)), R.empty(n))
     return t
 
 
