@@ -43,7 +43,7 @@ import numpy as np
 
 from ..errors import DeviceError
 from ..head.timesync import CLOCK_CHECK_TOL_S
-from ..loop.linkbudget import time_sync_bytes
+from ..loop.linkbudget import time_sync_bytes, windows_bytes
 from .headport import POLL, HeadPort, ImageResult
 
 CH_STREAM_POLL = 7      # log channels of a streaming port (kind POLL)
@@ -212,8 +212,6 @@ class StreamPort(HeadPort):
             self._sets[frame] = (spans, post)
             for old in [k for k in self._sets if k and k < frame - 8]:
                 del self._sets[old]
-        from ..loop.linkbudget import windows_bytes
-
         digest = struct.pack("<II", frame, zlib.crc32(np.ascontiguousarray(spans, np.int32).tobytes()))
         if self.replay is not None:
             if self.replay.take(self.replay.sets, "window sets") != digest:

@@ -301,6 +301,7 @@ class CoupledLoop:
             self._split = 0
             self._guarded(self._stream_take, t_step)
             self._outputs(self._split, n)
+            self._note_ages(n)
             self._guarded(self._stream_command, t_step)
             return n
         done = self.image.result()       # the readout handed over last step: apply it before this
@@ -333,7 +334,9 @@ class CoupledLoop:
 
     def _gyro_phase(self) -> int:
         n = self._read_gyro()
-        return self._outputs(0, n)
+        n_out = self._outputs(0, n)
+        self._note_ages(n)
+        return n_out
 
     def _read_gyro(self) -> int:
         """Read the gyro's FIFO into :attr:`samples`; returns the sample count."""
@@ -364,10 +367,12 @@ class CoupledLoop:
             self._outputs(self._split, k)       # out before the update: they need nothing from it
             self._split = k
 
-    def _note_ages(self, lo: int, hi: int) -> None:
-        """Keep how old samples ``lo:hi`` were when their step began (s, the loop's clock): the
-        wait in the FIFO that a watermark above 1 adds to every output but the newest."""
-        self.n_age = _ring_put(self.age, self.n_age, self.t_step_prev - self.samples.t[lo:hi])
+    def _note_ages(self, n: int) -> None:
+        """Keep how old this step's ``n`` samples were when it began (s, the loop's clock): the
+        wait in the FIFO that a watermark above 1 adds to every output but the newest. Once
+        per step, after its outputs (off the 400 Hz path's metered time)."""
+        if n:
+            self.n_age = _ring_put(self.age, self.n_age, self.t_step_prev - self.samples.t[:n])
 
     def _outputs(self, lo: int, hi: int) -> int:
         """Predict samples ``lo:hi`` of this step and emit their outputs; the 400 Hz path's
@@ -412,7 +417,6 @@ class CoupledLoop:
         if lo == 0:
             self.c.gyro_saturated += int(smp.saturated)
         self.outputs.emit(self._out[lo:hi], self._t_read, float(smp.t[hi - 1]))
-        self._note_ages(lo, hi)
         self.c.outputs += n
         if self._mids:                   # streamed frames whose update these outputs are the first to hold
             # on the loop's clock, the frames' own timeline (the latency clock is the same clock
