@@ -60,7 +60,8 @@ class AttitudeFilter:
         self.valid = False                            # q is an identified attitude
         self.mid = np.full(R.MID_N, np.nan)           # [t_mid, q_mid, cov_mid]: the newest frame's product
         self.smoothed = np.full(R.MID_N, np.nan)      # the frame before it, smoothed with the newest
-        self._state = (self.q, self.b, self.P, self.ts, self.hist_t, self.hist_q, self.ih, self.prm)
+        # the arrays the compiled predict and update work on in place, in their argument order
+        self.state_arrays = (self.q, self.b, self.P, self.ts, self.hist_t, self.hist_q, self.ih, self.prm)
 
     @property
     def omega(self) -> np.ndarray:
@@ -82,7 +83,7 @@ class AttitudeFilter:
         batch's last sample."""
         hi = smp.n if hi is None else hi
         t, rate, flags = (smp.t, smp.rate, smp.flags) if lo == 0 else (smp.t[lo:], smp.rate[lo:], smp.flags[lo:])
-        return predict_batch(t, rate, flags, hi - lo, *self._state, flags_first, flags_base, mode, refs, ids, cam,
+        return predict_batch(t, rate, flags, hi - lo, *self.state_arrays, flags_first, flags_base, mode, refs, ids, cam,
                              slots, uv_track, self.mid, self.smoothed, out)
 
     def q_at(self, t: float) -> np.ndarray:

@@ -39,17 +39,21 @@ import numpy as np
 
 from ..errors import DeviceError, GyrostarError, LinkLostError
 from ..head.client import HeadTimeoutError
-from ..starid.verify import consistent
 from . import modes
 from . import record as R
 from .attitude_filter import GATE, QD_MARGIN, SMOOTH_GAP_S, AttitudeFilter, fix_covariance
 from .floor import FloorInputs, pointing_bias_arcsec
+from .frame_kernel import N_ACCEPTED, N_CONSISTENT, N_MEASURED, N_USED, apply_frame
 from .image import ImagePipeline
-from .image_kernels import select_measured
 from .outputs import OutputStage
 from .tracks import MODEL, StarTracks
 
 log = logging.getLogger(__name__)
+# Which measured stars agree with each other, whatever the prior says: with ≥ 3 stars, QUEST
+# over them and iterative rejection of the worst residual beyond CONSISTENT_SIGMA × the median
+# centroid σ (at least CONSISTENT_MIN_PX). A window that caught another star, a hot pixel or a
+# smeared neighbour is dropped before the χ² gates see it: right after an acquisition those
+# gates are wide enough to take it.
 CONSISTENT_SIGMA = 6.0     # a star this many median centroid σ off the others' attitude is dropped
 CONSISTENT_MIN_PX = 1.5    # ... but never for less than this (px)
 CONFIRM_MIN_STARS = 4      # consistent stars the first image after a lost-in-space fix needs to confirm it
@@ -664,62 +668,48 @@ class CoupledLoop:
         state, b_mid, sig = measured
         tr = self.tracks
         w = self.filter.omega
-        # windows whose slot was dropped or refilled meanwhile are skipped; spots smeared past
-        # what the centroid model holds are not taken (coast on the gyro)
-        slots, b_use, r_use, s_use = select_measured(
-            pend["wins"], pend["nav"], state, b_mid, sig, tr.active, tr.nav, tr.misses, tr.ref,
+        f = self.filter
+        w = f.omega
+        # the first image after a lost-in-space fix confirms it: only stars that checked each
+        # other (:func:`gyrostar.starid.verify.consistent`) may, and at least 4 — the fix's
+        # wide prior lets a wrong centroid (a blend, a star at a window's edge) through every
+        # gate, and with 3 stars the attitude's three angles absorb most of two such errors
+        # (Monte Carlo seed 100120: two of three centroids 3.5 and 4.8 px off passed the
+        # check); two stars alone would be fitted exactly, attitude and bias (through their
+        # cross-covariance) alike. The same holds for a regain after a COAST that left the
+        # attitude uncertain by more than CONFIRM_PRIOR_PX (seed 100194: after a 21.6 °/s
+        # tumble, σ ≈ 35 px, two windows each caught the next star of a row of three)
+        wide = self.state.mode == R.MODE_ACQUIRE or (
+            self.state.mode == R.MODE_COAST
+            and math.sqrt(max(f.P[0, 0], f.P[1, 1])) * self.f_px > CONFIRM_PRIOR_PX)
+        min_used = max(CONFIRM_MIN_STARS, self.p.min_stars) if wide else self.p.min_stars
+        # one compiled call: windows whose slot was dropped or refilled meanwhile are skipped,
+        # spots smeared past what the centroid model holds are not taken (coast on the gyro),
+        # stars that disagree with the others are dropped, the rest update the filter at
+        # mid-exposure and the gate's verdict goes to the tracks
+        counts, info, wrong = apply_frame(
+            pend["wins"], pend["nav"], state, b_mid, sig, tr.active, tr.nav, tr.misses, tr.rejects, tr.ref,
             (self.p.camera_sigma_px / self.f_px) ** 2 if self.p.camera_sigma_px > 0 else 0.0,
-            math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]) > self.p.max_track_rate)
-        updated = 0
-        if len(slots):
-            acc = np.zeros(len(slots), np.uint8)
-            ok = self._consistent(b_use, r_use, s_use)
-            # the first image after a lost-in-space fix confirms it: only stars that checked
-            # each other (:meth:`_consistent`) may, and at least 4 — the fix's wide prior lets a
-            # wrong centroid (a blend, a star at a window's edge) through every gate, and with
-            # 3 stars the attitude's three angles absorb most of two such errors (Monte Carlo
-            # seed 100120: two of three centroids 3.5 and 4.8 px off passed the check); two
-            # stars alone would be fitted exactly, attitude and bias (through their
-            # cross-covariance) alike. The same holds for a regain after a COAST that left the
-            # attitude uncertain by more than CONFIRM_PRIOR_PX (seed 100194: after a 21.6 °/s
-            # tumble, σ ≈ 35 px, two windows each caught the next star of a row of three)
-            wide = self.state.mode == R.MODE_ACQUIRE or (
-                self.state.mode == R.MODE_COAST
-                and math.sqrt(max(self.filter.P[0, 0], self.filter.P[1, 1])) * self.f_px > CONFIRM_PRIOR_PX)
-            min_used = max(CONFIRM_MIN_STARS, self.p.min_stars) if wide else self.p.min_stars
-            n_ok = int(np.count_nonzero(ok))
-            if n_ok == len(slots):           # the usual case: every star agrees (no copies)
-                updated = self.filter.update(res.t_mid, b_use, r_use, s_use, acc, min_used)
-            elif n_ok:
-                sub = np.zeros(n_ok, np.uint8)
-                updated = self.filter.update(res.t_mid, b_use[ok], r_use[ok], s_use[ok], sub, min_used)
-                acc[ok] = sub
-            self.c.inconsistent_stars += len(slots) - n_ok
+            math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]) > self.p.max_track_rate,
+            CONSISTENT_SIGMA, CONSISTENT_MIN_PX / self.f_px, *f.state_arrays, f.kappa, f.mid, f.smoothed,
+            float(res.t_mid), int(min_used), GATE, QD_MARGIN, SMOOTH_GAP_S, self.p.wrong_id_rejects)
+        n_measured = int(counts[N_MEASURED])
+        updated = int(counts[N_USED])
+        if n_measured:
+            self.c.inconsistent_stars += n_measured - int(counts[N_CONSISTENT])
             self.c.updates += updated
-            good = acc.astype(np.bool_)
             if updated:
                 self.flags_pending |= R.FLAG_UPDATE_APPLIED
                 # its first output: the next sample's stamp
-                t_next = (self.filter.t_last or now) + self.filter.prm[0] + self.p.gyro_delay_s
-                self.floor.add(res.t_mid, t_next, 1.0 / float(np.sum(1.0 / s_use[good] ** 2)), updated)
-            self.c.rejected_updates += int(np.count_nonzero(~good))
-            wrong = tr.score(slots, good)
+                t_next = (f.t_last or now) + f.prm[0] + self.p.gyro_delay_s
+                self.floor.add(res.t_mid, t_next, 1.0 / info, updated)
+            self.c.rejected_updates += n_measured - int(counts[N_ACCEPTED])
             if updated >= self.p.min_stars:
                 for s in wrong:
-                    tr.drop_wrong(s, now)
+                    tr.drop_wrong(int(s), now)
                     self.c.wrong_ids_dropped += 1
-        self.id_verified = updated >= 3 and updated == len(slots)
-        self._after_image(now, int(updated))
-
-    def _consistent(self, b_mid, refs, sig) -> np.ndarray:
-        """Which measured stars agree with each other, whatever the prior says (bool (n,)).
-
-        With ≥ 3 stars, QUEST over them and iterative rejection of the worst residual beyond
-        ``CONSISTENT_SIGMA`` × the median centroid σ (at least ``CONSISTENT_MIN_PX``): a window
-        that caught another star, a hot pixel or a smeared neighbour is dropped before the
-        χ² gates see it — right after an acquisition those gates are wide enough to take it."""
-        return consistent(np.ascontiguousarray(b_mid, np.float64), np.ascontiguousarray(refs, np.float64),
-                          np.ascontiguousarray(sig, np.float64), CONSISTENT_SIGMA, CONSISTENT_MIN_PX / self.f_px)
+        self.id_verified = updated >= 3 and updated == n_measured
+        self._after_image(now, updated)
 
     def _after_image(self, now: float, updated: int) -> None:
         self.few_run = self.few_run + 1 if updated < self.p.min_stars else 0
@@ -793,7 +783,8 @@ def warmup() -> dict:
     from ..gyro.timebase import polygon_centroid
     from ..head.timesync import drift_fit
     from ..protocol.payloads import unpack10_kernel, windows_tail_decode
-    from . import acquire, image_kernels, kernels, update_kernel
+    from ..starid.verify import consistent
+    from . import acquire, frame_kernel, image_kernels, kernels, update_kernel
     from .warmup import warm
 
     cam = np.array([6666.0, 511.5, 511.5, 0, 0, 0, 0, 0, 1024, 1024])
@@ -844,9 +835,11 @@ def warmup() -> dict:
                                      np.zeros(2, np.int64), 3)),
         (image_kernels.lost_slots, (np.ones(2, np.bool_), np.zeros((2, 2)), np.zeros(2, np.int64), 1024, 1024, 3,
                                     True)),
-        (image_kernels.select_measured, (np.array([0], np.int64), np.array([0], np.int64), np.zeros(1, np.int8),
-                                         np.zeros((1, 3)), np.ones(1), np.ones(1, np.bool_), np.zeros(1, np.int64),
-                                         np.zeros(1, np.int64), np.zeros((1, 3)), 0.0, False)),
+        (frame_kernel.apply_frame, (np.array([0], np.int64), np.array([0], np.int64), np.ones(1, np.int8),   # missed
+                                    np.zeros((1, 3)), np.ones(1), np.ones(1, np.bool_), np.zeros(1, np.int64),
+                                    np.zeros(1, np.int64), np.zeros(1, np.int64), np.zeros((1, 3)), 0.0, False, 6.0,
+                                    1e-4, *af.state_arrays, af.kappa, af.mid, af.smoothed, 0.0, 1, GATE, QD_MARGIN,
+                                    SMOOTH_GAP_S, 5)),
     ]
     return warm(calls)
 

@@ -134,3 +134,94 @@ def test_plan_moves_the_stars_over_the_exact_lag():
     for w in got[1]:
         assert np.abs(box(got[0], w) - box(truth[0], w)).max() <= 1
     assert max(np.abs(box(rounded[0], w) - box(truth[0], w)).max() for w in truth[1]) >= 1
+
+
+def test_score_slots_restarts_the_accepted_and_names_the_fifth_rejection():
+    """Hand-counted: slot 2 accepted (its counts restart), slots 5 and 7 rejected; slot 7's
+    rejection is its fifth in a row, slot 5's its second."""
+    from gyrostar.loop.image_kernels import score_slots
+
+    misses = np.array([0, 0, 3, 0, 0, 1, 0, 2], np.int64)
+    rejects = np.array([0, 0, 2, 0, 0, 1, 0, 4], np.int64)
+    wrong = score_slots(np.array([2, 5, 7], np.int64), np.array([True, False, False]), misses, rejects, 5)
+    assert wrong.tolist() == [7]
+    assert misses.tolist() == [0, 0, 0, 0, 0, 1, 0, 2]          # only an accepted star's misses restart
+    assert rejects.tolist() == [0, 0, 0, 0, 0, 2, 0, 5]
+
+
+def test_apply_frame_equals_its_parts():
+    """One frame through ``frame_kernel.apply_frame`` and through its parts called one by one
+    (select_measured, consistent, AttitudeFilter.update on the consistent stars, score_slots):
+    the same filter state to the bit, the same track counts, the same counts. The frame: 7
+    windows, one missed, one whose slot now tracks another star, one centroid 140″ off (the
+    consistency check drops it)."""
+    from gyrostar.attitude import quat_mult, rotvec_to_quat
+    from gyrostar.loop import record as R
+    from gyrostar.loop.attitude_filter import GATE, QD_MARGIN, SMOOTH_GAP_S, AttitudeFilter
+    from gyrostar.loop.frame_kernel import N_ACCEPTED, N_CONSISTENT, N_MEASURED, N_USED, apply_frame
+    from gyrostar.loop.image_kernels import score_slots
+
+    rng = np.random.default_rng(11)
+    S = R.MAX_STARS
+    q_true = quat_from_boresight(0.9, 0.3, 0.1)
+    a = quat_to_dcm(q_true)
+    refs = rng.standard_normal((S, 3)) * 0.04 + a[2]
+    refs /= np.linalg.norm(refs, axis=1)[:, None]
+    filters = []
+    # 7.7″ off truth: the boresight 4.6″, the rest roll
+    q_start = quat_mult(rotvec_to_quat(np.array([2e-5, -1e-5, 3e-5])), q_true)
+    for _ in range(2):
+        f = AttitudeFilter(1.7e-4 / math.sqrt(2), 1e-6, 0.02, 0.0025)
+        f.q[:] = q_start
+        f.P[:3, :3] = np.eye(3) * (2e-5) ** 2
+        f.valid = True
+        smp = type("Smp", (), {})()
+        smp.t = 10.0 + np.arange(1, 41) * 0.0025
+        smp.rate, smp.flags, smp.n = np.zeros((40, 3)), np.zeros(40, np.uint8), 40
+        f.predict(smp, 0, 0, R.MODE_TRACK, np.zeros((0, 3)), np.zeros(0, np.int32), np.zeros(10),
+                  np.zeros(0, np.int64), np.zeros((S, 2)), R.empty(40))
+        filters.append(f)
+    wins = np.array([0, 1, 2, 3, 4, 5, 6], np.int64)
+    planned = np.arange(7, dtype=np.int64) + 100
+    nav = np.arange(S, dtype=np.int64) + 100
+    nav[5] = 555                                               # slot 5 refilled since the plan
+    active = np.zeros(S, np.bool_)
+    active[:7] = True
+    state = np.full(7, MEAS_OK, np.int8)
+    state[3] = MEAS_MISS
+    b_mid = refs[:7] @ a.T + rng.standard_normal((7, 3)) * 3e-6
+    b_mid[2] += np.array([7e-4, 0.0, 0.0])                     # 140″ off: another star's light
+    b_mid /= np.linalg.norm(b_mid, axis=1)[:, None]
+    sig = np.full(7, 5e-6)
+    t_mid = 10.0 + 30 * 0.0025
+    tracks = [(np.zeros(S, np.int64), np.zeros(S, np.int64)) for _ in range(2)]
+    tracks[0][1][2] = tracks[1][1][2] = 4                      # slot 2: its fifth rejection now
+
+    f = filters[0]
+    misses, rejects = tracks[0]
+    counts, info, wrong = apply_frame(wins, planned, state, b_mid, sig, active, nav, misses, rejects, refs, 0.0,
+                                      False, 6.0, 1.5 / 6640.0, *f.state_arrays, f.kappa, f.mid, f.smoothed, t_mid,
+                                      3, GATE, QD_MARGIN, SMOOTH_GAP_S, 5)
+
+    g = filters[1]
+    misses2, rejects2 = tracks[1]
+    slots, bu, ru, su = select_measured(wins, planned, state, b_mid, sig, active, nav, misses2, refs, 0.0, False)
+    ok = consistent(bu, ru, su, 6.0, 1.5 / 6640.0)
+    sub = np.zeros(int(ok.sum()), np.uint8)
+    used = g.update(t_mid, bu[ok], ru[ok], su[ok], sub, 3)
+    acc = np.zeros(len(slots), np.uint8)
+    acc[ok] = sub
+    good = acc.astype(bool)
+    wrong2 = score_slots(slots, good, misses2, rejects2, 5)
+
+    assert slots.tolist() == [0, 1, 2, 4, 6] and ok.tolist() == [True, True, False, True, True]
+    assert counts.tolist() == [5, 4, used, int(good.sum())] and used == 4
+    assert counts[N_MEASURED] == 5 and counts[N_CONSISTENT] == 4 and counts[N_USED] == counts[N_ACCEPTED] == 4
+    assert info == float(np.sum(1.0 / su[good] ** 2)) and wrong.tolist() == wrong2.tolist() == [2]
+    for x, y in zip(f.state_arrays + (f.mid, f.smoothed), g.state_arrays + (g.mid, g.smoothed)):
+        assert np.array_equal(x, y, equal_nan=True)
+    assert np.array_equal(misses, misses2) and np.array_equal(rejects, rejects2) and misses[3] == 1
+    # the update took the boresight to truth (roll, about it, 4 close stars see weakly)
+    def off(q):
+        return math.acos(min(1.0, float(quat_to_dcm(q)[2] @ a[2])))
+    assert off(f.q) < 0.2 * off(q_start) and off(f.q) < 1e-5
