@@ -48,37 +48,24 @@ def apply_frame(wins, nav_planned, state, b_mid, sig, active, nav, misses, rejec
     if k == 0:
         return counts, info, np.empty(0, np.int64)
     acc = np.zeros(k, np.uint8)
-    ok = consistent(bu, ru, su, k_sigma, tol_min)
-    n_ok = 0
-    for i in range(k):
-        if ok[i]:
-            n_ok += 1
+    idx = np.flatnonzero(consistent(bu, ru, su, k_sigma, tol_min))
+    n_ok = idx.shape[0]
     used = 0
     if n_ok == k:
         used = update_at_mid(q, b, P, ts, hist_t, hist_q, ih, prm, kappa, mid, smoothed, t_mid, bu, ru, su, acc,
                              min_used, gate, qd_margin, gap_s)
     elif n_ok:
-        idx = np.empty(n_ok, np.int64)
-        j = 0
-        for i in range(k):
-            if ok[i]:
-                idx[j] = i
-                j += 1
         sub = np.zeros(n_ok, np.uint8)
         used = update_at_mid(q, b, P, ts, hist_t, hist_q, ih, prm, kappa, mid, smoothed, t_mid, bu[idx], ru[idx],
                              su[idx], sub, min_used, gate, qd_margin, gap_s)
-        for j in range(n_ok):
-            acc[idx[j]] = sub[j]
-    good = np.zeros(k, np.bool_)
-    n_acc = 0
+        acc[idx] = sub
+    good = acc != 0
     for i in range(k):
-        if acc[i]:
-            good[i] = True
-            n_acc += 1
+        if good[i]:
             info += 1.0 / (su[i] * su[i])
     wrong = score_slots(slots, good, misses, rejects, wrong_id_rejects)
     counts[N_MEASURED] = k
     counts[N_CONSISTENT] = n_ok
     counts[N_USED] = used
-    counts[N_ACCEPTED] = n_acc
+    counts[N_ACCEPTED] = np.count_nonzero(good)
     return counts, info, wrong
