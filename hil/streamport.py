@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import collections
 import json
+import math
 import pickle
 import queue
 import struct
@@ -259,6 +260,18 @@ class StreamPort(HeadPort):
         """A result waits for :meth:`poll` (the loop's runner steps for it). Logs nothing; a
         replay has no runner to ask."""
         return self.replay is None and self._waiting() is not None
+
+    def ready_since(self) -> float | None:
+        """What waits for :meth:`poll`, for the loop's step schedule: the oldest measured
+        frame's arrival (host s), −inf for a finished job, None for nothing (and in a replay).
+        Logs nothing."""
+        if self.replay is None:
+            what = self._waiting()
+            if what == "frame":
+                return getattr(self._results[0], "t_rx", -math.inf)
+            if what == "job":
+                return -math.inf
+        return None
 
     def poll(self) -> ImageResult | None:
         if self.replay is not None:

@@ -164,6 +164,7 @@ class CoupledLoop:
         self.n_age = 0
         self._split = 0                # streaming: samples of this step already predicted
         self._t_due: float | None = None   # runner time of the last step_due() that said yes
+        self.t_newest = -math.inf           # stamp of the newest gyro sample read (host s)
         self.overruns = 0
         self.gyro = gyro
         self.head = head
@@ -263,9 +264,12 @@ class CoupledLoop:
         """Whether a runner that ticks every gyro period should step at ``now`` (its clock, s).
 
         A step is due when a FIFO watermark of samples has come in since the last due step
-        (:attr:`step_period_s`); when the head port has something for the loop (a streamed
-        frame measured, a job finished: its update is applied at once, so exposure → output
-        does not wait for the watermark); when an applied update has no output yet (its frame
+        (:attr:`step_period_s`); when the head port has something for the loop (a job
+        finished; a streamed frame measured, once the first gyro sample after its arrival
+        is due: its update goes in before that sample, and one step then applies it and
+        emits its first output, so exposure → output does not wait for the watermark and
+        no step is spent on a frame whose update no sample can carry yet — a port without
+        arrival times steps at once); when an applied update has no output yet (its frame
         arrived after the newest sample of the last step) or a request-mode readout waits to
         be applied; when a request-mode frame is due; and before the first step. A True
         answer counts as that step's start. With a watermark of 1 every tick is a step.
@@ -274,14 +278,31 @@ class CoupledLoop:
         """
         last = self._t_due
         tick = 1.0 / self.gyro.odr_hz if self.gyro.odr_hz else 0.0025
-        ready = getattr(self.head, "ready", None)
         due = (last is None or now - last >= self.step_period_s - 0.5 * tick
                or bool(self._mids) or self.image.busy
                or (not self.streaming and self.head_down_since is None and now >= self.next_frame_t)
-               or (ready is not None and ready()))
+               or self._result_due(now, tick))
         if due:
             self._t_due = now
         return due
+
+    def _result_due(self, now: float, tick: float) -> bool:
+        """The head port's waiting result is worth a step at ``now`` (s): a job at once; a
+        measured frame that arrived at ``t_rx`` once the first gyro sample stamped after
+        ``t_rx`` is due (on the grid of the newest sample read, :attr:`t_newest`, and the
+        gyro period: at most one period after ``t_rx``)."""
+        since = getattr(self.head, "ready_since", None)
+        if since is None:
+            ready = getattr(self.head, "ready", None)
+            return ready is not None and ready()
+        t_rx = since()
+        if t_rx is None:
+            return False
+        newest = self.t_newest
+        if not t_rx > newest or newest == -math.inf:   # a job (−inf), a sample after the arrival
+            return True                                  # read already, or no sample read yet
+        t_first = newest + math.ceil((t_rx - newest) / tick) * tick
+        return now >= t_first
 
     def step(self) -> int:
         """One loop step; returns the number of outputs emitted.
@@ -354,6 +375,8 @@ class CoupledLoop:
             self.flags_pending |= R.FLAG_GYRO_GAP
             log.debug("gyro read failed: %s", exc)
         self._t_read = self.lat_clock.now()
+        if smp.n:
+            self.t_newest = float(smp.t[smp.n - 1])
         self.c.gyro_register_faults += smp.register_faults
         if smp.n and smp.gap_frames:
             self.c.samples_lost += int(smp.gap_frames)

@@ -1,5 +1,6 @@
 """When the loop steps (CoupledLoop.step_due): a FIFO watermark of samples, a head-port
-result, an update still without its output, a request-mode frame due, the first tick."""
+result (a streamed frame once the first sample after its arrival is due), an update still
+without its output, a request-mode frame due, the first tick."""
 
 import math
 
@@ -73,3 +74,55 @@ def test_request_mode_frame_due_and_head_down():
     lp.next_frame_t = math.inf
     lp.image.busy = True                         # a readout centroided, waiting to be applied
     assert lp.step_due(100.0 + 6 * TICK)
+
+
+class _StreamHead:
+    """A stream port that says what waits: a measured frame's arrival time, −inf for a job."""
+
+    def __init__(self):
+        self.since = None
+
+    def ready_since(self):
+        return self.since
+
+
+def test_a_measured_frame_steps_when_the_first_sample_after_its_arrival_is_due():
+    """Samples every 2.5 ms stamped on a grid at 0.4 ms past the ticks; the newest read at
+    100.0004. A frame that arrived at 100.0011 waits for the sample at 100.0029, the first
+    its update can go into — one step applies it and emits that sample's output —, not
+    the tick at 100.0025 (a step there could carry the update into no output)."""
+    lp = _loop(4)
+    lp.head = _StreamHead()
+    assert lp.step_due(100.0)
+    lp.t_newest = 100.0004
+    lp.head.since = 100.0011
+    assert _ticks(lp, 100.0 + 0.5 * TICK, 1) == [False]
+    assert not lp.step_due(100.0 + TICK)             # 100.0025: the sample after the arrival is not in
+    assert lp.step_due(100.00291)                     # ... now it is
+    # a frame whose arrival the newest sample read already follows: at once
+    lp.t_newest, lp.head.since = 100.0054, 100.0050
+    assert lp.step_due(100.0055)
+    # a finished job (a full frame, a reconnect): at once
+    lp.head.since = -math.inf
+    assert lp.step_due(100.0056)
+    # no sample read yet: at once (nothing to wait for)
+    lp.t_newest, lp.head.since = -math.inf, 100.0100
+    assert lp.step_due(100.0101)
+
+
+def test_a_measured_frame_waits_one_tick_at_most():
+    """Whatever the newest stamp and the arrival, a measured frame is due after its arrival
+    and no later than one gyro period after it (the first sample on the newest's grid)."""
+    import numpy as np
+
+    rng = np.random.default_rng(2)
+    for _ in range(200):
+        lp = _loop(4)
+        lp.head = _StreamHead()
+        assert lp.step_due(100.0)
+        lp.t_newest = 100.0 + rng.uniform(0.0, 0.0025)
+        lp.head.since = lp.t_newest + rng.uniform(1e-6, 0.05)
+        for dt, want in ((-1e-7, False), (0.0, False), (TICK + 1e-9, True)):
+            t = lp.head.since + dt
+            lp._t_due = t - 0.001          # no watermark due: only the frame can make a step
+            assert lp.step_due(t) == want
