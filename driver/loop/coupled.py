@@ -690,7 +690,6 @@ class CoupledLoop:
             self.exposure_lag = 0.9 * self.exposure_lag + 0.1 * lag
         state, b_mid, sig = measured
         tr = self.tracks
-        w = self.filter.omega
         f = self.filter
         w = f.omega
         # the first image after a lost-in-space fix confirms it: only stars that checked each

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..attitude import quat_to_dcm
 from . import record as R
-from .image_kernels import lost_slots, plan_tracked, score_slots
+from .image_kernels import lost_slots, plan_tracked
 from .kernels import project_refs
 
 MODEL = 1                # core.motion.MODEL_PINHOLE
@@ -149,11 +149,6 @@ class StarTracks:
         for s in lost_slots(self.active, self.uv, self.misses, self.camera.width_px, self.camera.height_px,
                             self.p.max_misses, tracking):
             self.drop(int(s))
-
-    def score(self, slots, accepted) -> list[int]:
-        """Record the filter's verdict on measured ``slots``; returns the slots that failed
-        the gate ``wrong_id_rejects`` times in a row (a wrong or lost identification)."""
-        return [int(s) for s in score_slots(slots, accepted, self.misses, self.rejects, self.p.wrong_id_rejects)]
 
     # -- windows -------------------------------------------------------------------------
     def plan(self, q, omega, bias, sigma_att_rad: float, lag_s: float, lag_jitter_s: float, odr_hz: float,
