@@ -259,7 +259,7 @@ class StreamPort(HeadPort):
     def ready(self) -> bool:
         """A result waits for :meth:`poll` (the loop's runner steps for it). Logs nothing; a
         replay has no runner to ask."""
-        return self.replay is None and self._waiting() is not None
+        return self.ready_since() is not None
 
     def ready_since(self) -> float | None:
         """What waits for :meth:`poll`, for the loop's step schedule: the oldest measured
