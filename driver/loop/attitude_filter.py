@@ -62,6 +62,8 @@ class AttitudeFilter:
         self.smoothed = np.full(R.MID_N, np.nan)      # the frame before it, smoothed with the newest
         # the arrays the compiled predict and update work on in place, in their argument order
         self.state_arrays = (self.q, self.b, self.P, self.ts, self.hist_t, self.hist_q, self.ih, self.prm)
+        # ... and what the compiled delayed update takes after them (update_kernel.update_at_mid)
+        self.update_operands = self.state_arrays + (self.kappa, self.mid, self.smoothed)
 
     @property
     def omega(self) -> np.ndarray:
@@ -118,8 +120,7 @@ class AttitudeFilter:
         The smoothed product (:attr:`smoothed`) is the previous frame's mid-exposure attitude
         smoothed with this frame (one-lag Rauch–Tung–Striebel on the attitude error; frames
         more than ``SMOOTH_GAP_S`` apart are not combined)."""
-        return int(update_at_mid(self.q, self.b, self.P, self.ts, self.hist_t, self.hist_q, self.ih, self.prm,
-                                 self.kappa, self.mid, self.smoothed, float(t_mid),
+        return int(update_at_mid(*self.update_operands, float(t_mid),
                                  np.ascontiguousarray(b_mid, np.float64), np.ascontiguousarray(refs, np.float64),
                                  np.ascontiguousarray(sigmas, np.float64),
                                  accepted, int(min_used), GATE, QD_MARGIN, SMOOTH_GAP_S))

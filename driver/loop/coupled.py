@@ -713,7 +713,7 @@ class CoupledLoop:
             pend["wins"], pend["nav"], state, b_mid, sig, tr.active, tr.nav, tr.misses, tr.rejects, tr.ref,
             (self.p.camera_sigma_px / self.f_px) ** 2 if self.p.camera_sigma_px > 0 else 0.0,
             math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]) > self.p.max_track_rate,
-            CONSISTENT_SIGMA, CONSISTENT_MIN_PX / self.f_px, *f.state_arrays, f.kappa, f.mid, f.smoothed,
+            CONSISTENT_SIGMA, CONSISTENT_MIN_PX / self.f_px, *f.update_operands,
             float(res.t_mid), int(min_used), GATE, QD_MARGIN, SMOOTH_GAP_S, self.p.wrong_id_rejects)
         n_measured = int(counts[N_MEASURED])
         updated = int(counts[N_USED])
@@ -796,16 +796,16 @@ _NO_SLOTS = np.zeros(0, np.int64)
 def warmup() -> dict:
     """Compile or load every numba function the loop (or its head worker) calls from Python,
     with the argument types it uses, timed (see warmup.py). Kernels called only from inside
-    other kernels (centroiding, trajectories, windows) come with their callers."""
+    other kernels (centroiding, trajectories, windows, the image update's selection, check, MEKF
+    update and verdicts inside the frame kernel) come with their callers."""
     from ..attitude import quat_conj, quat_mult, quat_normalize, quat_propagate, quat_to_dcm
     from ..camera import unproject_many
-    from ..core.mekf import mekf_init, mekf_update
+    from ..core.mekf import mekf_init
     from ..core.motion import substeps_for
     from ..gyro.convert import convert_frames
     from ..gyro.timebase import polygon_centroid
     from ..head.timesync import drift_fit
     from ..protocol.payloads import unpack10_kernel, windows_tail_decode
-    from ..starid.verify import consistent
     from . import acquire, frame_kernel, image_kernels, kernels, update_kernel
     from .warmup import warm
 
@@ -823,7 +823,6 @@ def warmup() -> dict:
         (kernels.predict_batch, (np.zeros(4), np.zeros((4, 3)), np.zeros(4, np.uint8), 1, af.q, af.b, af.P, af.ts,
                                  af.hist_t, af.hist_q, af.ih, af.prm, 0, 0, 0, ref, ref[:, 0].astype(np.int32), cam,
                                  np.arange(2), np.zeros((R.MAX_STARS, 2)), af.mid, af.smoothed, R.empty(4))),
-        (mekf_update, (q, b, P, ref, ref, np.array([1e-5, 1e-5]), GATE, np.zeros(2, np.uint8))),
         (kernels.project_refs, (cam, q, ref)),
         (quat_propagate, (q, w, 0.001)),
         (quat_mult, (q, q)),          # acquisition and delayed-measurement transfer
@@ -846,21 +845,15 @@ def warmup() -> dict:
         (image_kernels.measure_windows, (spans, vals, np.array([0], np.int64), np.zeros((2, 2)),
                                          np.array([0], np.int64), np.array([2], np.int64), cam, 0.85, 4.0, 30.0,
                                          5.0, 10, 1e-3)),
-        (update_kernel.update_at_mid, (af.q, af.b, af.P, af.ts, af.hist_t, af.hist_q, af.ih, af.prm, af.kappa, af.mid,
-                                       af.smoothed, 0.0, ref, ref, np.array([1e-5, 1e-5]), np.zeros(2, np.uint8), 1,
-                                       GATE, QD_MARGIN, SMOOTH_GAP_S)),
         (update_kernel.q_at_history, (af.q, af.ts, af.hist_t, af.hist_q, af.ih, 0.0)),
-        (consistent, (ref, ref, np.ones(2), 6.0, 1e-4)),
         (unproject_many, (cam, np.zeros((2, 2)))),                            # lost-in-space spots (head worker)
         (polygon_centroid, (np.arange(4.0), np.arange(4.0) * 0.0025, 0.0024, 0.0026)),   # gyro timebase, no irq
-        (image_kernels.score_slots, (np.array([0, 1], np.int64), np.ones(2, np.bool_), np.zeros(2, np.int64),
-                                     np.zeros(2, np.int64), 3)),
         (image_kernels.lost_slots, (np.ones(2, np.bool_), np.zeros((2, 2)), np.zeros(2, np.int64), 1024, 1024, 3,
                                     True)),
         (frame_kernel.apply_frame, (np.array([0], np.int64), np.array([0], np.int64), np.ones(1, np.int8),   # missed
                                     np.zeros((1, 3)), np.ones(1), np.ones(1, np.bool_), np.zeros(1, np.int64),
                                     np.zeros(1, np.int64), np.zeros(1, np.int64), np.zeros((1, 3)), 0.0, False, 6.0,
-                                    1e-4, *af.state_arrays, af.kappa, af.mid, af.smoothed, 0.0, 1, GATE, QD_MARGIN,
+                                    1e-4, *af.update_operands, 0.0, 1, GATE, QD_MARGIN,
                                     SMOOTH_GAP_S, 5)),
     ]
     return warm(calls)

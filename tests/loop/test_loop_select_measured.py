@@ -200,7 +200,7 @@ def test_apply_frame_equals_its_parts():
     f = filters[0]
     misses, rejects = tracks[0]
     counts, info, wrong = apply_frame(wins, planned, state, b_mid, sig, active, nav, misses, rejects, refs, 0.0,
-                                      False, 6.0, 1.5 / 6640.0, *f.state_arrays, f.kappa, f.mid, f.smoothed, t_mid,
+                                      False, 6.0, 1.5 / 6640.0, *f.update_operands, t_mid,
                                       3, GATE, QD_MARGIN, SMOOTH_GAP_S, 5)
 
     g = filters[1]
