@@ -165,6 +165,7 @@ class CoupledLoop:
         self._split = 0                # streaming: samples of this step already predicted
         self._t_due: float | None = None   # runner time of the last step_due() that said yes
         self.t_newest = -math.inf           # stamp of the newest gyro sample read (host s)
+        self.rx_last = -math.inf            # arrival of the newest streamed frame taken in (host s)
         self.overruns = 0
         self.gyro = gyro
         self.head = head
@@ -271,20 +272,33 @@ class CoupledLoop:
         no step is spent on a frame whose update no sample can carry yet — a port without
         arrival times steps at once); when an applied update has no output yet (its frame
         arrived after the newest sample of the last step) or a request-mode readout waits to
-        be applied; when a request-mode frame is due; and before the first step. A True
-        answer counts as that step's start. With a watermark of 1 every tick is a step.
+        be applied; when a request-mode frame is due; and before the first step. The watermark
+        step waits one more tick when the next streamed frame is expected within a tick
+        (:meth:`_frame_expected`): that frame's step then takes the samples, so a frame whose
+        arrival jitters across a tick does not cost two steps. A True answer counts as that
+        step's start. With a watermark of 1 every tick is a step.
         Reads no clock, logs nothing: a replay steps through the logged steps whatever the
         ticks between them were.
         """
         last = self._t_due
         tick = 1.0 / self.gyro.odr_hz if self.gyro.odr_hz else 0.0025
-        due = (last is None or now - last >= self.step_period_s - 0.5 * tick
-               or bool(self._mids) or self.image.busy
+        watermark = last is None or now - last >= self.step_period_s - 0.5 * tick
+        if watermark and last is not None and self.step_period_s > 1.5 * tick \
+                and now - last < self.step_period_s + 0.5 * tick and self._frame_expected(now, tick):
+            watermark = False    # the frame's step, due by the next tick, takes these samples
+        due = (watermark or bool(self._mids) or self.image.busy
                or (not self.streaming and self.head_down_since is None and now >= self.next_frame_t)
                or self._result_due(now, tick))
         if due:
             self._t_due = now
         return due
+
+    def _frame_expected(self, now: float, tick: float) -> bool:
+        """The next streamed frame (the newest one's arrival, :attr:`rx_last`, plus the stream
+        period) is expected within one gyro period of ``now`` (s), either side: its step is
+        due by the next tick, so a watermark step now would be a second step for it."""
+        period = getattr(self.head, "period_s", 0.0) if self.streaming else 0.0
+        return period > 0.0 and abs(self.rx_last + period - now) <= tick
 
     def _result_due(self, now: float, tick: float) -> bool:
         """The head port's waiting result is worth a step at ``now`` (s): a job at once; a
@@ -541,6 +555,7 @@ class CoupledLoop:
                 self.c.full_frames += 1
                 self._acquire(res, now)
                 continue
+            self.rx_last = max(self.rx_last, getattr(res, "t_rx", -math.inf))
             pend = self.plans.get(res.set_frame)
             if pend is None or res.measured is None:
                 self.c.frames_unmatched += 1

@@ -34,6 +34,7 @@ def _loop(watermark=4, streaming=True):
     lp.gyro, lp.head, lp.image = _Gyro(watermark), _Head(), _Image()
     lp.streaming = streaming
     lp._t_due, lp._mids = None, []
+    lp.t_newest = lp.rx_last = -math.inf
     lp.head_down_since, lp.next_frame_t = None, math.inf
     return lp
 
@@ -78,6 +79,8 @@ def test_request_mode_frame_due_and_head_down():
 
 class _StreamHead:
     """A stream port that says what waits: a measured frame's arrival time, −inf for a job."""
+
+    period_s = 0.010
 
     def __init__(self):
         self.since = None
@@ -126,3 +129,57 @@ def test_a_measured_frame_waits_one_tick_at_most():
             t = lp.head.since + dt
             lp._t_due = t - 0.001          # no watermark due: only the frame can make a step
             assert lp.step_due(t) == want
+
+
+def _stream_run(arrivals, t_end, newest_lag=0.0004):
+    """Tick a streaming loop every gyro period from 100.0 to ``t_end``: frames become ready at
+    ``arrivals`` (host s); a due step takes the frames that have arrived (``rx_last``) and
+    reads the samples up to ``newest_lag`` before it. Returns (step times, frame → its step)."""
+    lp = _loop(4)
+    lp.head = _StreamHead()
+    queue, steps, taken = sorted(arrivals), [], {}
+    t = 100.0
+    while t < t_end:
+        here = [a for a in queue if a <= t]
+        lp.head.since = here[0] if here else None
+        if lp.step_due(t):
+            steps.append(t)
+            lp.t_newest = t - newest_lag
+            for a in here:
+                taken[a] = t
+                lp.rx_last = max(lp.rx_last, a)
+            queue = queue[len(here):]
+        t = round(t + TICK, 9)
+    return steps, taken
+
+
+def test_frames_jittering_across_a_tick_take_their_samples_in_one_step_each():
+    """Frames every 10 ms whose arrival jitters ±1 ms about a watermark tick: without a
+    look-ahead a frame that lands just after the tick costs two steps (the watermark's, then
+    its own one tick later) — 117 steps in this second. The watermark step waits that tick
+    for the expected frame: one step per frame, each at the first sample after its arrival,
+    no step more than 5 ticks after the last."""
+    import numpy as np
+
+    arrivals = list(100.0025 + 0.010 * np.arange(100) + np.random.default_rng(1).uniform(-0.001, 0.001, 100))
+    steps, taken = _stream_run(arrivals, 101.0, newest_lag=0.0004)
+    assert len(steps) <= 102
+    for a, t in taken.items():
+        assert a < t <= a + TICK + 0.0004
+    assert max(b - a for a, b in zip(steps, steps[1:])) <= 5 * TICK + 1e-9
+
+
+def test_a_frame_that_does_not_come_holds_the_watermark_one_tick_only():
+    """The stream stops after 100.2: the watermark step waits one tick for the frame expected
+    at 100.2127, then the watermark alone steps every 4 ticks again."""
+    arrivals = [100.0027 + 0.010 * k for k in range(21)]
+    steps, _ = _stream_run(arrivals, 100.4)
+    gaps = [round((b - a) / TICK) for a, b in zip(steps, steps[1:]) if a > 100.2]
+    assert gaps[0] == 5 and set(gaps[1:]) == {4}
+
+
+def test_watermark_one_steps_every_tick_whatever_frames_are_expected():
+    lp = _loop(1)
+    lp.head = _StreamHead()
+    lp.rx_last = 100.0 - 0.010          # the next frame expected at 100.0
+    assert all(_ticks(lp, 100.0 - 2 * TICK, 5))
