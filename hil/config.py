@@ -19,6 +19,7 @@ The built-in files are ``hil/flatsat.toml`` and ``hil/scenarios/*.toml``.
 from __future__ import annotations
 
 import math
+import typing
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -290,8 +291,14 @@ class Fault:
     at_s: float
     seconds: float = 0.0
     rate: float = 0.01                 # link-corruption: fraction of bytes corrupted
+    drop_rate: float = 0.0             # link-corruption: fraction of bytes dropped
+    garbage_rate: float = 0.0          # link-corruption: fraction of replies preceded by 8–64 random bytes
     step_s: float = 0.0                # head-clock-step: s the head MCU's clock jumps by, the link open
                                        # (+ ahead, as across a host suspend of the flight computer; − back)
+
+    def byte_faults(self, seed: int) -> dict:
+        """A link-corruption's :class:`~gyrostar.mocks.faults.ByteFaults` keyword arguments."""
+        return {"corrupt_p": self.rate, "drop_p": self.drop_rate, "garbage_p": self.garbage_rate, "seed": seed}
 
     @property
     def end_s(self) -> float:
@@ -299,6 +306,9 @@ class Fault:
         return math.inf if self.kind == "head-clock-step" else self.at_s + self.seconds
 
     def validate(self):
+        kinds = typing.get_args(typing.get_type_hints(Fault)["kind"])
+        if self.kind not in kinds:
+            raise ValueError(f"kind = {self.kind!r} must be one of {', '.join(kinds)}")
         if self.at_s < 0:
             raise ValueError(f"at_s = {self.at_s} must be ≥ 0 (s from the start of the run)")
         if self.kind == "head-clock-step":
@@ -307,8 +317,11 @@ class Fault:
                                  "(head-clock-step: what the head MCU's clock jumps by)")
         elif not self.seconds > 0:
             raise ValueError(f"seconds = {self.seconds} must be > 0 (a fault of 0 s never fires)")
-        if not 0.0 <= self.rate <= 1.0:
-            raise ValueError(f"rate = {self.rate} must be in [0, 1] (link-corruption: the fraction of bytes corrupted)")
+        for name in ("rate", "drop_rate", "garbage_rate"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f"{name} = {getattr(self, name)} must be in [0, 1] (link-corruption: a fraction)")
+        if self.kind == "link-corruption" and not (self.rate or self.drop_rate or self.garbage_rate):
+            raise ValueError("a link-corruption with rate, drop_rate and garbage_rate all 0 injects nothing")
 
 
 @dataclass

@@ -40,16 +40,12 @@ def _child(conn, make, parent_pid):
             elif cmd == "faults":
                 from ..mocks.faults import ByteFaults
 
-                if arg is None:
-                    emu.faults = None
-                elif isinstance(arg, dict):      # {corrupt_p, drop_p, garbage_p, seed}
-                    emu.faults = ByteFaults(**({"seed": 7} | arg))
-                else:
-                    emu.faults = ByteFaults(seed=7, corrupt_p=float(arg))
+                # ByteFaults keyword arguments {corrupt_p, drop_p, garbage_p, seed}, or None
+                emu.faults = None if arg is None else ByteFaults(**({"seed": 7} | arg))
                 reply = None
             elif cmd == "fault_counts":
                 f = emu.faults
-                reply = None if f is None else {"writes": f.writes, "mangled": f.mangled} | dict(f.injected)
+                reply = None if f is None else f.counts()
             elif cmd == "eclipse":
                 emu.eclipse(bool(arg))
                 reply = None
@@ -117,9 +113,6 @@ class EmulatorProcess:
             self.relay.close()
             self.relay = None
         self._call("disconnect")
-
-    def set_corruption(self, p: float | None) -> None:
-        self._call("faults", p)
 
     def set_byte_faults(self, settings: dict | None) -> None:
         """Reply-stream faults: :class:`~gyrostar.mocks.faults.ByteFaults` keyword arguments

@@ -826,7 +826,8 @@ def _head_devices(cfg, scen, sim, truth, seed, faults, lockstep=None):
 
 
 class FaultPlan:
-    """The scenario's injected faults, applied to the devices at their times."""
+    """The scenario's injected faults, applied to the devices at their times (from its own
+    thread, :meth:`start`, or by the caller's :meth:`apply`)."""
 
     def __init__(self, scen: hc.Scenario):
         self.faults = list(scen.faults)
@@ -835,6 +836,8 @@ class FaultPlan:
         self.head_emulator = None
         self.firmware_head = None
         self.active: set = set()
+        # per fault: a link-corruption's ByteFaults counters when it ended (writes, mangled, injected)
+        self.byte_counts: list[dict] = [{} for _ in self.faults]
         self.in_eclipse = False
         self._head_t = -math.inf     # the head's faults are applied up to here (only forward)
         # the times a head fault or an eclipse starts or ends, sorted (head_events_due)
@@ -900,12 +903,20 @@ class FaultPlan:
             on = f.at_s <= t < f.end_s
             if on and i not in self.active:
                 self.active.add(i)
-                self._set(f, True)
+                self._set(i, True)
             elif not on and i in self.active:
                 self.active.discard(i)
-                self._set(f, False)
+                self._set(i, False)
 
-    def _set(self, f: hc.Fault, on: bool) -> None:
+    def close(self) -> None:
+        """Switch off every fault still on (a clock step stays where it jumped)."""
+        for i in sorted(self.active):
+            if self.faults[i].kind != "head-clock-step":
+                self._set(i, False)
+        self.active.clear()
+
+    def _set(self, i: int, on: bool) -> None:
+        f = self.faults[i]
         log.info("fault %s %s", f.kind, "on" if on else "off")
         if f.kind == "gyro-nack" and self.gyro_bus is not None:
             if on:
@@ -922,7 +933,9 @@ class FaultPlan:
         elif f.kind == "link-corruption":
             dev = self.head_emulator or self.firmware_head
             if dev is not None:
-                dev.set_corruption(f.rate if on else None)
+                if not on:
+                    self.byte_counts[i] = dev.byte_fault_counts() or {}
+                dev.set_byte_faults(f.byte_faults(seed=1000 + i) if on else None)
         elif f.kind == "head-clock-step" and on and self.head_emulator is not None:
             self.head_emulator.step_clock(f.step_s)
 

@@ -160,7 +160,7 @@ class _Relay:
                         os.write(self._fw, data)
                     else:
                         if self.faults is not None:
-                            data = self.faults.mangle(data)
+                            data = self.faults.mutate(data)
                         os.write(self.master, data)
             except OSError:
                 return
@@ -192,7 +192,7 @@ class FirmwareHead:
         self.relay = None
         self.connected = False
         self.path = None
-        self._corrupt = None
+        self._byte_faults = None       # ByteFaults keyword arguments on the replies, or None
         self._lock = threading.Lock()
         ctx = mp.get_context("fork")
         self.conn, child = ctx.Pipe()
@@ -225,7 +225,7 @@ class FirmwareHead:
             self.relay = RelayProcess(fw_path, self.link)
         else:
             self.relay = _Relay(fw_path)
-        self.set_corruption(self._corrupt)
+        self.set_byte_faults(self._byte_faults)
         self.path = self.relay.path
         self.connected = True
         return self.path
@@ -237,14 +237,23 @@ class FirmwareHead:
             self.relay = None
         self.host.stop()
 
-    def set_corruption(self, p) -> None:
+    def set_byte_faults(self, settings: dict | None) -> None:
+        """Reply-stream faults: :class:`~gyrostar.mocks.faults.ByteFaults` keyword arguments
+        (``corrupt_p``, ``drop_p``, ``garbage_p``, ``seed``), or None to stop injecting; kept
+        across a reconnect."""
         from ..mocks.faults import ByteFaults
 
-        self._corrupt = p
+        self._byte_faults = settings
         if isinstance(self.relay, _Relay):
-            self.relay.faults = None if p is None else ByteFaults(seed=7, corrupt_p=float(p))
+            self.relay.faults = None if settings is None else ByteFaults(**({"seed": 7} | settings))
         elif self.relay is not None:
-            self.relay.set_faults(p)
+            self.relay.set_faults(settings)
+
+    def byte_fault_counts(self) -> dict | None:
+        """The in-process relay's ByteFaults counters; None when none are active or the relay
+        is a process of its own (a paced link: it keeps them)."""
+        faults = getattr(self.relay, "faults", None)
+        return None if faults is None else faults.counts()
 
     def eclipse(self, on: bool) -> None:
         self._call("eclipse", on)

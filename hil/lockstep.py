@@ -227,10 +227,16 @@ class SimHead:
     def stop(self) -> None:
         self.disconnect()
 
-    def set_corruption(self, p: float | None) -> None:
+    def set_byte_faults(self, settings: dict | None) -> None:
+        """Reply-stream faults: :class:`~gyrostar.mocks.faults.ByteFaults` keyword arguments
+        (``corrupt_p``, ``drop_p``, ``garbage_p``, ``seed``), or None to stop injecting."""
         from ..mocks.faults import ByteFaults
 
-        self.faults = None if p is None else ByteFaults(seed=7, corrupt_p=float(p))
+        self.faults = None if settings is None else ByteFaults(**({"seed": 7} | settings))
+
+    def byte_fault_counts(self) -> dict | None:
+        """The active ByteFaults' counters, or None."""
+        return None if self.faults is None else self.faults.counts()
 
     def eclipse(self, on: bool) -> None:
         self.emu.eclipse(bool(on))

@@ -251,6 +251,19 @@ class ByteFaults:
         self.injected["garbage_bytes"] += n
         return bytes(self.rng.randrange(256) for _ in range(n))
 
+    def mutate(self, data: bytes) -> bytes:
+        """``data`` corrupted and with bytes dropped, after a garbage burst (no delay): one write."""
+        self.writes += 1
+        junk = self.garbage()
+        out = self.mangle(data)
+        if out != data:
+            self.mangled += 1
+        return junk + out
+
+    def counts(self) -> dict:
+        """Writes passed through, writes mangled, and the injected counters."""
+        return {"writes": self.writes, "mangled": self.mangled} | self.injected
+
     def write_through(self, write, data: bytes, sleep=None) -> None:
         """Apply delay, then corruption/drops (and a garbage burst before), then ``write`` the
         result (nothing if disconnected)."""
@@ -259,11 +272,6 @@ class ByteFaults:
         d = self.delay()
         if d > 0:
             (sleep or precise_wait)(d)
-        self.writes += 1
-        junk = self.garbage()
-        out = self.mangle(data)
-        if out != data:
-            self.mangled += 1
-        out = junk + out
+        out = self.mutate(data)
         if out:
             write(out)

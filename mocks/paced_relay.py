@@ -127,10 +127,10 @@ class PacedRelay:
                     return
                 if cmd == "stop":
                     return
-                if cmd == "faults":
+                if cmd == "faults":             # ByteFaults keyword arguments, or None
                     from .faults import ByteFaults
 
-                    self.down.mangle = None if arg is None else ByteFaults(seed=7, corrupt_p=float(arg)).mangle
+                    self.down.mangle = None if arg is None else ByteFaults(**({"seed": 7} | arg)).mutate
                 elif cmd == "stats":
                     control.send({"up_bytes": self.up.wire.bytes_sent, "down_bytes": self.down.wire.bytes_sent})
 
@@ -174,8 +174,10 @@ class RelayProcess:
             raise DeviceError(f"link relay: {arg}")
         self.path = arg
 
-    def set_faults(self, corrupt_p: float | None) -> None:
-        self.conn.send(("faults", corrupt_p))
+    def set_faults(self, settings: dict | None) -> None:
+        """Head → client byte faults: :class:`~gyrostar.mocks.faults.ByteFaults` keyword
+        arguments (corruption, drops, garbage bursts before a chunk), or None to stop."""
+        self.conn.send(("faults", settings))
 
     def stats(self) -> dict:
         """Bytes carried so far each way: ``up_bytes`` (client → head), ``down_bytes``."""

@@ -8,15 +8,13 @@ trace preallocated for the whole run — time, mode, flags, attitude, and the lo
 counters — so memory does not grow with the run length. Exceptions escaping
 ``loop.step()`` are caught, counted and kept (the loop must never raise).
 
-Fault kinds (:class:`FaultEvent`):
-
-* ``bytes`` — reply-stream faults of the head emulator (``settings``: ByteFaults keyword
-  arguments such as ``corrupt_p``, ``drop_p``, ``garbage_p``);
-* ``disconnect`` — the head's pty closes for ``seconds`` and a new one opens;
-* ``gyro-nack`` — every gyro bus transaction NACKs for ``seconds``;
-* ``gyro-stall`` — the loop does not run for ``seconds`` (the FIFO overruns);
-* ``clock-step`` — the head MCU's clock jumps by ``settings["step_s"]`` at ``at_s``, the link
-  open (``seconds`` is 0: a step, not a span).
+The faults are the scenario's (:class:`gyrostar.hil.config.Fault`), applied by the
+flatsat's own :class:`~gyrostar.hil.flatsat.FaultPlan` at each tick: ``link-corruption``
+(reply-stream corruption, drops and garbage bursts, ``rate``/``drop_rate``/``garbage_rate``),
+``head-disconnect`` (the head's pty closes for ``seconds`` and a new one opens),
+``gyro-nack`` (every gyro bus transaction NACKs), ``gyro-fifo-overrun`` (the loop does not
+run for ``seconds``: the FIFO overruns) and ``head-clock-step`` (the head MCU's clock jumps
+by ``step_s`` at ``at_s``, the link open).
 """
 
 from __future__ import annotations
@@ -24,13 +22,10 @@ from __future__ import annotations
 import logging
 import os
 import time
-from dataclasses import dataclass, field
 
 import numpy as np
 
 log = logging.getLogger(__name__)
-
-FAULT_KINDS = ("bytes", "disconnect", "gyro-nack", "gyro-stall", "clock-step")
 
 TRACE_DTYPE = np.dtype([
     ("t", "<f8"), ("mode", "u1"), ("flags", "<u2"), ("q", "<f8", (4,)), ("frames", "<i8"),
@@ -41,79 +36,16 @@ TRACE_DTYPE = np.dtype([
 """One row per kept loop step: last output (host s, mode, flags, q ICRS→body) and counters."""
 
 
-@dataclass
-class FaultEvent:
-    kind: str
-    at_s: float
-    seconds: float
-    settings: dict = field(default_factory=dict)
-
-    def __post_init__(self):
-        if self.kind not in FAULT_KINDS:
-            raise ValueError(f"fault kind must be one of {FAULT_KINDS}, got {self.kind!r}")
-        if self.kind == "clock-step" and not abs(float(self.settings.get("step_s", 0.0))) >= 0.1:
-            raise ValueError(f"a clock-step needs settings step_s of at least 0.1 s either way, got {self.settings}")
-
-
 def rss_bytes(pid: int | str = "self") -> int:
     """Resident set size of a process (bytes), from /proc/<pid>/statm."""
     with open(f"/proc/{pid}/statm") as fh:
         return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
 
 
-class _Faults:
-    """Switches :class:`FaultEvent` s on and off on the flatsat's devices."""
-
-    def __init__(self, fs, events):
-        self.events = list(events)
-        self.emu = fs.faults.head_emulator
-        self.bus = fs.faults.gyro_bus
-        self.on: set[int] = set()
-        self.stepped: set[int] = set()
-        self.byte_counts: list[dict] = [{} for _ in self.events]
-
-    def stalled(self, t: float) -> bool:
-        return any(e.kind == "gyro-stall" and e.at_s <= t < e.at_s + e.seconds for e in self.events)
-
-    def apply(self, t: float) -> None:
-        for i, e in enumerate(self.events):
-            if e.kind == "clock-step":
-                if t >= e.at_s and i not in self.stepped:
-                    self.stepped.add(i)
-                    log.info("fault clock-step %+.3f s at %.2f s", e.settings["step_s"], e.at_s)
-                    self.emu.step_clock(float(e.settings["step_s"]))
-                continue
-            active = e.at_s <= t < e.at_s + e.seconds
-            if active and i not in self.on:
-                self.on.add(i)
-                self._set(i, e, True)
-            elif not active and i in self.on:
-                self.on.discard(i)
-                self._set(i, e, False)
-
-    def _set(self, i: int, e: FaultEvent, on: bool) -> None:
-        log.info("fault %s %s at %.2f s", e.kind, "on" if on else "off", e.at_s if on else e.at_s + e.seconds)
-        if e.kind == "bytes":
-            if not on:
-                self.byte_counts[i] = self.emu.byte_fault_counts() or {}
-            self.emu.set_byte_faults(dict(e.settings, seed=1000 + i) if on else None)
-        elif e.kind == "disconnect":
-            if on:
-                self.emu.disconnect()
-            else:
-                self.emu.start()
-        elif e.kind == "gyro-nack":
-            self.bus.nack_next(10**9 if on else 0)
-
-    def close(self, t: float) -> None:
-        for i in sorted(self.on):
-            self._set(i, self.events[i], False)
-        self.on.clear()
-
-
-def run_campaign(events, duration: float, seed: int = 1, keep_hz: float = 400.0, segments=None,
+def run_campaign(faults, duration: float, seed: int = 1, keep_hz: float = 400.0, segments=None,
                  rss_every_s: float = 60.0, progress=None, cfg=None) -> dict:
-    """Run the loop for ``duration`` s of flatsat time under ``events``.
+    """Run the loop for ``duration`` s of flatsat time under ``faults`` (scenario faults,
+    :class:`gyrostar.hil.config.Fault`, each validated).
 
     Returns ``{"trace", "truth", "counters", "link", "overruns", "steps", "exceptions", "rss",
     "byte_faults", "wall_s"}``: ``trace`` (:data:`TRACE_DTYPE`), ``truth`` (simulator truth
@@ -126,12 +58,14 @@ def run_campaign(events, duration: float, seed: int = 1, keep_hz: float = 400.0,
 
     cfg = cfg or hc.load_flatsat(None)
     segs = segments or [hc.Segment(seconds=duration, rate_dps=(0.3, 0.2, 0.05))]
-    scen = hc.Scenario(name="reliability", duration_s=duration, segments=segs)
+    for f in faults:
+        f.validate()
+    scen = hc.Scenario(name="reliability", duration_s=duration, segments=segs, faults=list(faults))
     warmup()
     fs = flatsat.build(cfg, scen, seed=seed, realtime=False, writer=None)
     if getattr(fs.irq, "model", None) is not None:
         fs.irq.model.truth_log = False   # (build does this too) the model's test-truth log grows ~90 kB/s
-    faults = _Faults(fs, events)
+    plan = fs.faults
     n_keep = int(duration * keep_hz) + 16
     trace = np.empty(n_keep, TRACE_DTYPE)
     trace.view(np.uint8)[:] = 0      # touch every page now: RSS must not grow as the trace fills
@@ -163,14 +97,14 @@ def run_campaign(events, duration: float, seed: int = 1, keep_hz: float = 400.0,
             t = fs.clock_now() - t_start
             if t >= duration:
                 break
-            faults.apply(t)
+            plan.apply(t)
             if t >= next_rss and n_rss < len(rss):
                 rss[n_rss] = (t, rss_bytes(), rss_bytes(emu_pid))
                 n_rss += 1
                 next_rss += rss_every_s
                 if progress is not None:
                     progress(t, loop)
-            if not faults.stalled(t) and loop.step_due(t + t_start):
+            if not plan.stalled(t) and loop.step_due(t + t_start):
                 try:
                     loop.step()
                 except Exception as exc:  # noqa: BLE001 - the campaign counts what escapes the loop
@@ -190,7 +124,7 @@ def run_campaign(events, duration: float, seed: int = 1, keep_hz: float = 400.0,
                                      sched.overruns, ls.get("corrupt", 0), ls.get("retries", 0),
                                      ls.get("clock_steps", 0))
                 state["n"] += 1
-        faults.close(t)
+        plan.close()
         rss[n_rss] = (t, rss_bytes(), rss_bytes(emu_pid))
         n_rss += 1
     finally:
@@ -202,7 +136,7 @@ def run_campaign(events, duration: float, seed: int = 1, keep_hz: float = 400.0,
     return {"trace": trace, "truth": truth, "t_origin": t_start, "counters": loop.counters(),
             "link": dict(client.stats) if client is not None else {}, "overruns": sched.overruns,
             "steps": sched.steps, "exceptions": exceptions, "n_exceptions": n_exc, "rss": rss[:n_rss],
-            "byte_faults": faults.byte_counts, "gyro_bus": dict(fs.faults.gyro_bus.injected),
+            "byte_faults": plan.byte_counts, "gyro_bus": dict(fs.faults.gyro_bus.injected),
             "wall_s": time.perf_counter() - wall0}
 
 
@@ -215,3 +149,12 @@ def cross_boresight_error_arcsec(trace: np.ndarray, truth: np.ndarray) -> np.nda
     err = np.hypot(e[:, 0], e[:, 1])
     err[(trace["flags"] & FLAG_ATTITUDE_VALID) == 0] = np.nan
     return err
+
+
+def mode_seconds(t: np.ndarray, mode: np.ndarray, rows: np.ndarray) -> dict:
+    """Seconds in each mode over the trace ``rows`` (bool mask): each row's mode holds until
+    the next row's time (rows come one per loop step, whatever samples it took)."""
+    from ...loop.record import MODE_NAMES
+
+    held = np.diff(t, append=t[-1]) if len(t) else np.zeros(0)
+    return {name: round(float(held[rows & (mode == m)].sum()), 2) for m, name in MODE_NAMES.items()}

@@ -28,15 +28,15 @@ GAP_S = 3.0
 
 def schedule(first_s: float = FIRST_S, fault_s: float = FAULT_S, gap_s: float = GAP_S):
     """The four link faults, back to back with ``gap_s`` of clean link between them."""
-    from .campaign import FaultEvent
+    from ..config import Fault
 
-    kinds = [("corruption 1 %", "bytes", {"corrupt_p": 0.01}, fault_s),
-             ("dropped bytes 0.1 %", "bytes", {"drop_p": 0.001}, fault_s),
-             ("garbage bursts", "bytes", {"garbage_p": 0.3}, fault_s),
-             ("disconnect 2 s", "disconnect", {}, 2.0)]
+    kinds = [("corruption 1 %", "link-corruption", {"rate": 0.01}, fault_s),
+             ("dropped bytes 0.1 %", "link-corruption", {"rate": 0.0, "drop_rate": 0.001}, fault_s),
+             ("garbage bursts", "link-corruption", {"rate": 0.0, "garbage_rate": 0.3}, fault_s),
+             ("disconnect 2 s", "head-disconnect", {}, 2.0)]
     out, t = [], first_s
-    for name, kind, settings, secs in kinds:
-        out.append((name, FaultEvent(kind, t, secs, settings)))
+    for name, kind, rates, secs in kinds:
+        out.append((name, Fault(kind, t, secs, **rates)))
         t += secs + gap_s
     return out
 
@@ -52,8 +52,7 @@ IN_FLIGHT_S = 0.05   # s: longer than one image cycle (windows, exposure, reply)
 
 def analyse(res: dict, faults) -> dict:
     """Per-fault continuity, resynchronisation and bad-frame accounting from a campaign result."""
-    from ...loop.record import MODE_NAMES
-    from .campaign import cross_boresight_error_arcsec
+    from .campaign import cross_boresight_error_arcsec, mode_seconds
 
     tr, truth = res["trace"], res["truth"]
     t = tr["t"] - res["t_origin"]
@@ -92,8 +91,7 @@ def analyse(res: dict, faults) -> dict:
             # that made it worse (a jump), and that made it better (an update correcting the coast)
             "err_largest_increase_step_arcsec": _nanmax(step[around]),
             "err_largest_correction_step_arcsec": _nanmax(-step[around]),
-            "modes_during_s": {name: round(float(np.count_nonzero(tr["mode"][during] == m)) / 400.0, 2)
-                               for m, name in MODE_NAMES.items()},
+            "modes_during_s": mode_seconds(t, tr["mode"], during),
             "valid_fraction_during": float(np.mean(np.isfinite(err[during]))) if np.any(during) else None,
             "frames_good_during": int(np.ptp(good[settled])) if np.any(settled) else 0,
             "frames_failed_during": int(np.ptp(failed[during | after])) if np.any(during) else 0,
@@ -115,14 +113,13 @@ def _nanmax(x):
 
 
 def run(duration: float = 30.0, seed: int = 1) -> dict:
-    from ...loop.record import MODE_NAMES
-    from .campaign import run_campaign
+    from .campaign import mode_seconds, run_campaign
 
     faults = schedule()
     res = run_campaign([ev for _, ev in faults], duration, seed=seed, keep_hz=400.0, rss_every_s=5.0)
     per = analyse(res, faults)
     tr = res["trace"]
-    modes = {name: round(float(np.count_nonzero(tr["mode"] == m)) / 400.0, 2) for m, name in MODE_NAMES.items()}
+    modes = mode_seconds(tr["t"], tr["mode"], np.ones(len(tr), bool))
     summary = {
         "duration_s": duration, "seed": seed, "wall_s": round(res["wall_s"], 1),
         "exceptions_escaped": res["n_exceptions"], "exceptions": res["exceptions"],

@@ -27,7 +27,7 @@ WINDOW_S = 600.0
 
 def random_schedule(duration: float, seed: int, every_s: float = 45.0, quiet_start_s: float = 60.0):
     """Faults at Poisson times (mean spacing ``every_s``), none in the first ``quiet_start_s``."""
-    from .campaign import FaultEvent
+    from ..config import Fault
 
     rng = random.Random(seed)
     out = []
@@ -37,17 +37,17 @@ def random_schedule(duration: float, seed: int, every_s: float = 45.0, quiet_sta
         kind = rng.choice(["corrupt", "drop", "garbage", "disconnect", "gyro-nack", "gyro-stall", "clock-step"])
         if kind in ("corrupt", "drop", "garbage"):
             secs = rng.uniform(1.0, 3.0)
-            settings = {"corrupt": {"corrupt_p": 0.01}, "drop": {"drop_p": 0.001},
-                        "garbage": {"garbage_p": 0.3}}[kind]
-            ev = FaultEvent("bytes", t, secs, settings)
+            rates = {"corrupt": {"rate": 0.01}, "drop": {"rate": 0.0, "drop_rate": 0.001},
+                     "garbage": {"rate": 0.0, "garbage_rate": 0.3}}[kind]
+            ev = Fault("link-corruption", t, secs, **rates)
         elif kind == "disconnect":
-            ev = FaultEvent("disconnect", t, rng.uniform(1.0, 3.0))
+            ev = Fault("head-disconnect", t, rng.uniform(1.0, 3.0))
         elif kind == "gyro-nack":
-            ev = FaultEvent("gyro-nack", t, rng.uniform(0.02, 0.2))
+            ev = Fault("gyro-nack", t, rng.uniform(0.02, 0.2))
         elif kind == "clock-step":
-            ev = FaultEvent("clock-step", t, 0.0, {"step_s": rng.choice((-1.0, 1.0)) * rng.uniform(0.1, 5.0)})
+            ev = Fault("head-clock-step", t, 0.0, step_s=rng.choice((-1.0, 1.0)) * rng.uniform(0.1, 5.0))
         else:
-            ev = FaultEvent("gyro-stall", t, rng.uniform(0.1, 0.5))
+            ev = Fault("gyro-fifo-overrun", t, rng.uniform(0.1, 0.5))
         if t + ev.seconds >= duration - 5.0:
             return out
         out.append((kind, ev))
@@ -66,7 +66,7 @@ def rate_segments(duration: float, seed: int, every_s: float = 120.0, max_dps: f
 def run(duration: float = 3600.0, seed: int = 1, fault_every_s: float = 45.0, max_rss_growth_mb: float = 20.0,
         progress: bool = True) -> dict:
     from ...loop.record import MODE_NAMES, MODE_TRACK
-    from .campaign import cross_boresight_error_arcsec, run_campaign
+    from .campaign import cross_boresight_error_arcsec, mode_seconds, run_campaign
     from .linkfaults import cumulative
 
     faults = random_schedule(duration, seed, fault_every_s)
@@ -115,8 +115,7 @@ def run(duration: float = 3600.0, seed: int = 1, fault_every_s: float = 45.0, ma
         "rss_series_mb": [[round(float(a), 0), round(b / 2**20, 2), round(c / 2**20, 2)] for a, b, c in rss],
         "overruns_total": res["overruns"], "windows": windows,
         "exceptions_escaped": res["n_exceptions"], "exceptions": res["exceptions"],
-        "mode_seconds": {name: round(float(np.count_nonzero(tr["mode"] == m)) / 10.0, 1)
-                         for m, name in MODE_NAMES.items()},
+        "mode_seconds": mode_seconds(tr["t"], tr["mode"], np.ones(len(tr), bool)),
         "counters": {k: v for k, v in res["counters"].items() if k != "mode_changes"},
         "mode_changes": len(res["counters"]["mode_changes"]),
         # found by the clock model; a step while the head is away meets a new client's model

@@ -78,3 +78,62 @@ def test_register_model_truth_log_can_be_off_for_long_runs():
         counts.append((out.n, len(model.popped_indices()), len(model.watermark_edges)))
     assert counts[0][0] > 300 and counts[0][1] == counts[0][0] and counts[0][2] > 300  # tests keep the logs
     assert counts[1][0] > 300 and counts[1][1] == 0 and counts[1][2] == 0              # a soak keeps nothing
+
+
+def test_fault_plan_link_faults_reach_the_head_and_report_their_counts():
+    """A link-corruption goes to the head as ByteFaults settings (its rates, a seed per fault)
+    for its span, its counters are kept when it ends, a stall stops the loop for its span,
+    and close() switches off what is still on; a clock step is applied once, for good."""
+    from gyrostar.hil import config as hc
+    from gyrostar.hil.flatsat import FaultPlan
+
+    class Head:
+        def __init__(self):
+            self.calls, self.faults, self.steps = [], None, []
+
+        def set_byte_faults(self, settings):
+            self.calls.append(settings)
+            self.faults = None if settings is None else ByteFaults(**settings)
+
+        def byte_fault_counts(self):
+            return None if self.faults is None else self.faults.counts()
+
+        def step_clock(self, s):
+            self.steps.append(s)
+
+    faults = [hc.Fault("link-corruption", 1.0, 2.0, rate=0.0, garbage_rate=1.0),
+              hc.Fault("gyro-fifo-overrun", 2.0, 0.5), hc.Fault("head-clock-step", 2.5, step_s=-0.5),
+              hc.Fault("link-corruption", 4.0, 5.0, rate=0.5, drop_rate=0.25)]
+    for f in faults:
+        f.validate()
+    plan = FaultPlan(hc.Scenario(name="t", faults=faults))
+    plan.head_emulator = head = Head()
+    plan.apply(0.5)
+    assert head.calls == [] and not plan.stalled(0.5)
+    plan.apply(1.0)
+    assert head.calls == [{"corrupt_p": 0.0, "drop_p": 0.0, "garbage_p": 1.0, "seed": 1000}]
+    head.faults.mutate(b"\x01\x02")                      # one reply through the fault
+    assert plan.stalled(2.2) and not plan.stalled(2.6)
+    plan.apply(2.6)
+    plan.apply(3.1)
+    assert head.calls[-1] is None and head.steps == [-0.5]
+    assert plan.byte_counts[0]["writes"] == 1 and plan.byte_counts[0]["garbage_bursts"] == 1
+    plan.apply(4.5)
+    assert head.calls[-1] == {"corrupt_p": 0.5, "drop_p": 0.25, "garbage_p": 0.0, "seed": 1003}
+    plan.close()
+    assert head.calls[-1] is None and head.steps == [-0.5] and not plan.active
+
+
+def test_mode_seconds_follow_the_trace_times_not_its_row_count():
+    """Rows come one per loop step (4 samples or fewer each): a mode's time is the time its
+    rows hold, hand-counted here, not rows / 400."""
+    import numpy as np
+    from gyrostar.hil.reliability.campaign import mode_seconds
+    from gyrostar.loop.record import MODE_ACQUIRE, MODE_COAST, MODE_TRACK
+
+    t = np.array([0.0, 0.01, 0.03, 0.06, 0.08, 0.10])
+    mode = np.array([MODE_ACQUIRE, MODE_TRACK, MODE_TRACK, MODE_COAST, MODE_TRACK, MODE_TRACK])
+    got = mode_seconds(t, mode, np.ones(6, bool))
+    assert (got["ACQUIRE"], got["TRACK"], got["COAST"]) == (0.01, 0.07, 0.02)
+    assert sum(got.values()) == 0.10
+    assert mode_seconds(t, mode, t >= 0.03)["TRACK"] == 0.05

@@ -4,7 +4,8 @@ the gyro with a valid attitude, gets a good frame back within 2 frames, counts b
 
 import numpy as np
 import pytest
-from gyrostar.hil.reliability.campaign import FaultEvent, run_campaign
+from gyrostar.hil.config import Fault
+from gyrostar.hil.reliability.campaign import run_campaign
 from gyrostar.hil.reliability.linkfaults import analyse, cumulative
 from gyrostar.loop.record import MODE_ACQUIRE
 
@@ -13,12 +14,16 @@ def test_cum_counter_survives_client_restart():
     assert list(cumulative(np.array([0, 2, 5, 0, 1, 4]))) == [0, 2, 5, 5, 6, 9]
 
 
-def test_fault_events_are_checked():
-    with pytest.raises(ValueError):
-        FaultEvent("meteor", 1.0, 1.0)
-    for settings in ({}, {"step_s": 0.05}, {"step_s": float("nan")}):
-        with pytest.raises(ValueError, match="step_s"):
-            FaultEvent("clock-step", 1.0, 0.0, settings)
+def test_campaign_faults_are_checked():
+    """The campaign's faults are the scenario's, checked the same way before anything runs."""
+    for bad, what in ((Fault("meteor", 1.0, 1.0), "kind"), (Fault("head-clock-step", 1.0), "step_s"),
+                      (Fault("head-clock-step", 1.0, step_s=0.05), "step_s"),
+                      (Fault("head-clock-step", 1.0, step_s=float("nan")), "step_s"),
+                      (Fault("link-corruption", 1.0, 1.0, rate=0.0), "injects nothing"),
+                      (Fault("link-corruption", 1.0, 1.0, garbage_rate=1.5), "garbage_rate"),
+                      (Fault("gyro-nack", 1.0, 0.0), "seconds")):
+        with pytest.raises(ValueError, match=what):
+            run_campaign([bad], 1.0)
 
 
 @pytest.mark.slow
@@ -29,7 +34,7 @@ def test_head_clock_steps_during_a_short_run():
     from gyrostar.hil.reliability.campaign import cross_boresight_error_arcsec
     from gyrostar.loop.record import MODE_TRACK
 
-    steps = [FaultEvent("clock-step", 4.0, 0.0, {"step_s": 3.0}), FaultEvent("clock-step", 7.0, 0.0, {"step_s": -1.5})]
+    steps = [Fault("head-clock-step", 4.0, step_s=3.0), Fault("head-clock-step", 7.0, step_s=-1.5)]
     res = run_campaign(steps, 10.0, seed=3, keep_hz=400.0, rss_every_s=5.0)
     assert res["n_exceptions"] == 0, res["exceptions"]
     tr = res["trace"]
@@ -44,9 +49,9 @@ def test_head_clock_steps_during_a_short_run():
 
 @pytest.mark.slow
 def test_corruption_and_disconnect_during_a_short_run():
-    faults = [("corruption 1 %", FaultEvent("bytes", 5.0, 2.0, {"corrupt_p": 0.01})),
-              ("garbage bursts", FaultEvent("bytes", 8.0, 1.5, {"garbage_p": 0.5})),
-              ("disconnect", FaultEvent("disconnect", 10.5, 1.5))]
+    faults = [("corruption 1 %", Fault("link-corruption", 5.0, 2.0, rate=0.01)),
+              ("garbage bursts", Fault("link-corruption", 8.0, 1.5, rate=0.0, garbage_rate=0.5)),
+              ("disconnect", Fault("head-disconnect", 10.5, 1.5))]
     res = run_campaign([ev for _, ev in faults], 14.0, seed=3, keep_hz=400.0, rss_every_s=5.0)
     assert res["n_exceptions"] == 0, res["exceptions"]
     per = analyse(res, faults)
