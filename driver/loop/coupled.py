@@ -212,6 +212,7 @@ class CoupledLoop:
         self.n_e2o = 0
         self.frame_t = [np.nan, np.nan]        # mid-exposure of the first and last frame used
         self.few_run = 0                       # consecutive streamed images that updated too few stars
+        self.t_image = -math.inf               # loop time of the last image (or missing frame) the modes saw
 
     # ------------------------------------------------------------------ views
     @property
@@ -339,6 +340,7 @@ class CoupledLoop:
             n = self._read_gyro()
             self._split = 0
             self._guarded(self._stream_take, t_step)
+            self._frames_missing(t_step)
             self._outputs(self._split, n)
             self._note_ages(n)
             self._guarded(self._stream_command, t_step)
@@ -537,6 +539,7 @@ class CoupledLoop:
                 if res.error is None:
                     self.c.head_reconnects += 1
                     log.info("head link back after %.2f s", now - (self.head_down_since or now))
+                    self.t_image = now               # the stream restarts: its first frame takes a while
                     self.head_down_since = None
                     self.timeouts = 0
                 else:
@@ -599,6 +602,7 @@ class CoupledLoop:
         if frame == 0:
             if now >= self.stream_start_wait:              # the set that starts the stream
                 self.stream_start_wait = now + 0.2
+                self.t_image = now                   # no frame can come before this set's exposure
                 self.last_commanded = 0
                 self._command_windows(now, 0, t_exp)
         elif frame > self.last_commanded:
@@ -748,7 +752,20 @@ class CoupledLoop:
         self.id_verified = updated >= 3 and updated == n_measured
         self._after_image(now, updated)
 
+    def _frames_missing(self, now: float) -> None:
+        """Streaming, tracking or coasting: once no frame has come for :data:`STREAM_GAP_FRAMES`
+        frame periods (all lost on the link, the head silent), each further period counts as an
+        image that updated no star — the modes coast and time out as for starless frames, and
+        the outputs say so, instead of TRACK on a gyro-only attitude."""
+        if not self.streaming or self.head_down_since is not None or self.state.mode == R.MODE_ACQUIRE:
+            return
+        period = 1.0 / (self.budget.frame_hz if self.budget is not None else self.p.frame_hz)
+        if now - self.t_image > STREAM_GAP_FRAMES * period:
+            self._after_image(now, 0)
+            self.t_image = now - (STREAM_GAP_FRAMES - 1) * period     # the next one a period later
+
     def _after_image(self, now: float, updated: int) -> None:
+        self.t_image = now
         self.few_run = self.few_run + 1 if updated < self.p.min_stars else 0
         if self.streaming and self.state.mode == R.MODE_TRACK and 0 < self.few_run < STREAM_FEW_FRAMES:
             # streaming at 100 Hz: one frame read with a late window set is no reason to coast
@@ -802,6 +819,7 @@ class CoupledLoop:
 
 
 STREAM_FEW_FRAMES = 3       # streaming: consecutive images with too few stars before COAST (30 ms)
+STREAM_GAP_FRAMES = 3       # streaming: frame periods without any frame before each further one counts as starless
 
 _NO_REFS = np.zeros((0, 3))
 _NO_IDS = np.zeros(0, np.int32)

@@ -1,0 +1,89 @@
+"""Streaming: frames that stop coming (all lost on the link, the head silent while its link
+stays up) make the loop coast, and time out to ACQUIRE, as starless frames would — the
+outputs must not say TRACK over a gyro-only attitude."""
+
+import math
+
+from gyrostar.loop import modes
+from gyrostar.loop import record as R
+from gyrostar.loop.coupled import STREAM_FEW_FRAMES, STREAM_GAP_FRAMES, CoupledLoop, Counters, LoopParams
+
+TICK = 0.0025
+
+
+class _Tracks:
+    def __init__(self):
+        self.cleared = 0
+
+    def drop_lost(self, tracking):
+        pass
+
+    def clear(self):
+        self.cleared += 1
+
+
+class _Filter:
+    valid = True
+
+
+def _tracking_loop():
+    lp = CoupledLoop.__new__(CoupledLoop)          # only what the image-mode bookkeeping reads
+    lp.p = LoopParams()
+    lp.mp = lp.p.mode_params()
+    lp.streaming, lp.head_down_since, lp.budget = True, None, None
+    lp.state = modes.ModeState(mode=R.MODE_TRACK)
+    lp.c, lp.tracks, lp.filter = Counters(), _Tracks(), _Filter()
+    lp.few_run, lp.t_image, lp.last_image_flags, lp.next_acquire_t = 0, -math.inf, 0, math.inf
+    return lp
+
+
+def _run(lp, t0, t1, frames_until):
+    """Tick from ``t0`` to ``t1``: a frame updating 10 stars every 10 ms until ``frames_until``,
+    none after. Returns [(t, mode)] at each tick."""
+    out, t, next_frame = [], t0, t0
+    while t < t1:
+        if t >= next_frame and t <= frames_until:
+            lp._after_image(t, 10)
+            next_frame += 0.010
+        lp._frames_missing(t)
+        out.append((t, lp.state.mode))
+        t = round(t + TICK, 9)
+    return out
+
+
+def test_frames_that_stop_coming_coast_after_a_few_periods_and_time_out():
+    lp = _tracking_loop()
+    trace = _run(lp, 100.0, 107.0, frames_until=101.0)
+    before = [m for t, m in trace if t <= 101.0 + STREAM_GAP_FRAMES * 0.010]
+    assert set(before) == {R.MODE_TRACK}                 # frames coming (and one late frame's slack)
+    coast_at = min(t for t, m in trace if m == R.MODE_COAST)
+    # the first missing period counts after STREAM_GAP_FRAMES, then one per period: COAST at the
+    # STREAM_FEW_FRAMES-th, as three starless frames would
+    assert coast_at - 101.0 <= (STREAM_GAP_FRAMES + STREAM_FEW_FRAMES - 1) * 0.010 + 2 * TICK
+    assert coast_at - 101.0 > STREAM_GAP_FRAMES * 0.010
+    acquire_at = min(t for t, m in trace if m == R.MODE_ACQUIRE)
+    assert lp.p.coast_timeout_s < acquire_at - coast_at <= lp.p.coast_timeout_s + 0.011
+    assert lp.tracks.cleared == 1 and not lp.filter.valid       # the attitude is given up there
+    # in ACQUIRE nothing more is counted (lost-in-space full frames run their own course)
+    assert lp.few_run == 0 or lp.state.mode == R.MODE_ACQUIRE
+
+
+def test_frames_coming_never_count_as_missing_and_a_return_regains_track():
+    lp = _tracking_loop()
+    trace = _run(lp, 100.0, 103.0, frames_until=103.0)
+    assert {m for _, m in trace} == {R.MODE_TRACK}
+    trace = _run(lp, 103.0, 103.2, frames_until=103.0)      # frames stop: COAST
+    assert trace[-1][1] == R.MODE_COAST
+    trace = _run(lp, 103.2, 103.3, frames_until=104.0)      # they come back
+    assert trace[-1][1] == R.MODE_TRACK
+
+
+def test_no_missing_frames_while_the_head_is_away_or_in_request_mode():
+    for setup in ({"head_down_since": 99.0}, {"streaming": False}):
+        lp = _tracking_loop()
+        lp._after_image(100.0, 10)
+        for k, v in setup.items():
+            setattr(lp, k, v)
+        for i in range(200):
+            lp._frames_missing(100.0 + i * TICK)
+        assert lp.state.mode == R.MODE_TRACK and lp.few_run == 0
