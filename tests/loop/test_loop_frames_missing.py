@@ -6,7 +6,7 @@ import math
 
 from gyrostar.loop import modes
 from gyrostar.loop import record as R
-from gyrostar.loop.coupled import STREAM_FEW_FRAMES, STREAM_GAP_FRAMES, CoupledLoop, Counters, LoopParams
+from gyrostar.loop.coupled import STREAM_FEW_FRAMES, STREAM_GAP_FRAMES, Counters, CoupledLoop, LoopParams
 
 TICK = 0.0025
 
