@@ -356,7 +356,8 @@ class Flatsat:
             self.faults.start(t0, self.base_clock)
 
     def apply_faults(self, t: float) -> None:
-        """Fast mode: the faults and eclipses due at scenario time ``t`` (s), from the runner."""
+        """The faults and eclipses due at scenario time ``t`` (s), applied by the caller (fast
+        mode's runner; the reliability campaigns, at each tick)."""
         if self.faults is not None:
             self.faults.apply(t)
 

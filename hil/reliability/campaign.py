@@ -84,7 +84,7 @@ def run_campaign(faults, duration: float, seed: int = 1, keep_hz: float = 400.0,
     loop = fs.make_loop([CallbackSink(keep)])
     loop.warm_identifier()
     sched = PeriodicScheduler(1.0 / cfg.gyro.odr_hz)
-    emu_pid = fs.faults.head_emulator.proc.pid
+    emu_pid = plan.head_emulator.proc.pid
     wall0 = time.perf_counter()
     try:
         fs.truth.restart(fs.clock_now())
@@ -97,14 +97,14 @@ def run_campaign(faults, duration: float, seed: int = 1, keep_hz: float = 400.0,
             t = fs.clock_now() - t_start
             if t >= duration:
                 break
-            plan.apply(t)
+            fs.apply_faults(t)
             if t >= next_rss and n_rss < len(rss):
                 rss[n_rss] = (t, rss_bytes(), rss_bytes(emu_pid))
                 n_rss += 1
                 next_rss += rss_every_s
                 if progress is not None:
                     progress(t, loop)
-            if not plan.stalled(t) and loop.step_due(t + t_start):
+            if not fs.loop_stalled(t) and loop.step_due(t + t_start):
                 try:
                     loop.step()
                 except Exception as exc:  # noqa: BLE001 - the campaign counts what escapes the loop
@@ -136,7 +136,7 @@ def run_campaign(faults, duration: float, seed: int = 1, keep_hz: float = 400.0,
     return {"trace": trace, "truth": truth, "t_origin": t_start, "counters": loop.counters(),
             "link": dict(client.stats) if client is not None else {}, "overruns": sched.overruns,
             "steps": sched.steps, "exceptions": exceptions, "n_exceptions": n_exc, "rss": rss[:n_rss],
-            "byte_faults": plan.byte_counts, "gyro_bus": dict(fs.faults.gyro_bus.injected),
+            "byte_faults": plan.byte_counts, "gyro_bus": dict(plan.gyro_bus.injected),
             "wall_s": time.perf_counter() - wall0}
 
 
