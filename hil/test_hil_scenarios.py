@@ -148,8 +148,10 @@ def test_bench_without_truth(flatsat_config, run_dir):
 
 def test_head_clock_steps_keep_tracking(flatsat_config, run_dir):
     """The head MCU's clock jumps 3 s ahead and 1.5 s back with the link open: each jump
-    costs the one frame stamped outside its arrival, a TIME_SYNC restarts the clock model,
-    and the loop stays in TRACK with its mid-exposure times on the new clock. In request mode
+    costs the frames stamped outside their arrival, a TIME_SYNC restarts the clock model,
+    and the loop tracks on with its mid-exposure times on the new clock — coasting, and saying
+    so, only while no frame is used (≤ 0.1 s a jump: on a 921.6 kBd UART the resynchronising
+    exchanges share the wire with the frames, 80 ms without a used frame). In request mode
     (``head.mode = "request"``) the capture after a jump is re-timed inside its job; one
     whose exposure straddles the jump is lost, a frame period of COAST at most."""
     if flatsat_config.head.kind != "emulator":
@@ -163,7 +165,7 @@ def test_head_clock_steps_keep_tracking(flatsat_config, run_dir):
     changes = [(round(tc - log["t0"], 3), a, b) for tc, a, b in res["counters"]["mode_changes"]]
     track = out["mode"][t > 2.0] == R.MODE_TRACK
     if "stream" in res:
-        assert np.all(track), changes
+        assert np.sum(~track) / flatsat_config.gyro.odr_hz <= 0.1 * len(scen.faults), changes
     else:   # request mode: a capture that straddles a step has no host time, one frame lost
         assert res["counters"]["frames_failed"] <= len(scen.faults), res["counters"]
         assert np.sum(~track) / flatsat_config.gyro.odr_hz <= 0.05 * len(scen.faults), changes
