@@ -151,10 +151,12 @@ def cross_boresight_error_arcsec(trace: np.ndarray, truth: np.ndarray) -> np.nda
     return err
 
 
-def mode_seconds(t: np.ndarray, mode: np.ndarray, rows: np.ndarray) -> dict:
-    """Seconds in each mode over the trace ``rows`` (bool mask): each row's mode holds until
-    the next row's time (rows come one per loop step, whatever samples it took)."""
+def mode_seconds(t: np.ndarray, mode: np.ndarray, rows: np.ndarray | None = None) -> dict:
+    """Seconds in each mode over the trace ``rows`` (bool mask; None: all): each row's mode
+    holds until the next row's time (rows come one per loop step, whatever samples it took)."""
     from ...loop.record import MODE_NAMES
 
     held = np.diff(t, append=t[-1]) if len(t) else np.zeros(0)
+    if rows is None:
+        rows = np.ones(len(t), bool)
     return {name: round(float(held[rows & (mode == m)].sum()), 2) for m, name in MODE_NAMES.items()}

@@ -119,7 +119,7 @@ def run(duration: float = 30.0, seed: int = 1) -> dict:
     res = run_campaign([ev for _, ev in faults], duration, seed=seed, keep_hz=400.0, rss_every_s=5.0)
     per = analyse(res, faults)
     tr = res["trace"]
-    modes = mode_seconds(tr["t"], tr["mode"], np.ones(len(tr), bool))
+    modes = mode_seconds(tr["t"], tr["mode"])
     summary = {
         "duration_s": duration, "seed": seed, "wall_s": round(res["wall_s"], 1),
         "exceptions_escaped": res["n_exceptions"], "exceptions": res["exceptions"],

@@ -115,7 +115,7 @@ def run(duration: float = 3600.0, seed: int = 1, fault_every_s: float = 45.0, ma
         "rss_series_mb": [[round(float(a), 0), round(b / 2**20, 2), round(c / 2**20, 2)] for a, b, c in rss],
         "overruns_total": res["overruns"], "windows": windows,
         "exceptions_escaped": res["n_exceptions"], "exceptions": res["exceptions"],
-        "mode_seconds": mode_seconds(tr["t"], tr["mode"], np.ones(len(tr), bool)),
+        "mode_seconds": mode_seconds(tr["t"], tr["mode"]),
         "counters": {k: v for k, v in res["counters"].items() if k != "mode_changes"},
         "mode_changes": len(res["counters"]["mode_changes"]),
         # found by the clock model; a step while the head is away meets a new client's model

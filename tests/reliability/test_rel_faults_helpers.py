@@ -133,7 +133,7 @@ def test_mode_seconds_follow_the_trace_times_not_its_row_count():
 
     t = np.array([0.0, 0.01, 0.03, 0.06, 0.08, 0.10])
     mode = np.array([MODE_ACQUIRE, MODE_TRACK, MODE_TRACK, MODE_COAST, MODE_TRACK, MODE_TRACK])
-    got = mode_seconds(t, mode, np.ones(6, bool))
+    got = mode_seconds(t, mode)
     assert (got["ACQUIRE"], got["TRACK"], got["COAST"]) == (0.01, 0.07, 0.02)
     assert sum(got.values()) == 0.10
     assert mode_seconds(t, mode, t >= 0.03)["TRACK"] == 0.05
