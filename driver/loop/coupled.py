@@ -44,8 +44,10 @@ from . import record as R
 from .attitude_filter import GATE, QD_MARGIN, SMOOTH_GAP_S, AttitudeFilter, fix_covariance
 from .floor import FloorInputs, pointing_bias_arcsec
 from .frame_kernel import N_ACCEPTED, N_CONSISTENT, N_MEASURED, N_USED, apply_frame
+from .head_link import HeadLink
 from .image import ImagePipeline
 from .outputs import OutputStage
+from .step_schedule import StepSchedule
 from .tracks import MODEL, StarTracks
 
 log = logging.getLogger(__name__)
@@ -163,9 +165,7 @@ class CoupledLoop:
         self.age = np.zeros(1 << 16)   # ring: step start − sample stamp of each output (s, loop clock)
         self.n_age = 0
         self._split = 0                # streaming: samples of this step already predicted
-        self._t_due: float | None = None   # runner time of the last step_due() that said yes
-        self.t_newest = -math.inf           # stamp of the newest gyro sample read (host s)
-        self.rx_last = -math.inf            # arrival of the newest streamed frame taken in (host s)
+        self.schedule = StepSchedule()      # when to step: last step, newest sample, newest frame
         self.overruns = 0
         self.gyro = gyro
         self.head = head
@@ -188,11 +188,9 @@ class CoupledLoop:
         self.next_frame_t = -np.inf
         self.next_acquire_t = -np.inf
         self.pending = None            # the windows in flight: plan + time commanded
-        self.head_down_since: float | None = None
-        self.timeouts = 0              # consecutive head jobs without an answer
+        self.link = HeadLink(params.reconnect_every_s, params.head_timeouts_lost)   # up / down, reconnects
         self.exposure_lag = 0.002      # s from commanding windows to the exposure start (EMA)
         self.lag_jitter = 0.001        # s, mean deviation of that lag
-        self.next_reconnect_t = -np.inf
         self._refs = np.zeros((0, 3))  # tracked stars' catalog vectors / ids in slot order (kernel inputs)
         self._ids = np.zeros(0, np.int32)
         self._slots = np.zeros(0, np.int64)
@@ -207,7 +205,7 @@ class CoupledLoop:
         self.plans: dict = {}
         self.last_commanded = 0
         self.stream_start_wait = -np.inf
-        self._mids: list = []
+        self.updates_owed: list = []         # mid-exposure times of applied frame updates no output holds yet
         self.e2o = np.zeros(1 << 16)
         self.n_e2o = 0
         self.frame_t = [np.nan, np.nan]        # mid-exposure of the first and last frame used
@@ -266,58 +264,37 @@ class CoupledLoop:
         """Whether a runner that ticks every gyro period should step at ``now`` (its clock, s).
 
         A step is due when a FIFO watermark of samples has come in since the last due step
-        (:attr:`step_period_s`); when the head port has something for the loop (a job
-        finished; a streamed frame measured, once the first gyro sample after its arrival
-        is due: its update goes in before that sample, and one step then applies it and
-        emits its first output, so exposure → output does not wait for the watermark and
-        no step is spent on a frame whose update no sample can carry yet — a port without
-        arrival times steps at once); when an applied update has no output yet (its frame
-        arrived after the newest sample of the last step) or a request-mode readout waits to
-        be applied; when a request-mode frame is due; and before the first step. The watermark
-        step waits one more tick when the next streamed frame is expected within a tick
-        (:meth:`_frame_expected`): that frame's step then takes the samples, so a frame whose
-        arrival jitters across a tick does not cost two steps. A True answer counts as that
-        step's start. With a watermark of 1 every tick is a step.
+        (:attr:`step_period_s`; it waits one tick for a streamed frame expected by then:
+        :meth:`StepSchedule.watermark_due`); when an applied update has no output yet (its
+        frame arrived after the newest sample of the last step) or a request-mode readout
+        waits to be applied; when a request-mode frame is due; when the head port has
+        something for the loop (a job finished; a streamed frame measured, once the first
+        gyro sample after its arrival is due: :meth:`StepSchedule.arrival_due` — a port
+        without arrival times steps at once); and before the first step. A True answer
+        counts as that step's start. With a watermark of 1 every tick is a step.
         Reads no clock, logs nothing: a replay steps through the logged steps whatever the
         ticks between them were.
         """
-        last = self._t_due
         tick = 1.0 / self.gyro.odr_hz if self.gyro.odr_hz else 0.0025
-        watermark = last is None or now - last >= self.step_period_s - 0.5 * tick
-        if watermark and last is not None and self.step_period_s > 1.5 * tick \
-                and now - last < self.step_period_s + 0.5 * tick and self._frame_expected(now, tick):
-            watermark = False    # the frame's step, due by the next tick, takes these samples
-        due = (watermark or bool(self._mids) or self.image.busy
-               or (not self.streaming and self.head_down_since is None and now >= self.next_frame_t)
+        sched = self.schedule
+        frame_period = getattr(self.head, "period_s", 0.0) if self.streaming else 0.0
+        due = (sched.watermark_due(now, tick, self.step_period_s, frame_period) or bool(self.updates_owed)
+               or self.image.busy
+               or (not self.streaming and self.link.up and now >= self.next_frame_t)
                or self._result_due(now, tick))
         if due:
-            self._t_due = now
+            sched.stepped(now)
         return due
 
-    def _frame_expected(self, now: float, tick: float) -> bool:
-        """The next streamed frame (the newest one's arrival, :attr:`rx_last`, plus the stream
-        period) is expected within one gyro period of ``now`` (s), either side: its step is
-        due by the next tick, so a watermark step now would be a second step for it."""
-        period = getattr(self.head, "period_s", 0.0) if self.streaming else 0.0
-        return period > 0.0 and abs(self.rx_last + period - now) <= tick
-
     def _result_due(self, now: float, tick: float) -> bool:
-        """The head port's waiting result is worth a step at ``now`` (s): a job at once; a
-        measured frame that arrived at ``t_rx`` once the first gyro sample stamped after
-        ``t_rx`` is due (on the grid of the newest sample read, :attr:`t_newest`, and the
-        gyro period: at most one period after ``t_rx``)."""
+        """The head port's waiting result is worth a step at ``now`` (s): its arrival time
+        (``ready_since``) goes to :meth:`StepSchedule.arrival_due`; a port without arrival
+        times steps whenever it is ``ready``."""
         since = getattr(self.head, "ready_since", None)
         if since is None:
             ready = getattr(self.head, "ready", None)
             return ready is not None and ready()
-        t_rx = since()
-        if t_rx is None:
-            return False
-        newest = self.t_newest
-        if not t_rx > newest or newest == -math.inf:   # a job (−inf), a sample after the arrival
-            return True                                  # read already, or no sample read yet
-        t_first = newest + math.ceil((t_rx - newest) / tick) * tick
-        return now >= t_first
+        return self.schedule.arrival_due(now, tick, since())
 
     def step(self) -> int:
         """One loop step; returns the number of outputs emitted.
@@ -392,7 +369,7 @@ class CoupledLoop:
             log.debug("gyro read failed: %s", exc)
         self._t_read = self.lat_clock.now()
         if smp.n:
-            self.t_newest = float(smp.t[smp.n - 1])
+            self.schedule.sample_read(float(smp.t[smp.n - 1]))
         self.c.gyro_register_faults += smp.register_faults
         if smp.n and smp.gap_frames:
             self.c.samples_lost += int(smp.gap_frames)
@@ -441,7 +418,7 @@ class CoupledLoop:
             base |= R.FLAG_ATTITUDE_VALID
         if self.id_verified:
             base |= R.FLAG_ID_VERIFIED
-        if self.head_down_since is not None:
+        if not self.link.up:
             base |= R.FLAG_HEAD_LOST
         if f.valid:
             refs, ids, slots = self._kernel_stars()
@@ -461,11 +438,11 @@ class CoupledLoop:
             self.c.gyro_saturated += int(smp.saturated)
         self.outputs.emit(self._out[lo:hi], self._t_read, float(smp.t[hi - 1]))
         self.c.outputs += n
-        if self._mids:                   # streamed frames whose update these outputs are the first to hold
+        if self.updates_owed:                   # streamed frames whose update these outputs are the first to hold
             # on the loop's clock, the frames' own timeline (the latency clock is the same clock
             # in real time; on a simulated clock it measures host compute, which takes no time there)
-            self.n_e2o = _ring_put(self.e2o, self.n_e2o, self.clock.now() - np.asarray(self._mids))
-            self._mids.clear()
+            self.n_e2o = _ring_put(self.e2o, self.n_e2o, self.clock.now() - np.asarray(self.updates_owed))
+            self.updates_owed.clear()
         return n
 
     # ------------------------------------------------------------------ images
@@ -475,15 +452,12 @@ class CoupledLoop:
         if res is not None and res.kind == "reconnect":
             if res.error is None:
                 self.c.head_reconnects += 1
-                log.info("head link back after %.2f s", now - self.head_down_since)
-                self.head_down_since = None
-                self.timeouts = 0
+                log.info("head link back after %.2f s", self.link.back(now))
             else:
                 log.debug("head still away: %s", res.error)
             res = None
-        if self.head_down_since is not None:
-            if not self.head.busy and now >= self.next_reconnect_t:
-                self.next_reconnect_t = now + self.p.reconnect_every_s
+        if not self.link.up:
+            if self.link.reconnect_due(now, self.head.busy):
                 self.pending = None
                 self.head.submit_reconnect()
             return
@@ -505,18 +479,18 @@ class CoupledLoop:
                 self.c.frames_failed += 1
                 self.last_image_flags |= R.FLAG_LINK_ERROR
                 self._count_head_error(res.error)
-                self.timeouts = self.timeouts + 1 if isinstance(res.error, HeadTimeoutError) else 0
-                if isinstance(res.error, LinkLostError) or self.timeouts >= self.p.head_timeouts_lost:
+                unanswered = self.link.job_failed(isinstance(res.error, HeadTimeoutError))
+                if isinstance(res.error, LinkLostError) or unanswered:
                     self._head_failed(res.error)
                     return
                 if res.kind == "windows":
                     self._after_image(now, updated=0)
             elif res.kind == "frame":
-                self.timeouts = 0
+                self.link.answered()
                 self.c.full_frames += 1
                 self._acquire(res, now)
             else:
-                self.timeouts = 0
+                self.link.answered()
         if self.head.busy:
             return
         if self.state.mode == R.MODE_ACQUIRE and not self.filter.valid:
@@ -538,10 +512,8 @@ class CoupledLoop:
             if res.kind == "reconnect":
                 if res.error is None:
                     self.c.head_reconnects += 1
-                    log.info("head link back after %.2f s", now - (self.head_down_since or now))
+                    log.info("head link back after %.2f s", self.link.back(now))
                     self.t_image = now               # the stream restarts: its first frame takes a while
-                    self.head_down_since = None
-                    self.timeouts = 0
                 else:
                     log.debug("head still away: %s", res.error)
                 continue
@@ -554,11 +526,11 @@ class CoupledLoop:
                     return
                 continue
             if res.kind == "frame":
-                self.timeouts = 0
+                self.link.answered()
                 self.c.full_frames += 1
                 self._acquire(res, now)
                 continue
-            self.rx_last = max(self.rx_last, getattr(res, "t_rx", -math.inf))
+            self.schedule.frame_taken(getattr(res, "t_rx", -math.inf))
             pend = self.plans.get(res.set_frame)
             if pend is None or res.measured is None:
                 self.c.frames_unmatched += 1
@@ -573,7 +545,7 @@ class CoupledLoop:
                 self._after_image(now, updated=0)
                 continue
             self._process_windows(pend, res, res.measured, now)
-            self._mids.append(res.t_mid)
+            self.updates_owed.append(res.t_mid)
             if self.frame_t[0] != self.frame_t[0]:
                 self.frame_t[0] = res.t_mid
             self.frame_t[1] = res.t_mid
@@ -582,9 +554,8 @@ class CoupledLoop:
         """Streaming head: reconnect or acquire when due, else command the windows of the
         frame two ahead of the newest one (while the next one integrates)."""
         head = self.head
-        if self.head_down_since is not None:
-            if not head.busy and now >= self.next_reconnect_t:
-                self.next_reconnect_t = now + self.p.reconnect_every_s
+        if not self.link.up:
+            if self.link.reconnect_due(now, head.busy):
                 self.plans.clear()
                 self.last_commanded = 0
                 head.submit_reconnect()
@@ -638,12 +609,11 @@ class CoupledLoop:
     def _head_failed(self, exc: Exception) -> None:
         """The link is down (lost, no answer after retries): COAST and reconnect."""
         self.pending = None
-        if self.head_down_since is None:
-            self.head_down_since = self.clock.now()
-            self.next_reconnect_t = self.head_down_since + self.p.reconnect_every_s
+        if self.link.up:
+            self.link.lost(self.clock.now())
             log.info("head link lost: %s", exc)
         self.last_image_flags |= R.FLAG_LINK_ERROR | R.FLAG_FEW_STARS
-        self._set_state(modes.on_head_lost(self.state, self.head_down_since), self.head_down_since)
+        self._set_state(modes.on_head_lost(self.state, self.link.down_since), self.link.down_since)
 
     # -- ACQUIRE ----------------------------------------------------------------
     def _acquire(self, res, now: float) -> None:
@@ -757,7 +727,7 @@ class CoupledLoop:
         frame periods (all lost on the link, the head silent), each further period counts as an
         image that updated no star — the modes coast and time out as for starless frames, and
         the outputs say so, instead of TRACK on a gyro-only attitude."""
-        if not self.streaming or self.head_down_since is not None or self.state.mode == R.MODE_ACQUIRE:
+        if not self.streaming or not self.link.up or self.state.mode == R.MODE_ACQUIRE:
             return
         period = 1.0 / (self.budget.frame_hz if self.budget is not None else self.p.frame_hz)
         if now - self.t_image > STREAM_GAP_FRAMES * period:

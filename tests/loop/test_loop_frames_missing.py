@@ -7,6 +7,7 @@ import math
 from gyrostar.loop import modes
 from gyrostar.loop import record as R
 from gyrostar.loop.coupled import STREAM_FEW_FRAMES, STREAM_GAP_FRAMES, Counters, CoupledLoop, LoopParams
+from gyrostar.loop.head_link import HeadLink
 
 TICK = 0.0025
 
@@ -30,7 +31,8 @@ def _tracking_loop():
     lp = CoupledLoop.__new__(CoupledLoop)          # only what the image-mode bookkeeping reads
     lp.p = LoopParams()
     lp.mp = lp.p.mode_params()
-    lp.streaming, lp.head_down_since, lp.budget = True, None, None
+    lp.streaming, lp.budget = True, None
+    lp.link = HeadLink(lp.p.reconnect_every_s, lp.p.head_timeouts_lost)
     lp.state = modes.ModeState(mode=R.MODE_TRACK)
     lp.c, lp.tracks, lp.filter = Counters(), _Tracks(), _Filter()
     lp.few_run, lp.t_image, lp.last_image_flags, lp.next_acquire_t = 0, -math.inf, 0, math.inf
@@ -79,11 +81,13 @@ def test_frames_coming_never_count_as_missing_and_a_return_regains_track():
 
 
 def test_no_missing_frames_while_the_head_is_away_or_in_request_mode():
-    for setup in ({"head_down_since": 99.0}, {"streaming": False}):
+    for away in (True, False):
         lp = _tracking_loop()
         lp._after_image(100.0, 10)
-        for k, v in setup.items():
-            setattr(lp, k, v)
+        if away:
+            lp.link.lost(99.0)
+        else:
+            lp.streaming = False
         for i in range(200):
             lp._frames_missing(100.0 + i * TICK)
         assert lp.state.mode == R.MODE_TRACK and lp.few_run == 0

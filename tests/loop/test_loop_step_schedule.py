@@ -1,11 +1,14 @@
-"""When the loop steps (CoupledLoop.step_due): a FIFO watermark of samples, a head-port
-result (a streamed frame once the first sample after its arrival is due), an update still
-without its output, a request-mode frame due, the first tick."""
+"""When the loop steps (CoupledLoop.step_due, its timing in gyrostar.loop.step_schedule): a
+FIFO watermark of samples, a head-port result (a streamed frame once the first sample after
+its arrival is due), an update still without its output, a request-mode frame due, the first
+tick."""
 
 import math
 
 import pytest
 from gyrostar.loop.coupled import CoupledLoop
+from gyrostar.loop.head_link import HeadLink
+from gyrostar.loop.step_schedule import StepSchedule
 
 TICK = 0.0025
 
@@ -33,9 +36,8 @@ def _loop(watermark=4, streaming=True):
     lp = CoupledLoop.__new__(CoupledLoop)      # only what step_due reads
     lp.gyro, lp.head, lp.image = _Gyro(watermark), _Head(), _Image()
     lp.streaming = streaming
-    lp._t_due, lp._mids = None, []
-    lp.t_newest = lp.rx_last = -math.inf
-    lp.head_down_since, lp.next_frame_t = None, math.inf
+    lp.schedule, lp.updates_owed = StepSchedule(), []
+    lp.link, lp.next_frame_t = HeadLink(0.25, 3), math.inf
     return lp
 
 
@@ -57,9 +59,9 @@ def test_a_measured_frame_or_a_waiting_update_steps_at_once_and_restarts_the_cou
     lp.head.result = True                        # a frame measured one tick later
     assert lp.step_due(100.0 + TICK)
     lp.head.result = False
-    lp._mids = [99.99]                           # its update applied, no sample after its arrival yet
+    lp.updates_owed = [99.99]                           # its update applied, no sample after its arrival yet
     assert lp.step_due(100.0 + 2 * TICK)
-    lp._mids = []
+    lp.updates_owed = []
     # the watermark counts from the last step: due again 4 ticks later, not before
     assert _ticks(lp, 100.0 + 3 * TICK, 4) == [False, False, False, True]
 
@@ -69,9 +71,9 @@ def test_request_mode_frame_due_and_head_down():
     assert lp.step_due(100.0)
     lp.next_frame_t = 100.0 + TICK
     assert lp.step_due(100.0 + TICK)             # the next request-mode frame is due
-    lp.head_down_since = 100.0                   # head lost: only the watermark steps (reconnects run there)
+    lp.link.lost(100.0)                          # head lost: only the watermark steps (reconnects run there)
     assert _ticks(lp, 100.0 + 2 * TICK, 4) == [False, False, False, True]
-    lp.head_down_since = None
+    lp.link.back(100.0 + 6 * TICK)
     lp.next_frame_t = math.inf
     lp.image.busy = True                         # a readout centroided, waiting to be applied
     assert lp.step_due(100.0 + 6 * TICK)
@@ -97,19 +99,21 @@ def test_a_measured_frame_steps_when_the_first_sample_after_its_arrival_is_due()
     lp = _loop(4)
     lp.head = _StreamHead()
     assert lp.step_due(100.0)
-    lp.t_newest = 100.0004
+    lp.schedule.sample_read(100.0004)
     lp.head.since = 100.0011
     assert _ticks(lp, 100.0 + 0.5 * TICK, 1) == [False]
     assert not lp.step_due(100.0 + TICK)             # 100.0025: the sample after the arrival is not in
     assert lp.step_due(100.00291)                     # ... now it is
     # a frame whose arrival the newest sample read already follows: at once
-    lp.t_newest, lp.head.since = 100.0054, 100.0050
+    lp.schedule.sample_read(100.0054)
+    lp.head.since = 100.0050
     assert lp.step_due(100.0055)
     # a finished job (a full frame, a reconnect): at once
     lp.head.since = -math.inf
     assert lp.step_due(100.0056)
     # no sample read yet: at once (nothing to wait for)
-    lp.t_newest, lp.head.since = -math.inf, 100.0100
+    lp.schedule.sample_read(-math.inf)
+    lp.head.since = 100.0100
     assert lp.step_due(100.0101)
 
 
@@ -123,17 +127,17 @@ def test_a_measured_frame_waits_one_tick_at_most():
         lp = _loop(4)
         lp.head = _StreamHead()
         assert lp.step_due(100.0)
-        lp.t_newest = 100.0 + rng.uniform(0.0, 0.0025)
-        lp.head.since = lp.t_newest + rng.uniform(1e-6, 0.05)
+        lp.schedule.sample_read(100.0 + rng.uniform(0.0, 0.0025))
+        lp.head.since = lp.schedule.t_newest + rng.uniform(1e-6, 0.05)
         for dt, want in ((-1e-7, False), (0.0, False), (TICK + 1e-9, True)):
             t = lp.head.since + dt
-            lp._t_due = t - 0.001          # no watermark due: only the frame can make a step
+            lp.schedule.stepped(t - 0.001)         # no watermark due: only the frame can make a step
             assert lp.step_due(t) == want
 
 
 def _stream_run(arrivals, t_end, newest_lag=0.0004):
     """Tick a streaming loop every gyro period from 100.0 to ``t_end``: frames become ready at
-    ``arrivals`` (host s); a due step takes the frames that have arrived (``rx_last``) and
+    ``arrivals`` (host s); a due step takes the frames that have arrived (:meth:`StepSchedule.frame_taken`) and
     reads the samples up to ``newest_lag`` before it. Returns (step times, frame → its step)."""
     lp = _loop(4)
     lp.head = _StreamHead()
@@ -144,10 +148,10 @@ def _stream_run(arrivals, t_end, newest_lag=0.0004):
         lp.head.since = here[0] if here else None
         if lp.step_due(t):
             steps.append(t)
-            lp.t_newest = t - newest_lag
+            lp.schedule.sample_read(t - newest_lag)
             for a in here:
                 taken[a] = t
-                lp.rx_last = max(lp.rx_last, a)
+                lp.schedule.frame_taken(a)
             queue = queue[len(here):]
         t = round(t + TICK, 9)
     return steps, taken
@@ -181,5 +185,55 @@ def test_a_frame_that_does_not_come_holds_the_watermark_one_tick_only():
 def test_watermark_one_steps_every_tick_whatever_frames_are_expected():
     lp = _loop(1)
     lp.head = _StreamHead()
-    lp.rx_last = 100.0 - 0.010          # the next frame expected at 100.0
+    lp.schedule.frame_taken(100.0 - 0.010)         # the next frame expected at 100.0
     assert all(_ticks(lp, 100.0 - 2 * TICK, 5))
+
+
+def test_schedule_watermark_waits_one_tick_for_an_expected_frame_and_never_when_late():
+    """StepSchedule alone: the watermark (4 ticks) is held for a frame expected within a tick,
+    but not once the step is half a tick late, and never at watermark 1."""
+    s = StepSchedule()
+    assert s.watermark_due(100.0, TICK, 4 * TICK, 0.010)       # no step yet
+    s.stepped(100.0)
+    assert not s.watermark_due(100.0 + 3 * TICK, TICK, 4 * TICK, 0.010)
+    s.frame_taken(100.0 + 4 * TICK - 0.010 + 0.0005)           # next frame expected 0.5 ms after the tick
+    assert not s.watermark_due(100.0 + 4 * TICK, TICK, 4 * TICK, 0.010)
+    assert s.watermark_due(100.0 + 4.5 * TICK, TICK, 4 * TICK, 0.010)   # half a tick late: step
+    assert s.watermark_due(100.0 + 4 * TICK, TICK, 4 * TICK, 0.0)       # not streaming: step
+    s1 = StepSchedule()
+    s1.stepped(100.0)
+    s1.frame_taken(100.0 + TICK - 0.010)
+    assert s1.watermark_due(100.0 + TICK, TICK, TICK, 0.010)            # watermark 1: every tick
+
+
+def test_schedule_arrival_due_on_the_newest_samples_grid():
+    """A frame that arrived 0.7 ms after the newest sample (stamped 100.0004) is due at the next
+    sample on that grid, 100.0029; nothing waiting is never due; an older arrival at once."""
+    s = StepSchedule()
+    assert s.arrival_due(100.0, TICK, 99.0)                    # no sample read yet: at once
+    s.sample_read(100.0004)
+    assert not s.arrival_due(100.0028, TICK, 100.0011)
+    assert s.arrival_due(100.00291, TICK, 100.0011)
+    assert s.arrival_due(100.0005, TICK, 100.0003)             # the newest sample already follows it
+    assert s.arrival_due(100.0005, TICK, -math.inf)            # a finished job
+    assert not s.arrival_due(200.0, TICK, None)
+
+
+def test_head_link_counts_unanswered_jobs_and_paces_reconnects():
+    """HeadLink alone: 3 timeouts in a row mean lost, an answer or an error reply restarts the
+    count; while down, a reconnect every 0.25 s, none while the port is busy; back says how long."""
+    link = HeadLink(0.25, 3)
+    assert link.up
+    assert not link.job_failed(True) and not link.job_failed(True)
+    assert not link.job_failed(False)                  # an answer that was an error: not a timeout
+    assert not link.job_failed(True) and not link.job_failed(True)
+    assert link.job_failed(True)
+    link.lost(10.0)
+    link.lost(10.1)                                    # already down: the loss time stays
+    assert not link.up and link.down_since == 10.0
+    assert not link.reconnect_due(10.2, busy=False)    # the first attempt 0.25 s after the loss
+    assert not link.reconnect_due(10.3, busy=True)
+    assert link.reconnect_due(10.3, busy=False)
+    assert not link.reconnect_due(10.5, busy=False)
+    assert link.reconnect_due(10.55, busy=False)
+    assert link.back(10.6) == pytest.approx(0.6) and link.up and link.timeouts == 0
