@@ -1,11 +1,18 @@
-"""The coupled 400/100 Hz loop and its outputs.
+"""The coupled 400/100 Hz loop: one module per stage, composed by :mod:`.coupled`.
 
-* :mod:`.record`    — the output record (numpy structured dtype), modes and quality flags
-* :mod:`.sinks`     — output sinks: callback, recorder, UDP datagrams on loopback
-* :mod:`.scheduler` — drift-free periodic scheduling on the monotonic clock, overruns,
-  optional SCHED_FIFO and CPU affinity
-* :mod:`.warmup`    — numba start-up: compile or load every hot function, timed
-* :mod:`.coupled`   — the loop itself: gyro FIFO → predict, windows → head → centroid →
-  update, star identification, attitude; ACQUIRE → TRACK → COAST
-* :mod:`.stats`     — run statistics (attitude error against truth, latency, modes)
+* :mod:`.coupled`         — the loop: gyro FIFO → predict, windows → head → centroid →
+  update, star identification, attitude; ACQUIRE → TRACK ⇄ COAST
+* :mod:`.attitude_filter` — MEKF state and attitude history (:mod:`.kernels`,
+  :mod:`.update_kernel`, :mod:`.frame_kernel`: its numba calls)
+* :mod:`.tracks`          — tracked stars and the next exposure's windows (:mod:`.image_kernels`)
+* :mod:`.image`           — centroiding on a measuring thread, lost in space (:mod:`.acquire`)
+* :mod:`.modes`           — the pure mode machine
+* :mod:`.step_schedule`   — when the loop steps; :mod:`.scheduler` — the runner's periodic
+  ticks, overruns, SCHED_FIFO and CPU affinity
+* :mod:`.head_link`       — the head link up or down, reconnects; :mod:`.stream_plans` — a
+  streaming head's window plans; :mod:`.linkbudget` — pixels and frame rate per link
+* :mod:`.outputs`, :mod:`.sinks`, :mod:`.record` — the 400 Hz output records and where they go
+* :mod:`.floor`           — the run's steady-state attitude floor
+* :mod:`.meters`          — host time in the 400 Hz path, sample age, exposure → output
+* :mod:`.warmup`, :mod:`.wakeup_probe` — numba start-up; the host's late wake-ups
 """

@@ -8,7 +8,11 @@ The loop composes one stage per job:
 * :mod:`~gyrostar.loop.outputs` — latency stamp and the sinks;
 * :mod:`~gyrostar.loop.tracks` — tracked stars and the next exposure's windows;
 * :mod:`~gyrostar.loop.image` — centroiding on a measuring thread, lost-in-space;
-* :mod:`~gyrostar.loop.modes` — the pure mode machine (ACQUIRE → TRACK ⇄ COAST → ACQUIRE).
+* :mod:`~gyrostar.loop.modes` — the pure mode machine (ACQUIRE → TRACK ⇄ COAST → ACQUIRE);
+* :mod:`~gyrostar.loop.step_schedule` — when to step (FIFO watermark, a frame's arrival);
+* :mod:`~gyrostar.loop.head_link` — the head link up or down, unanswered jobs, reconnects;
+* :mod:`~gyrostar.loop.stream_plans` — the window plans of a streaming head's frames;
+* :mod:`~gyrostar.loop.meters` — host time in the 400 Hz path, sample age, exposure → output.
 
 One :meth:`CoupledLoop.step` (every gyro period, from a real-time scheduler or the
 lock-step runner of ``gyrostar run --fast``):
@@ -46,8 +50,10 @@ from .floor import FloorInputs, pointing_bias_arcsec
 from .frame_kernel import N_ACCEPTED, N_CONSISTENT, N_MEASURED, N_USED, apply_frame
 from .head_link import HeadLink
 from .image import ImagePipeline
+from .meters import LoopMeters
 from .outputs import OutputStage
 from .step_schedule import StepSchedule
+from .stream_plans import StreamPlans
 from .tracks import MODEL, StarTracks
 
 log = logging.getLogger(__name__)
@@ -132,16 +138,6 @@ class Counters:
     mode_changes: list = field(default_factory=list)
 
 
-def _ring_put(ring: np.ndarray, count: int, values: np.ndarray) -> int:
-    """Write ``values`` into ``ring`` after the ``count`` written so far (wrapping round);
-    returns the new count. The ring's first ``min(count, len(ring))`` entries are the kept ones."""
-    i = count % len(ring)
-    m = min(len(values), len(ring) - i)
-    ring[i:i + m] = values[:m]
-    ring[:len(values) - m] = values[m:]
-    return count + len(values)
-
-
 class CoupledLoop:
     """The loop. ``sinks`` get each step's output records (``put(records, t_ns)``)."""
 
@@ -162,8 +158,7 @@ class CoupledLoop:
         self.t_step_prev: float | None = None
         self._t_read = 0.0             # latency-clock time of this step's FIFO read
         self._out = None               # this step's output rows (OutputStage.batch), emitted in order
-        self.age = np.zeros(1 << 16)   # ring: step start − sample stamp of each output (s, loop clock)
-        self.n_age = 0
+        self.meters = LoopMeters()     # host time in the 400 Hz path, sample ages, exposure → output
         self._split = 0                # streaming: samples of this step already predicted
         self.schedule = StepSchedule()      # when to step: last step, newest sample, newest frame
         self.overruns = 0
@@ -191,24 +186,13 @@ class CoupledLoop:
         self.link = HeadLink(params.reconnect_every_s, params.head_timeouts_lost)   # up / down, reconnects
         self.exposure_lag = 0.002      # s from commanding windows to the exposure start (EMA)
         self.lag_jitter = 0.001        # s, mean deviation of that lag
-        self._refs = np.zeros((0, 3))  # tracked stars' catalog vectors / ids in slot order (kernel inputs)
-        self._ids = np.zeros(0, np.int32)
-        self._slots = np.zeros(0, np.int64)
-        self._tracks_version = -1
-        self.gyro_path_s = 0.0         # host s in the 400 Hz path after the FIFO read (filter, outputs, sinks)
-        self.gyro_path_cpu_s = 0.0     # ... its CPU seconds on the loop's thread (without other threads' turns)
         self.floor = FloorInputs()     # what the run's attitude floor depends on (per update)
         # streaming head (gyrostar.hil.streamport): plans by stream frame, link budget,
         # exposure → output latency (mid-exposure to the first output holding its update)
         self.streaming = bool(getattr(head, "streaming", False))
         self.budget = link_budget
-        self.plans: dict = {}
-        self.last_commanded = 0
-        self.stream_start_wait = -np.inf
+        self.plans = StreamPlans()
         self.updates_owed: list = []         # mid-exposure times of applied frame updates no output holds yet
-        self.e2o = np.zeros(1 << 16)
-        self.n_e2o = 0
-        self.frame_t = [np.nan, np.nan]        # mid-exposure of the first and last frame used
         self.few_run = 0                       # consecutive streamed images that updated too few stars
         self.t_image = -math.inf               # loop time of the last image (or missing frame) the modes saw
 
@@ -340,16 +324,6 @@ class CoupledLoop:
             self._count_head_error(exc)
             self._head_failed(exc)
 
-    def _kernel_stars(self):
-        """Tracked stars as the kernel wants them (rebuilt only when the set changes)."""
-        tr = self.tracks
-        if tr.version != self._tracks_version:
-            self._tracks_version = tr.version
-            self._slots = tr.tracked()
-            self._refs = np.ascontiguousarray(tr.ref[self._slots])
-            self._ids = np.ascontiguousarray(tr.ids[self._slots])
-        return self._refs, self._ids, self._slots
-
     def _gyro_phase(self) -> int:
         n = self._read_gyro()
         n_out = self._outputs(0, n)
@@ -392,11 +366,11 @@ class CoupledLoop:
         wait in the FIFO that a watermark above 1 adds to every output but the newest. Once
         per step, after its outputs (off the 400 Hz path's metered time)."""
         if n:
-            self.n_age = _ring_put(self.age, self.n_age, self.t_step_prev - self.samples.t[:n])
+            self.meters.sample_ages(self.t_step_prev - self.samples.t[:n])
 
     def _outputs(self, lo: int, hi: int) -> int:
         """Predict samples ``lo:hi`` of this step and emit their outputs; the 400 Hz path's
-        host time (:attr:`gyro_path_s`, :attr:`gyro_path_cpu_s`) is metered here, once per
+        host time (:meth:`LoopMeters.add_path`) is metered here, once per
         call. Returns the outputs emitted."""
         if hi <= lo:
             return 0
@@ -404,8 +378,8 @@ class CoupledLoop:
         c0 = self.cpu_clock()
         self._predict(lo, hi)
         n = self._emit(lo, hi)
-        self.gyro_path_cpu_s += self.cpu_clock() - c0
-        self.gyro_path_s += time.perf_counter() - w0
+        cpu = self.cpu_clock() - c0
+        self.meters.add_path(time.perf_counter() - w0, cpu)
         return n
 
     def _predict(self, lo: int, hi: int) -> None:
@@ -421,7 +395,7 @@ class CoupledLoop:
         if not self.link.up:
             base |= R.FLAG_HEAD_LOST
         if f.valid:
-            refs, ids, slots = self._kernel_stars()
+            refs, ids, slots = self.tracks.kernel_stars()
         else:
             refs, ids, slots = _NO_REFS, _NO_IDS, _NO_SLOTS
         # the tracked stars' predicted centroids go straight into the tracks' table (uv)
@@ -441,7 +415,7 @@ class CoupledLoop:
         if self.updates_owed:                   # streamed frames whose update these outputs are the first to hold
             # on the loop's clock, the frames' own timeline (the latency clock is the same clock
             # in real time; on a simulated clock it measures host compute, which takes no time there)
-            self.n_e2o = _ring_put(self.e2o, self.n_e2o, self.clock.now() - np.asarray(self.updates_owed))
+            self.meters.exposure_to_output(self.clock.now() - np.asarray(self.updates_owed))
             self.updates_owed.clear()
         return n
 
@@ -546,9 +520,7 @@ class CoupledLoop:
                 continue
             self._process_windows(pend, res, res.measured, now)
             self.updates_owed.append(res.t_mid)
-            if self.frame_t[0] != self.frame_t[0]:
-                self.frame_t[0] = res.t_mid
-            self.frame_t[1] = res.t_mid
+            self.meters.frame_used(res.t_mid)
 
     def _stream_command(self, now: float) -> None:
         """Streaming head: reconnect or acquire when due, else command the windows of the
@@ -556,8 +528,7 @@ class CoupledLoop:
         head = self.head
         if not self.link.up:
             if self.link.reconnect_due(now, head.busy):
-                self.plans.clear()
-                self.last_commanded = 0
+                self.plans.restart()
                 head.submit_reconnect()
             return
         if head.busy:
@@ -565,39 +536,22 @@ class CoupledLoop:
         if self.state.mode == R.MODE_ACQUIRE and not self.filter.valid:
             if now >= self.next_acquire_t:
                 self.next_acquire_t = now + self.p.acquire_every_s
-                self.plans.clear()
-                self.last_commanded = 0
+                self.plans.restart()
                 head.submit_frame(self.image.lost_in_space)
             return
         frame, t_exp = head.next_target(now)
         if frame == 0:
-            if now >= self.stream_start_wait:              # the set that starts the stream
-                self.stream_start_wait = now + 0.2
+            if self.plans.start_due(now):              # the set that starts the stream
                 self.t_image = now                   # no frame can come before this set's exposure
-                self.last_commanded = 0
                 self._command_windows(now, 0, t_exp)
-        elif frame > self.last_commanded:
-            self.last_commanded = frame
+        elif self.plans.target_new(frame):
             self._command_windows(now, frame, t_exp)
 
     def stream_summary(self) -> dict:
         """Frame rate, exposure → output latency, how old a sample is at the step that emits
         it (``sample_age_at_step_ms``: the FIFO wait of the watermark) and the link budget's
         actions (streaming)."""
-        out: dict = {}
-        n = min(self.n_age, len(self.age))
-        if n:
-            age = np.maximum(self.age[:n], 0.0) * 1e3      # the ring's order does not matter here
-            out["sample_age_at_step_ms_p50"] = float(np.median(age))
-            out["sample_age_at_step_ms_p99"] = float(np.percentile(age, 99))
-        n = min(self.n_e2o, len(self.e2o))
-        if n:
-            lat = self.e2o[:n] * 1e3
-            out["exposure_to_output_ms_p50"] = float(np.median(lat))
-            out["exposure_to_output_ms_p99"] = float(np.percentile(lat, 99))
-        t0, t1 = self.frame_t
-        if self.c.frames > 1 and t1 > t0:
-            out["frame_rate_hz"] = (self.c.frames - 1) / (t1 - t0)
+        out = self.meters.summary(self.c.frames)
         if self.budget is not None:
             out["link_budget"] = self.budget.summary()
         return out
@@ -663,9 +617,7 @@ class CoupledLoop:
                 log.info("link %s: frame rate → %.1f Hz", self.budget.link.name, self.budget.frame_hz)
                 self.head.set_period(1.0 / self.budget.frame_hz)
         if self.streaming:
-            self.plans[frame] = plan
-            for old in [k for k in self.plans if k < frame - 8]:
-                del self.plans[old]
+            self.plans.add(frame, plan)
             self.head.submit_windows(plan["spans"], frame, lambda values, pl=plan: self.image.measure(pl, values))
             return
         self.head.submit_windows(plan["spans"])
@@ -780,12 +732,12 @@ class CoupledLoop:
     def host_us_per_gyro_sample(self) -> float | None:
         """Host CPU µs per gyro sample in the 400 Hz path after the FIFO read (filter kernel,
         output stage, sinks), on the loop's thread: what the path costs."""
-        return self.gyro_path_cpu_s / self.c.gyro_samples * 1e6 if self.c.gyro_samples else None
+        return self.meters.us_per_sample(self.c.gyro_samples)
 
     def host_us_per_gyro_sample_wall(self) -> float | None:
         """The same path in wall-clock µs per sample: its cost plus the turns other threads of
         the process (head worker, link reader, measuring thread) took inside it."""
-        return self.gyro_path_s / self.c.gyro_samples * 1e6 if self.c.gyro_samples else None
+        return self.meters.us_per_sample(self.c.gyro_samples, wall=True)
 
 
 STREAM_FEW_FRAMES = 3       # streaming: consecutive images with too few stars before COAST (30 ms)

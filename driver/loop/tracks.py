@@ -54,6 +54,8 @@ class StarTracks:
         self.rejects = np.zeros(S, np.int64)
         self.uv = np.zeros((S, 2))             # predicted centroid (col, row) px at the last output
         self.version = 0                       # changes whenever the set of tracked stars changes
+        self._kernel_version = -1              # version of the arrays kernel_stars() made last
+        self._kernel = (np.zeros((0, 3)), np.zeros(0, np.int32), np.zeros(0, np.int64))
         self.strikes: dict[int, int] = {}      # navigation index → wrong-identification drops
         self.banned_until: dict[int, float] = {}   # navigation index → time (s) it may come back
 
@@ -81,6 +83,16 @@ class StarTracks:
 
     def tracked(self) -> np.ndarray:
         return np.flatnonzero(self.active)
+
+    def kernel_stars(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The tracked stars as the predict kernel takes them: catalog vectors (k, 3), ids
+        (k,) int32 and slots (k,) int64, contiguous, in slot order — made again only when the
+        set of tracked stars has changed (:attr:`version`)."""
+        if self.version != self._kernel_version:
+            self._kernel_version = self.version
+            slots = self.tracked()
+            self._kernel = (np.ascontiguousarray(self.ref[slots]), np.ascontiguousarray(self.ids[slots]), slots)
+        return self._kernel
 
     def mags(self, slots) -> np.ndarray:
         return self.index.vmag[self.nav[slots]] if len(slots) else np.zeros(0)
