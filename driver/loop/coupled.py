@@ -53,6 +53,7 @@ from .image import ImagePipeline
 from .meters import LoopMeters
 from .outputs import OutputStage
 from .step_schedule import StepSchedule
+from .stream_images import StreamImages
 from .stream_plans import StreamPlans
 from .tracks import MODEL, StarTracks
 
@@ -193,8 +194,7 @@ class CoupledLoop:
         self.budget = link_budget
         self.plans = StreamPlans()
         self.updates_owed: list = []         # mid-exposure times of applied frame updates no output holds yet
-        self.few_run = 0                       # consecutive streamed images that updated too few stars
-        self.t_image = -math.inf               # loop time of the last image (or missing frame) the modes saw
+        self.stream_images = StreamImages()    # which streamed frames' outcomes the modes hear
 
     # ------------------------------------------------------------------ views
     @property
@@ -487,7 +487,7 @@ class CoupledLoop:
                 if res.error is None:
                     self.c.head_reconnects += 1
                     log.info("head link back after %.2f s", self.link.back(now))
-                    self.t_image = now               # the stream restarts: its first frame takes a while
+                    self.stream_images.restart(now)   # the stream restarts: its first frame takes a while
                 else:
                     log.debug("head still away: %s", res.error)
                 continue
@@ -542,7 +542,7 @@ class CoupledLoop:
         frame, t_exp = head.next_target(now)
         if frame == 0:
             if self.plans.start_due(now):              # the set that starts the stream
-                self.t_image = now                   # no frame can come before this set's exposure
+                self.stream_images.restart(now)      # no frame can come before this set's exposure
                 self._command_windows(now, 0, t_exp)
         elif self.plans.target_new(frame):
             self._command_windows(now, frame, t_exp)
@@ -675,21 +675,21 @@ class CoupledLoop:
         self._after_image(now, updated)
 
     def _frames_missing(self, now: float) -> None:
-        """Streaming, tracking or coasting: once no frame has come for :data:`STREAM_GAP_FRAMES`
-        frame periods (all lost on the link, the head silent), each further period counts as an
-        image that updated no star — the modes coast and time out as for starless frames, and
-        the outputs say so, instead of TRACK on a gyro-only attitude."""
+        """Streaming, tracking or coasting: once no frame has come for a few frame periods (all
+        lost on the link, the head silent), each further period counts as an image that updated
+        no star (:class:`~gyrostar.loop.stream_images.StreamImages`) — the modes coast and time
+        out as for starless frames, and the outputs say so, instead of TRACK on a gyro-only
+        attitude."""
         if not self.streaming or not self.link.up or self.state.mode == R.MODE_ACQUIRE:
             return
         period = 1.0 / (self.budget.frame_hz if self.budget is not None else self.p.frame_hz)
-        if now - self.t_image > STREAM_GAP_FRAMES * period:
+        if self.stream_images.frame_missing(now, period):
             self._after_image(now, 0)
-            self.t_image = now - (STREAM_GAP_FRAMES - 1) * period     # the next one a period later
+            self.stream_images.missing_counted(now, period)
 
     def _after_image(self, now: float, updated: int) -> None:
-        self.t_image = now
-        self.few_run = self.few_run + 1 if updated < self.p.min_stars else 0
-        if self.streaming and self.state.mode == R.MODE_TRACK and 0 < self.few_run < STREAM_FEW_FRAMES:
+        if not self.stream_images.image(now, updated < self.p.min_stars,
+                                        self.streaming and self.state.mode == R.MODE_TRACK):
             # streaming at 100 Hz: one frame read with a late window set is no reason to coast
             self.last_image_flags = (R.FLAG_IMAGE_UPDATE if updated else 0) | R.FLAG_FEW_STARS
             return
@@ -740,8 +740,6 @@ class CoupledLoop:
         return self.meters.us_per_sample(self.c.gyro_samples, wall=True)
 
 
-STREAM_FEW_FRAMES = 3       # streaming: consecutive images with too few stars before COAST (30 ms)
-STREAM_GAP_FRAMES = 3       # streaming: frame periods without any frame before each further one counts as starless
 
 _NO_REFS = np.zeros((0, 3))
 _NO_IDS = np.zeros(0, np.int32)

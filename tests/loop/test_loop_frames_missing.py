@@ -6,8 +6,9 @@ import math
 
 from gyrostar.loop import modes
 from gyrostar.loop import record as R
-from gyrostar.loop.coupled import STREAM_FEW_FRAMES, STREAM_GAP_FRAMES, Counters, CoupledLoop, LoopParams
+from gyrostar.loop.coupled import Counters, CoupledLoop, LoopParams
 from gyrostar.loop.head_link import HeadLink
+from gyrostar.loop.stream_images import STREAM_FEW_FRAMES, STREAM_GAP_FRAMES, StreamImages
 
 TICK = 0.0025
 
@@ -35,7 +36,7 @@ def _tracking_loop():
     lp.link = HeadLink(lp.p.reconnect_every_s, lp.p.head_timeouts_lost)
     lp.state = modes.ModeState(mode=R.MODE_TRACK)
     lp.c, lp.tracks, lp.filter = Counters(), _Tracks(), _Filter()
-    lp.few_run, lp.t_image, lp.last_image_flags, lp.next_acquire_t = 0, -math.inf, 0, math.inf
+    lp.stream_images, lp.last_image_flags, lp.next_acquire_t = StreamImages(), 0, math.inf
     return lp
 
 
@@ -67,7 +68,7 @@ def test_frames_that_stop_coming_coast_after_a_few_periods_and_time_out():
     assert lp.p.coast_timeout_s < acquire_at - coast_at <= lp.p.coast_timeout_s + 0.011
     assert lp.tracks.cleared == 1 and not lp.filter.valid       # the attitude is given up there
     # in ACQUIRE nothing more is counted (lost-in-space full frames run their own course)
-    assert lp.few_run == 0 or lp.state.mode == R.MODE_ACQUIRE
+    assert lp.stream_images.few_run == 0 or lp.state.mode == R.MODE_ACQUIRE
 
 
 def test_frames_coming_never_count_as_missing_and_a_return_regains_track():
@@ -90,4 +91,23 @@ def test_no_missing_frames_while_the_head_is_away_or_in_request_mode():
             lp.streaming = False
         for i in range(200):
             lp._frames_missing(100.0 + i * TICK)
-        assert lp.state.mode == R.MODE_TRACK and lp.few_run == 0
+        assert lp.state.mode == R.MODE_TRACK and lp.stream_images.few_run == 0
+
+
+def test_stream_images_alone_short_runs_unheard_and_missing_frames_one_per_period():
+    """StreamImages: while streaming and tracking, the first STREAM_FEW_FRAMES − 1 short images in
+    a row are not passed on, the next is; a good image restarts the run; not tracking, every
+    image is. No frame for STREAM_GAP_FRAMES periods: a missing one, then one per period."""
+    s = StreamImages()
+    heard = [s.image(100.0 + 0.01 * k, True, True) for k in range(STREAM_FEW_FRAMES)]
+    assert heard == [False] * (STREAM_FEW_FRAMES - 1) + [True]
+    assert s.image(100.1, False, True) and s.few_run == 0
+    assert s.image(100.11, True, False)                      # coasting: heard
+    s.restart(200.0)
+    period = 0.010
+    assert not s.frame_missing(200.0 + STREAM_GAP_FRAMES * period - 0.0001, period)
+    t = 200.0 + STREAM_GAP_FRAMES * period + 0.001
+    assert s.frame_missing(t, period)
+    s.missing_counted(t, period)
+    assert not s.frame_missing(t + period - 0.0001, period)
+    assert s.frame_missing(t + period + 0.0001, period)
