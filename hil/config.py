@@ -155,6 +155,9 @@ class LoopConfig:
     max_track_rate_dps: float = 20.0   # above this body rate (deg/s) images are not measured: the loop coasts
     reconnect_every_s: float = 0.25    # s between reconnection attempts while the head is away
     head_timeouts_lost: int = 3        # head jobs in a row without an answer that mean the link is lost
+    stream_few_frames: int = 3         # streaming, tracking: images in a row with too few stars before COAST (frames)
+    stream_gap_frames: int = 3         # streaming, link up: frame periods with no frame before each further one
+                                       # counts as a starless image (frames)
     # gyro angle random walk N (IEEE, deg/sqrt(s)) for the filter's process noise; a simulated
     # flatsat uses its gyro model's (one-sided noise density / sqrt(2)); 0.0099 = BMI088 class
     gyro_arw_deg_rts: float = 0.0099
@@ -181,7 +184,8 @@ class LoopConfig:
 
         if not 0 <= self.camera_sigma_px <= 20:
             raise ValueError(f"loop.camera_sigma_px {self.camera_sigma_px} outside [0, 20]")
-        for key in ("confirm_images", "wrong_id_rejects", "head_timeouts_lost"):
+        for key in ("confirm_images", "wrong_id_rejects", "head_timeouts_lost", "stream_few_frames",
+                    "stream_gap_frames"):
             if getattr(self, key) < 1:
                 raise ValueError(f"loop.{key} must be at least 1")
         if not 0.0 <= self.gyro_lowpass_hz < 10000.0:

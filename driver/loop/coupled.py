@@ -107,6 +107,8 @@ class LoopParams:
     max_track_rate: float = 0.349     # rad/s (20 °/s): faster, the smeared spots are not measured (coast)
     reconnect_every_s: float = 0.25   # s between reconnection attempts while the head is away
     head_timeouts_lost: int = 3       # head jobs in a row without an answer that mean the link is lost
+    stream_few_frames: int = 3        # streaming, tracking: images in a row with too few stars before COAST
+    stream_gap_frames: int = 3        # streaming: frame periods without a frame before each further one is starless
 
     def mode_params(self) -> modes.ModeParams:
         return modes.ModeParams(min_stars=self.min_stars, confirm_images=self.confirm_images,
@@ -194,7 +196,7 @@ class CoupledLoop:
         self.budget = link_budget
         self.plans = StreamPlans()
         self.updates_owed: list = []         # mid-exposure times of applied frame updates no output holds yet
-        self.stream_images = StreamImages()    # which streamed frames' outcomes the modes hear
+        self.stream_images = StreamImages(params.stream_few_frames, params.stream_gap_frames)   # what the modes hear
 
     # ------------------------------------------------------------------ views
     @property

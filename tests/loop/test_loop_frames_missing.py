@@ -111,3 +111,24 @@ def test_stream_images_alone_short_runs_unheard_and_missing_frames_one_per_perio
     s.missing_counted(t, period)
     assert not s.frame_missing(t + period - 0.0001, period)
     assert s.frame_missing(t + period + 0.0001, period)
+
+
+def test_stream_counts_from_the_config():
+    """The two counts are loop parameters (flatsat config loop.stream_few_frames / stream_gap_frames):
+    with 1 a single short image coasts and a single missing period counts; 0 is refused."""
+    import pytest
+
+    s = StreamImages(few_frames=1, gap_frames=1)
+    assert s.image(100.0, True, True)                       # heard at once
+    s.restart(200.0)
+    assert s.frame_missing(200.0105, 0.010)
+    with pytest.raises(ValueError):
+        StreamImages(few_frames=0)
+    lp = _tracking_loop()
+    assert (lp.p.stream_few_frames, lp.p.stream_gap_frames) == (STREAM_FEW_FRAMES, STREAM_GAP_FRAMES)
+    from gyrostar.hil import config as hc
+
+    lc = hc.load_flatsat().loop
+    assert (lc.stream_few_frames, lc.stream_gap_frames) == (STREAM_FEW_FRAMES, STREAM_GAP_FRAMES)
+    with pytest.raises(ValueError, match="stream_gap_frames"):
+        hc.LoopConfig(stream_gap_frames=0).validate()
