@@ -414,7 +414,7 @@ class CoupledLoop:
             self.c.gyro_saturated += int(smp.saturated)
         self.outputs.emit(self._out[lo:hi], self._t_read, float(smp.t[hi - 1]))
         self.c.outputs += n
-        if self.updates_owed:                   # streamed frames whose update these outputs are the first to hold
+        if self.updates_owed:            # streamed frames whose update these outputs are the first to hold
             # on the loop's clock, the frames' own timeline (the latency clock is the same clock
             # in real time; on a simulated clock it measures host compute, which takes no time there)
             self.meters.exposure_to_output(self.clock.now() - np.asarray(self.updates_owed))
