@@ -218,7 +218,10 @@ class ByteFaults:
         self.garbage_p = garbage_p          # probability that a write is preceded by a garbage burst
         self.garbage_len = garbage_len      # burst length range (bytes, inclusive)
         self.disconnected = False
-        self.injected = {"corrupt": 0, "drop": 0, "delayed": 0, "garbage_bursts": 0, "garbage_bytes": 0}
+        # delimiters_lost: frame delimiters (0x00) dropped or flipped to another value — each one
+        # merges a reply with the next, so the decoder sees one corrupt frame for two mangled replies
+        self.injected = {"corrupt": 0, "drop": 0, "delayed": 0, "garbage_bursts": 0, "garbage_bytes": 0,
+                         "delimiters_lost": 0}
         self.writes = 0                     # writes passed through
         self.mangled = 0                    # writes whose bytes were changed (corrupt or drop)
 
@@ -229,8 +232,10 @@ class ByteFaults:
         for b in data:
             if self.drop_p and self.rng.random() < self.drop_p:
                 self.injected["drop"] += 1
+                self.injected["delimiters_lost"] += b == 0
                 continue
             if self.corrupt_p and self.rng.random() < self.corrupt_p:
+                self.injected["delimiters_lost"] += b == 0
                 b ^= 1 << self.rng.randrange(8)
                 self.injected["corrupt"] += 1
             out.append(b)

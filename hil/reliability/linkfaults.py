@@ -101,8 +101,11 @@ def analyse(res: dict, faults) -> dict:
         }
         if counts:
             d["injected"] = counts
-            # every mangled reply must show up as a corrupt frame or a missing reply (retry)
-            d["bad_frames_accounted"] = d["host_corrupt_frames"] + d["host_retries"] >= counts.get("mangled", 0)
+            # every mangled reply must show up as a corrupt frame or a missing reply (retry); a lost
+            # delimiter joins a mangled reply to the next one, which may be mangled too: one corrupt
+            # frame for both
+            d["bad_frames_accounted"] = (d["host_corrupt_frames"] + d["host_retries"] + counts.get("delimiters_lost", 0)
+                                         >= counts.get("mangled", 0))
         out.append(d)
     return out
 
