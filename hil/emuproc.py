@@ -12,7 +12,7 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 
-from ..cli.interrupt import ignore_in_child, sigint_blocked
+from ..cli.interrupt import ignore_in_child, signals_held
 from ..errors import DeviceError
 
 
@@ -77,7 +77,7 @@ class EmulatorProcess:
         ctx = mp.get_context("fork")
         self.conn, child = ctx.Pipe()
         self.proc = ctx.Process(target=_child, args=(child, make, os.getpid()), name="head-emulator", daemon=True)
-        with sigint_blocked():   # the child ignores SIGINT before any can reach it
+        with signals_held():   # the child ignores SIGINT (SIGTERM: default) before any signal reaches it
             self.proc.start()
         self.path = None
         self.emulator_path = None

@@ -32,7 +32,7 @@ from multiprocessing.connection import wait as mp_wait
 
 import numpy as np
 
-from ..cli.interrupt import ignore_in_child, sigint_blocked
+from ..cli.interrupt import ignore_in_child, signals_held
 from ..errors import DeviceError
 
 BOX = 16
@@ -200,7 +200,7 @@ class FirmwareHead:
                                 args=(child, self.host.pixels, self.host.exposures, sim, truth, seed, simcfg.catalog,
                                       mag_limit, os.getpid()),
                                 daemon=True)
-        with sigint_blocked():   # the child ignores SIGINT before any can reach it
+        with signals_held():   # the child ignores SIGINT (SIGTERM: default) before any signal reaches it
             self.proc.start()
         if not self.conn.poll(120.0):
             self.stop()

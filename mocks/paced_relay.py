@@ -32,7 +32,7 @@ import time
 import tty
 from collections import deque
 
-from gyrostar.cli.interrupt import ignore_in_child, sigint_blocked
+from gyrostar.cli.interrupt import ignore_in_child, signals_held
 from gyrostar.errors import DeviceError
 from gyrostar.transport.linkrate import LinkPreset, Wire, preset
 
@@ -163,7 +163,7 @@ class RelayProcess:
         self.link = preset(link) if isinstance(link, str) else link
         self.proc = ctx.Process(target=_relay_child, args=(child, target, self.link, os.getpid()),
                                 name="link-relay", daemon=True)
-        with sigint_blocked():      # the child ignores SIGINT before any can reach it (the parent stops it)
+        with signals_held():      # the child ignores SIGINT (the parent stops it) before any signal can reach it
             self.proc.start()
         if not self.conn.poll(10.0):
             self.close()

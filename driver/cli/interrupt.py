@@ -102,31 +102,58 @@ class SignalHold:
     def release(self) -> None:
         """Previous handlers back; a held signal raised now (once; later calls do nothing)."""
         prev, self.prev = self.prev, {}
+        late = None
         for s, h in prev.items():
-            signal.signal(s, h)
+            while True:
+                try:
+                    signal.signal(s, h)
+                    break
+                except KeyboardInterrupt as exc:    # a signal came in meanwhile and its handler, put
+                    late = exc                      # back, raised: put the rest back, then raise it
+        if late is not None:
+            raise late
         if prev and self.held:
             signal.raise_signal(self.held[0])
 
 
+_HELD = {signal.SIGINT, signal.SIGTERM}
+
+
 @contextmanager
-def sigint_blocked():
-    """Hold SIGINT back (delivered when the block ends): wrap a fork so the child can set
-    :func:`ignore_in_child` before any Ctrl-C reaches it."""
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+def signals_held():
+    """Hold SIGINT and SIGTERM back while the block runs (delivered when it ends): wrap the
+    start of a child (a fork, a ``subprocess``) so that no signal arrives before the handle
+    to stop it exists. The child inherits the mask: a forked Python child calls
+    :func:`ignore_in_child`, an exec'd program gets :func:`release_held_signals` as
+    ``preexec_fn``.
+
+    The mask holds only this thread's share: the kernel gives a process-directed signal to any
+    thread that does not block it, and Python then runs the handler in the main thread at once.
+    So on the main thread a :class:`SignalHold` records them meanwhile and raises a held one
+    when the block ends."""
+    hold = SignalHold()
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, _HELD)
     try:
         yield
     finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)     # a signal pending on us: to the hold now
+        hold.release()
+
+
+def release_held_signals() -> None:
+    """In a forked child before exec: SIGINT and SIGTERM reach it again."""
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, _HELD)
 
 
 def ignore_in_child() -> None:
-    """In a forked child: ignore SIGINT (the parent stops us), then unblock it; SIGTERM gets
-    its default action back (the parent's handler, inherited through the fork, would raise
-    KeyboardInterrupt and print a traceback when a service manager stops the process group:
-    the child ends at once, quietly, and the parent stops the run as for Ctrl-C)."""
+    """In a forked child (started under :func:`signals_held`): ignore SIGINT (the parent stops
+    us) and give SIGTERM its default action back, then unblock both. The parent's handlers,
+    inherited through the fork, would raise KeyboardInterrupt and print a traceback when a
+    terminal's Ctrl-C or a service manager's SIGTERM reaches the process group: the child
+    ends at once on SIGTERM, quietly, and the parent stops the run as for Ctrl-C."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
-    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+    release_held_signals()
 
 
 class StepBoundary:

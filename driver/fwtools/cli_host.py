@@ -21,9 +21,10 @@ def run(args) -> int:
     import subprocess
     from pathlib import Path
 
+    from ..cli.interrupt import release_held_signals, signals_held
     from ..errors import ConfigError
     from . import build
-    from .interrupt import release_held_signals, signals_held, sigterm_as_interrupt, stop_child
+    from .interrupt import sigterm_as_interrupt, stop_child
 
     sensor = Path(args.sensor)
     if sensor.is_dir() or not sensor.parent.is_dir():

@@ -14,8 +14,6 @@ import subprocess
 import threading
 from contextlib import contextmanager
 
-from ..cli.interrupt import SignalHold
-
 
 class Terminated(KeyboardInterrupt):
     """SIGTERM arrived."""
@@ -37,33 +35,6 @@ def sigterm_as_interrupt():
         yield
     finally:
         signal.signal(signal.SIGTERM, old)
-
-
-_HELD = {signal.SIGINT, signal.SIGTERM}
-
-
-@contextmanager
-def signals_held():
-    """Hold SIGINT and SIGTERM back while the block runs (delivered when it ends): wrap the
-    start of a child so that a signal cannot arrive before the handle to stop it exists. The
-    child inherits the mask: give it :func:`release_held_signals` as ``preexec_fn``.
-
-    The mask holds only this thread's share: the kernel gives a process-directed signal to any
-    thread that does not block it, and Python then runs the handler in the main thread at once.
-    So on the main thread a :class:`gyrostar.cli.interrupt.SignalHold` records them meanwhile
-    and raises a held one when the block ends."""
-    hold = SignalHold()
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, _HELD)
-    try:
-        yield
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)     # a signal pending on us: to the hold now
-        hold.release()
-
-
-def release_held_signals() -> None:
-    """In a forked child before exec: SIGINT and SIGTERM reach it again."""
-    signal.pthread_sigmask(signal.SIG_UNBLOCK, _HELD)
 
 
 def stop_child(proc: subprocess.Popen, grace_s: float = 2.0) -> None:
