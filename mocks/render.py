@@ -152,12 +152,34 @@ def add_stars_full(signal, paths, electrons, boxes, sigma):
 
 
 @njit(cache=True, nogil=True)
+def _span_groups(spans):
+    """Runs of spans with one window id: int64 (g, 6) rows ``[first span, end span, row0,
+    row1, col0, col1)`` (the run's bounding rectangle, half-open)."""
+    n = spans.shape[0]
+    groups = np.empty((n, 6), dtype=np.int64)
+    g = 0
+    i = 0
+    while i < n:
+        j = i
+        r0, r1, c0, c1 = spans[i, 1], spans[i, 1] + 1, spans[i, 2], spans[i, 3]
+        while j < n and spans[j, 0] == spans[i, 0]:
+            r0, r1 = min(r0, spans[j, 1]), max(r1, spans[j, 1] + 1)
+            c0, c1 = min(c0, spans[j, 2]), max(c1, spans[j, 3])
+            j += 1
+        groups[g, 0], groups[g, 1], groups[g, 2], groups[g, 3], groups[g, 4], groups[g, 5] = i, j, r0, r1, c0, c1
+        g += 1
+        i = j
+    return groups[:g]
+
+
+@njit(cache=True, nogil=True)
 def add_stars_spans(signal, spans, paths, electrons, boxes, sigma):
     """Add every star's spot to the span pixels ``signal`` (m,) (span order), in place.
 
     Per star that touches a span, the edge-erf tables of its box are computed once per
     sub-step (the same values and sub-step pixels :func:`add_stars_full` uses), then summed on
-    the span pixels.
+    the span pixels. A star is tested against each window's bounding rectangle before its
+    spans, so the stars of the field that no window reaches cost a few comparisons each.
     """
     n, m = paths.shape[0], paths.shape[1]
     inv = 1.0 / (math.sqrt(2.0) * sigma)
@@ -165,15 +187,22 @@ def add_stars_spans(signal, spans, paths, electrons, boxes, sigma):
     starts[0] = 0
     for i in range(spans.shape[0]):
         starts[i + 1] = starts[i] + (spans[i, 3] - spans[i, 2])
+    groups = _span_groups(spans)
+    hit = np.zeros(groups.shape[0], np.bool_)
     for s in range(n):
         r0, r1, c0, c1 = boxes[s, 0], boxes[s, 1], boxes[s, 2], boxes[s, 3]
         if r1 <= r0:
             continue
         touched = False
-        for i in range(spans.shape[0]):
-            if r0 <= spans[i, 1] < r1 and spans[i, 2] < c1 and spans[i, 3] > c0:
-                touched = True
-                break
+        for g in range(groups.shape[0]):
+            hit[g] = False
+            if groups[g, 2] >= r1 or groups[g, 3] <= r0 or groups[g, 4] >= c1 or groups[g, 5] <= c0:
+                continue
+            for i in range(groups[g, 0], groups[g, 1]):
+                if r0 <= spans[i, 1] < r1 and spans[i, 2] < c1 and spans[i, 3] > c0:
+                    hit[g] = True
+                    touched = True
+                    break
         if not touched:
             continue
         ex = np.empty((m, c1 - c0 + 1))
@@ -188,20 +217,23 @@ def add_stars_spans(signal, spans, paths, electrons, boxes, sigma):
             for r in range(ka, kb + 1):
                 ey[k, r - r0] = _edge_erf(r, v, inv)
         w = electrons[s] / m
-        for i in range(spans.shape[0]):
-            r = spans[i, 1]
-            if r < r0 or r >= r1:
+        for g in range(groups.shape[0]):
+            if not hit[g]:
                 continue
-            a0, a1 = max(c0, spans[i, 2]), min(c1, spans[i, 3])
-            if a1 <= a0:
-                continue
-            base = starts[i] - spans[i, 2]
-            for k in range(m):
-                if r < sub[k, 0] or r >= sub[k, 1]:
+            for i in range(groups[g, 0], groups[g, 1]):
+                r = spans[i, 1]
+                if r < r0 or r >= r1:
                     continue
-                a = w * (0.5 * (ey[k, r - r0 + 1] - ey[k, r - r0]))
-                for c in range(max(a0, sub[k, 2]), min(a1, sub[k, 3])):
-                    signal[base + c] += a * (0.5 * (ex[k, c - c0 + 1] - ex[k, c - c0]))
+                a0, a1 = max(c0, spans[i, 2]), min(c1, spans[i, 3])
+                if a1 <= a0:
+                    continue
+                base = starts[i] - spans[i, 2]
+                for k in range(m):
+                    if r < sub[k, 0] or r >= sub[k, 1]:
+                        continue
+                    a = w * (0.5 * (ey[k, r - r0 + 1] - ey[k, r - r0]))
+                    for c in range(max(a0, sub[k, 2]), min(a1, sub[k, 3])):
+                        signal[base + c] += a * (0.5 * (ex[k, c - c0 + 1] - ex[k, c - c0]))
 
 
 @njit(cache=True, nogil=True)

@@ -50,3 +50,31 @@ def test_trail_matches_the_pixel_integral(trail):
     flat = np.zeros(H * W)
     render.add_stars_spans(flat, spans, paths, electrons, boxes, SIGMA)
     assert np.array_equal(flat.reshape(H, W), img)
+
+
+def test_many_windows_and_stars_outside_them_give_the_full_frame_pixels():
+    """Windows (some overlapping, one reaching no star) among stars most of which no window
+    reaches: each span's pixels are the full frame's, bit for bit, and the stars outside every
+    window add nothing."""
+    rng = np.random.default_rng(7)
+    n, m = 40, 6
+    starts = rng.uniform([0, 0], [W, H], (n, 2))
+    paths = starts[:, None, :] + np.linspace(0.0, 1.0, m)[None, :, None] * rng.normal(0, 3.0, (n, 1, 2))
+    electrons = rng.uniform(1e3, 1e4, n)
+    boxes = render.star_boxes(paths, SIGMA, W, H)
+    img = np.zeros((H, W))
+    render.add_stars_full(img, paths, electrons, boxes, SIGMA)
+    rects = [(5, 14, 3, 20), (10, 20, 15, 30), (40, 60, 60, 80), (0, 3, 77, 80), (30, 31, 0, 80)]
+    rows = [[w, r, c0, c1] for w, (r0, r1, c0, c1) in enumerate(rects) for r in range(r0, r1)]
+    spans = np.array(rows, dtype=np.int64)
+    flat = np.zeros(int((spans[:, 3] - spans[:, 2]).sum()))
+    render.add_stars_spans(flat, spans, paths, electrons, boxes, SIGMA)
+    ref = np.concatenate([img[r, c0:c1] for _, r, c0, c1 in spans])
+    assert np.array_equal(flat, ref)
+    # only the stars whose boxes reach a window: the same pixels
+    reach = [s for s in range(n) if any(boxes[s, 0] < r1 and boxes[s, 1] > r0 and boxes[s, 2] < c1
+                                        and boxes[s, 3] > c0 for r0, r1, c0, c1 in rects)]
+    assert 0 < len(reach) < n
+    few = np.zeros_like(flat)
+    render.add_stars_spans(few, spans, np.ascontiguousarray(paths[reach]), electrons[reach], boxes[reach], SIGMA)
+    assert np.array_equal(few, flat)
