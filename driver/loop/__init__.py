@@ -6,7 +6,9 @@
   :mod:`.update_kernel`, :mod:`.frame_kernel`: its numba calls)
 * :mod:`.tracks`          — tracked stars and the next exposure's windows (:mod:`.image_kernels`)
 * :mod:`.image`           — centroiding on a measuring thread, lost in space (:mod:`.acquire`)
-* :mod:`.modes`           — the pure mode machine
+* :mod:`.modes`           — the pure mode machine; :mod:`.mode_keeper` — the mode and the
+  outputs' image flags from each frame's outcome (:mod:`.stream_images`: which streamed
+  outcomes it hears)
 * :mod:`.step_schedule`   — when the loop steps; :mod:`.scheduler` — the runner's periodic
   ticks, overruns, SCHED_FIFO and CPU affinity
 * :mod:`.head_link`       — the head link up or down, reconnects; :mod:`.stream_plans` — a

@@ -37,7 +37,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -51,9 +51,9 @@ from .frame_kernel import N_ACCEPTED, N_CONSISTENT, N_MEASURED, N_USED, apply_fr
 from .head_link import HeadLink
 from .image import ImagePipeline
 from .meters import LoopMeters
+from .mode_keeper import Heard, ModeKeeper
 from .outputs import OutputStage
 from .step_schedule import StepSchedule
-from .stream_images import StreamImages
 from .stream_plans import StreamPlans
 from .tracks import MODEL, StarTracks
 
@@ -138,7 +138,6 @@ class Counters:
     head_errors: int = 0
     head_reconnects: int = 0
     outputs: int = 0
-    mode_changes: list = field(default_factory=list)
 
 
 class CoupledLoop:
@@ -155,7 +154,6 @@ class CoupledLoop:
 
         self.irq = irq           # FIFO-watermark interrupt line: irq.now() = host time of the last edge
         self.p = params
-        self.mp = params.mode_params()
         self.clock = clock
         self.lat_clock = clock if lat_clock is None else lat_clock
         self.t_step_prev: float | None = None
@@ -179,9 +177,7 @@ class CoupledLoop:
         self.tracks = StarTracks(params, camera, star_index, blended)
         self.image = ImagePipeline(params, camera, identifier)
         self.outputs = OutputStage(sinks, self.lat_clock)
-        self.state = modes.ModeState()
         self.flags_pending = 0
-        self.last_image_flags = R.FLAG_FEW_STARS
         self.id_verified = False
         self.next_frame_t = -np.inf
         self.next_acquire_t = -np.inf
@@ -196,12 +192,14 @@ class CoupledLoop:
         self.budget = link_budget
         self.plans = StreamPlans()
         self.updates_owed: list = []         # mid-exposure times of applied frame updates no output holds yet
-        self.stream_images = StreamImages(params.stream_few_frames, params.stream_gap_frames)   # what the modes hear
+        # the mode and the outputs' image flags, from each frame's outcome (streamed ones as StreamImages says)
+        self.mode_keeper = ModeKeeper(params.mode_params(), self.streaming, params.stream_few_frames,
+                                      params.stream_gap_frames)
 
     # ------------------------------------------------------------------ views
     @property
     def mode(self) -> int:
-        return self.state.mode
+        return self.mode_keeper.mode
 
     @property
     def last_output(self):
@@ -389,8 +387,8 @@ class CoupledLoop:
         output batch (one compiled call)."""
         smp = self.samples
         f = self.filter
-        base = self.last_image_flags
-        if f.valid and self.state.mode != R.MODE_ACQUIRE:
+        base = self.mode_keeper.flags
+        if f.valid and self.mode_keeper.mode != R.MODE_ACQUIRE:
             base |= R.FLAG_ATTITUDE_VALID
         if self.id_verified:
             base |= R.FLAG_ID_VERIFIED
@@ -401,7 +399,7 @@ class CoupledLoop:
         else:
             refs, ids, slots = _NO_REFS, _NO_IDS, _NO_SLOTS
         # the tracked stars' predicted centroids go straight into the tracks' table (uv)
-        self.c.gyro_stuck += f.predict(smp, self.flags_pending, base, self.state.mode, refs, ids, self.cam, slots,
+        self.c.gyro_stuck += f.predict(smp, self.flags_pending, base, self.mode_keeper.mode, refs, ids, self.cam, slots,
                                        self.tracks.uv, self._out[lo:hi], lo, hi)
         self.flags_pending = 0
 
@@ -445,7 +443,7 @@ class CoupledLoop:
             # centroid the readout on the measuring thread (nogil kernel) while this step
             # plans the next exposure; the update is applied at the next step
             self.image.submit(pend, res)
-        if ok_windows and self.state.mode != R.MODE_ACQUIRE and now >= self.next_frame_t - 0.5 / self.p.frame_hz:
+        if ok_windows and self.mode_keeper.mode != R.MODE_ACQUIRE and now >= self.next_frame_t - 0.5 / self.p.frame_hz:
             # next exposure first (windows from the prediction), then this image's update:
             # the head exposes while the loop centroids
             self.next_frame_t = max(self.next_frame_t + 1.0 / self.p.frame_hz, now)
@@ -453,14 +451,14 @@ class CoupledLoop:
         if res is not None:
             if res.error is not None:
                 self.c.frames_failed += 1
-                self.last_image_flags |= R.FLAG_LINK_ERROR
+                self.mode_keeper.link_error()
                 self._count_head_error(res.error)
                 unanswered = self.link.job_failed(isinstance(res.error, HeadTimeoutError))
                 if isinstance(res.error, LinkLostError) or unanswered:
                     self._head_failed(res.error)
                     return
                 if res.kind == "windows":
-                    self._after_image(now, updated=0)
+                    self._heard(self.mode_keeper.image(now, 0), now)
             elif res.kind == "frame":
                 self.link.answered()
                 self.c.full_frames += 1
@@ -469,7 +467,7 @@ class CoupledLoop:
                 self.link.answered()
         if self.head.busy:
             return
-        if self.state.mode == R.MODE_ACQUIRE and not self.filter.valid:
+        if self.mode_keeper.mode == R.MODE_ACQUIRE and not self.filter.valid:
             if now >= self.next_acquire_t:
                 self.next_acquire_t = now + self.p.acquire_every_s
                 self.head.submit_frame(self.image.lost_in_space)
@@ -489,13 +487,13 @@ class CoupledLoop:
                 if res.error is None:
                     self.c.head_reconnects += 1
                     log.info("head link back after %.2f s", self.link.back(now))
-                    self.stream_images.restart(now)   # the stream restarts: its first frame takes a while
+                    self.mode_keeper.restart_stream(now)   # the stream restarts: its first frame takes a while
                 else:
                     log.debug("head still away: %s", res.error)
                 continue
             if res.error is not None:
                 self.c.frames_failed += 1
-                self.last_image_flags |= R.FLAG_LINK_ERROR
+                self.mode_keeper.link_error()
                 self._count_head_error(res.error)
                 if res.kind == "frame" or isinstance(res.error, (LinkLostError, HeadTimeoutError)):
                     self._head_failed(res.error)
@@ -518,7 +516,7 @@ class CoupledLoop:
             speed = math.sqrt(float(self.filter.omega @ self.filter.omega)) * self.f_px
             if late > 0 and late * head.period_s * speed > 0.5:
                 self.c.frames_stale_windows += 1
-                self._after_image(now, updated=0)
+                self._heard(self.mode_keeper.image(now, 0), now)
                 continue
             self._process_windows(pend, res, res.measured, now)
             self.updates_owed.append(res.t_mid)
@@ -535,7 +533,7 @@ class CoupledLoop:
             return
         if head.busy:
             return
-        if self.state.mode == R.MODE_ACQUIRE and not self.filter.valid:
+        if self.mode_keeper.mode == R.MODE_ACQUIRE and not self.filter.valid:
             if now >= self.next_acquire_t:
                 self.next_acquire_t = now + self.p.acquire_every_s
                 self.plans.restart()
@@ -544,7 +542,7 @@ class CoupledLoop:
         frame, t_exp = head.next_target(now)
         if frame == 0:
             if self.plans.start_due(now):              # the set that starts the stream
-                self.stream_images.restart(now)      # no frame can come before this set's exposure
+                self.mode_keeper.restart_stream(now)      # no frame can come before this set's exposure
                 self._command_windows(now, 0, t_exp)
         elif self.plans.target_new(frame):
             self._command_windows(now, frame, t_exp)
@@ -568,8 +566,7 @@ class CoupledLoop:
         if self.link.up:
             self.link.lost(self.clock.now())
             log.info("head link lost: %s", exc)
-        self.last_image_flags |= R.FLAG_LINK_ERROR | R.FLAG_FEW_STARS
-        self._set_state(modes.on_head_lost(self.state, self.link.down_since), self.link.down_since)
+        self.mode_keeper.head_lost(self.link.down_since)
 
     # -- ACQUIRE ----------------------------------------------------------------
     def _acquire(self, res, now: float) -> None:
@@ -590,7 +587,7 @@ class CoupledLoop:
         self.tracks.fill_from_catalog(self.filter.q, now)
         log.info("acquired: %d stars identified (p_false %.2g)", ident.n_identified, ident.p_false)
         # the mode turns to TRACK at the first image whose stars pass the filter's gate
-        self._set_state(modes.on_acquired(self.state), now)
+        self.mode_keeper.acquired(now)
         self.next_frame_t = now
 
     # -- TRACK / COAST --------------------------------------------------------------
@@ -608,7 +605,7 @@ class CoupledLoop:
             lag, jitter = self.exposure_lag, self.lag_jitter
         plan = self.tracks.plan(f.q, f.omega, f.b, sig, lag, jitter, self.gyro.odr_hz, budget=self.budget)
         if plan is None:
-            self._after_image(now, updated=0)
+            self._heard(self.mode_keeper.image(now, 0), now)
             return
         plan["t_submit"] = now
         if self.budget is not None:
@@ -644,8 +641,8 @@ class CoupledLoop:
         # cross-covariance) alike. The same holds for a regain after a COAST that left the
         # attitude uncertain by more than CONFIRM_PRIOR_PX (seed 100194: after a 21.6 °/s
         # tumble, σ ≈ 35 px, two windows each caught the next star of a row of three)
-        wide = self.state.mode == R.MODE_ACQUIRE or (
-            self.state.mode == R.MODE_COAST
+        wide = self.mode_keeper.mode == R.MODE_ACQUIRE or (
+            self.mode_keeper.mode == R.MODE_COAST
             and math.sqrt(max(f.P[0, 0], f.P[1, 1])) * self.f_px > CONFIRM_PRIOR_PX)
         min_used = max(CONFIRM_MIN_STARS, self.p.min_stars) if wide else self.p.min_stars
         # one compiled call: windows whose slot was dropped or refilled meanwhile are skipped,
@@ -674,54 +671,32 @@ class CoupledLoop:
                     tr.drop_wrong(int(s), now)
                     self.c.wrong_ids_dropped += 1
         self.id_verified = updated >= 3 and updated == n_measured
-        self._after_image(now, updated)
+        self._heard(self.mode_keeper.image(now, updated), now)
 
     def _frames_missing(self, now: float) -> None:
-        """Streaming, tracking or coasting: once no frame has come for a few frame periods (all
-        lost on the link, the head silent), each further period counts as an image that updated
-        no star (:class:`~gyrostar.loop.stream_images.StreamImages`) — the modes coast and time
-        out as for starless frames, and the outputs say so, instead of TRACK on a gyro-only
-        attitude."""
-        if not self.streaming or not self.link.up or self.state.mode == R.MODE_ACQUIRE:
-            return
+        """Streaming: frames that stopped coming count as starless images, one per period
+        (:meth:`ModeKeeper.frame_missing`)."""
         period = 1.0 / (self.budget.frame_hz if self.budget is not None else self.p.frame_hz)
-        if self.stream_images.frame_missing(now, period):
-            self._after_image(now, 0)
-            self.stream_images.missing_counted(now, period)
+        self._heard(self.mode_keeper.frame_missing(now, period, self.link.up), now)
 
-    def _after_image(self, now: float, updated: int) -> None:
-        if not self.stream_images.image(now, updated < self.p.min_stars,
-                                        self.streaming and self.state.mode == R.MODE_TRACK):
-            # streaming at 100 Hz: one frame read with a late window set is no reason to coast
-            self.last_image_flags = (R.FLAG_IMAGE_UPDATE if updated else 0) | R.FLAG_FEW_STARS
+    def _heard(self, heard: Heard | None, now: float) -> None:
+        """Carry out what an image's outcome asked (:class:`ModeKeeper`), if it was heard."""
+        if heard is None:
             return
-        prev = self.state.mode
-        state, act = modes.on_image(self.state, now, updated, self.mp)
-        self._set_state(state, now)
-        if act & modes.Action.ACQUISITION_FAILED:
+        if heard.action & modes.Action.ACQUISITION_FAILED:
             self.c.acquisition_failures += 1
-        if act & modes.Action.LOSE_ATTITUDE:
+        if heard.action & modes.Action.LOSE_ATTITUDE:
             self.filter.valid = False
             self.tracks.clear()
-        if act & modes.Action.ACQUIRE_NOW:
+        if heard.action & modes.Action.ACQUIRE_NOW:
             self.next_acquire_t = now
-        if prev == R.MODE_ACQUIRE:
-            return
-        self.last_image_flags = R.FLAG_IMAGE_UPDATE if updated else 0
-        if updated < self.p.min_stars:
-            self.last_image_flags |= R.FLAG_FEW_STARS
-        self.tracks.drop_lost(tracking=self.state.mode == R.MODE_TRACK)
-
-    def _set_state(self, state: modes.ModeState, t: float) -> None:
-        if state.mode != self.state.mode:
-            self.c.mode_changes.append((float(t), R.MODE_NAMES[self.state.mode], R.MODE_NAMES[state.mode]))
-        self.state = state
+        if heard.check_tracks:
+            self.tracks.drop_lost(tracking=heard.tracking)
 
     # ------------------------------------------------------------------ summary
     def counters(self) -> dict:
         c = self.c
-        return {k: getattr(c, k) for k in c.__dataclass_fields__ if k != "mode_changes"} | {
-            "mode_changes": list(c.mode_changes)}
+        return {k: getattr(c, k) for k in c.__dataclass_fields__} | {"mode_changes": list(self.mode_keeper.changes)}
 
     def floor_summary(self) -> dict:
         """The steady-state floor for this run's gyro ARW, star noise, star count and timing,
