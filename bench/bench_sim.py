@@ -132,7 +132,7 @@ def run(quick: bool) -> dict:
     load_catalog("hip2", 7.5)  # make sure the cache exists
     us = _median_us(lambda: load_catalog("hip2", 7.5), reps)
     def numpy_build():
-        catalog._read_hip2.cache_clear()  # parse the text file every time
+        catalog.forget_parsed_hip2()  # parse the text file every time
         return build_catalog("hip2", 7.5, 2025.0)
 
     base = _median_us(numpy_build, 1 if quick else 2)

@@ -37,7 +37,7 @@ def _fields(n, seed):
     for q in random_attitudes(n, rng):
         omega = np.radians(rng.uniform(-0.3, 0.3, 3))
         q1 = quat_propagate(q, omega, 1.0)
-        q_pred = ev._gyro_prediction(q, omega, cfg, rng)
+        q_pred = ev.gyro_prediction(q, omega, cfg, rng)
         out.append((s["sky"].observe(s["camera"], q1, 7.5, 1.0, 0.2, 0, rng), q_pred))
     return s, out
 

@@ -143,6 +143,12 @@ def _read_hip2() -> dict[str, np.ndarray]:
             "pmra": cols[:, 3], "pmdec": cols[:, 4], "hp": cols[:, 5], "b_v": cols[:, 6]}
 
 
+def forget_parsed_hip2() -> None:
+    """Drop the parsed hip2.dat this process keeps: the next catalog build parses it again
+    (the catalog benchmark's baseline)."""
+    _read_hip2.cache_clear()
+
+
 def _hip2_arrays(epoch: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     h = _read_hip2()
     vec = propagate(h["ra"], h["dec"], h["pmra"], h["pmdec"], epoch - HIP2_EPOCH)

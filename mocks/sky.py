@@ -145,7 +145,7 @@ class Sky:
         # stars near the field: within the field radius + the rotation of the exposure
         bore = quat_to_dcm(q_mid)[2]
         reach = self._field_radius + w_max * t_exp
-        sel = self._near(bore, reach)
+        sel = self.near(bore, reach)
         vecs = np.ascontiguousarray(self.catalog.vectors[sel])
         grid_paths = render.star_paths(self.params, vecs, qs)
         paths = np.ascontiguousarray(grid_paths[:, 2::4])
@@ -204,7 +204,7 @@ class Sky:
                                                          self.camera.width_px, self.camera.height_px)]),
                 np.concatenate([electrons, self._spot_electrons]))
 
-    def _near(self, bore: np.ndarray, reach: float) -> np.ndarray:
+    def near(self, bore: np.ndarray, reach: float) -> np.ndarray:
         """Catalog indexes (ascending) within ``reach`` rad of ``bore``: the test of
         :meth:`window_pixels` (``_within``), so both renderers see the same stars."""
         return _within(*self._candidates(bore, reach), bore, math.cos(min(reach, math.pi)))[0]

@@ -143,6 +143,11 @@ class HeadClient:
         self.window_set_replies: list = []         # (seq, fields or exception) of send_windows
 
     # --- plumbing ---------------------------------------------------------------------------
+    @property
+    def seq(self) -> int:
+        """The last sequence number sent (``first_seq`` − 1 before the first request)."""
+        return self._seq
+
     def _next_seq(self) -> int:
         self._seq = (self._seq + 1) & 0xFFFF
         return self._seq

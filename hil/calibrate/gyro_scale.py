@@ -99,7 +99,7 @@ def _from_rate_table(rec_t, rate, run, table, trim_s):
     return fit_rate_table(table, means)
 
 
-def _from_slews(t_g, w_g, t_cam, q_cam, lag: int = 5):
+def from_slews(t_g, w_g, t_cam, q_cam, lag: int = 5):
     """Windows of ``lag`` camera frames, those whose gyro integral is not their rotation
     vector left out (:meth:`~gyrostar.calibration.gyro_integral.GyroIntegral.rotation_windows`:
     more than 170°, or not about one fixed axis)."""
@@ -174,7 +174,7 @@ def run(args) -> int:
                 r_align = quat_to_dcm(np.asarray(al.q_gyro_to_camera, float))
                 rate = rate @ r_align.T
                 t_g = t_g + al.time_offset_s
-        fit = _from_slews(t_g, rate, t_cam, q_cam)
+        fit = from_slews(t_g, rate, t_cam, q_cam)
         if args.alignment and source != "simulate":  # back to gyro axes: S_g = Rᵀ S_cam R
             from ...calibration.scale_fit import ScaleFit
 

@@ -282,7 +282,7 @@ def _warm_up(cfg: TrialConfig, s: dict) -> None:
         s["ident"].identify(frame.uv)
 
 
-def _gyro_prediction(q0_est, omega, cfg, rng):
+def gyro_prediction(q0_est, omega, cfg, rng):
     from ...attitude import quat_propagate
 
     bias = cfg.bias_dph * DPH * rng.choice([-1.0, 1.0], 3)
@@ -317,10 +317,10 @@ def run_chunk(cfg: TrialConfig, seed: int, n: int) -> dict:
             m0 = np.array([row_of.get(int(t), -1) for t in f0.truth], dtype=np.int64)
             q0 = solve(cam.unproject(f0.uv), index.vectors, m0) if np.count_nonzero(m0 >= 0) >= 2 else q
             q_true = quat_propagate(q, omega, cfg.update_period_s)
-            q_pred = _gyro_prediction(q0, omega, cfg, rng)
+            q_pred = gyro_prediction(q0, omega, cfg, rng)
             frame = sky.observe(cam, q_true, cfg.mag_limit, pn, mn, cfg.false_stars, rng)
             # gyro-only prediction error at the boresight, px (paper 001 eq. 6 / Fig. 16)
-            q_gyro = _gyro_prediction(q, omega, cfg, rng)
+            q_gyro = gyro_prediction(q, omega, cfg, rng)
             gyro_err = math.acos(min(1.0, float(quat_to_dcm(q_gyro)[2] @ quat_to_dcm(q_true)[2]))) \
                 * cam.focal_length_px
         else:
@@ -378,11 +378,7 @@ def _neighbour_stats(cfg, ident, frame, index, row_of) -> tuple[int, int]:
     ids = index.ids
     if cfg.method == "grid":
         b = ident.camera.unproject(frame.uv) if frame.uv.size else np.empty((0, 3))
-        from ...starid.grid import grid_lis_core
-
-        p = ident.db.params
-        _, nb_obs = grid_lis_core(np.ascontiguousarray(b), ident.max_ref, p.br, p.pr, p.g, p.cell, p.xi,
-                                  ident.db.inv_start, ident.db.inv_stars, len(index), ident._votes)
+        _, nb_obs = ident.identify_vectors(b)
         for r in range(min(len(frame.uv), ident.max_ref)):
             row = row_of.get(int(frame.truth[r]), -1)
             if frame.truth[r] < 0 or row < 0:

@@ -126,7 +126,7 @@ def test_slew_windows_across_two_slews_are_left_out():
     rotation is not the gyro's integral (they do not commute): the slew fit leaves it out and
     finds the scales; every window kept, the same data give scales far off."""
     from gyrostar.calibration.scale_fit import NotDetermined, attitude_increments
-    from gyrostar.hil.calibrate.gyro_scale import _from_slews
+    from gyrostar.hil.calibrate.gyro_scale import from_slews
 
     t_g, w_g, t_cam, q_cam, s = _slews_with_a_blind_rest()
     gi = GyroIntegral(t_g, w_g)
@@ -139,7 +139,7 @@ def test_slew_windows_across_two_slews_are_left_out():
     idx = np.arange(0, len(t_cam), 5)
     keep = gi.one_axis(t_cam[idx][:-1], t_cam[idx][1:])
     assert (~keep).sum() == 1                          # the window across the blind rest, only
-    fit = _from_slews(t_g, w_g, t_cam, q_cam)
+    fit = from_slews(t_g, w_g, t_cam, q_cam)
     assert np.allclose(fit.sensitivity, s, atol=2e-5), fit.sensitivity
     phi = attitude_increments(q_cam[idx])
     g = np.diff(gi.at(t_cam[idx]), axis=0)

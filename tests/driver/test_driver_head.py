@@ -487,7 +487,7 @@ def test_new_client_ignores_late_replies_meant_for_an_earlier_one(leg):
     finally:
         link.close()
     # without first_seq the first sequence number is random, not 1
-    firsts = {HeadClient(link, first_seq=None)._seq for _ in range(8)}
+    firsts = {HeadClient(link, first_seq=None).seq for _ in range(8)}
     assert len(firsts) > 1
 
 

@@ -119,6 +119,6 @@ def test_near_field_selection_matches_brute_force(sky):
         bore = bore + rng.normal(0, 0.003, 3)
         bore /= np.linalg.norm(bore)
         reach = math.radians(6.5)
-        got = sky._near(bore, reach)
+        got = sky.near(bore, reach)
         ref = np.flatnonzero(sky.catalog.vectors @ bore > math.cos(reach))
         assert np.array_equal(got, ref)
