@@ -316,8 +316,8 @@ class Fault:
         if self.at_s < 0:
             raise ValueError(f"at_s = {self.at_s} must be ≥ 0 (s from the start of the run)")
         if self.kind == "head-clock-step":
-            if not (math.isfinite(self.step_s) and abs(self.step_s) >= 0.1):
-                raise ValueError(f"step_s = {self.step_s} must be a finite jump of at least 0.1 s either way "
+            if not (math.isfinite(self.step_s) and abs(self.step_s) >= 0.001):
+                raise ValueError(f"step_s = {self.step_s} must be a finite jump of at least 0.001 s either way "
                                  "(head-clock-step: what the head MCU's clock jumps by)")
         elif not self.seconds > 0:
             raise ValueError(f"seconds = {self.seconds} must be > 0 (a fault of 0 s never fires)")

@@ -27,10 +27,17 @@ of envelope per ``drift_sigma_ppm`` of drift (the MCU oscillator's tolerance), s
 baseline that a few exchanges leave undetermined does not tilt the line.
 
 A clock that steps (a host suspend stops CLOCK_MONOTONIC while the MCU counts on; an MCU
-reset behind a UART the host keeps open) makes one direction's delay, against the model,
-more than :data:`STEP_US` below zero — faster than instantaneous, which no queueing does.
-The exchanges before it describe another clock, so the window restarts from that exchange
-(:attr:`ClockSync.steps` counts it; the drift, the oscillator's, is kept).
+reset behind a UART the host keeps open) puts a new exchange outside what the window allows:
+the envelopes bound θ hard, ``−min(d + b·dt) ≤ θ − b·dt ≤ min(u − b·dt)`` (no delay is
+negative), so one direction's delay against the model is below minus half the envelopes'
+round trip — faster than instantaneous, which no queueing does. Beyond that bound and the
+model's own error it is a step: :data:`STEP_MIN_US`, plus the oscillator's tolerance
+(``drift_sigma_ppm``) over the time since the newest exchange (a head that was away a minute
+is allowed 12 ms more). With clean minima in the window, steps of a few ms are found; right
+after a start whose every reply waited, the bound is as wide as the waits. The exchanges
+before it describe another clock, so the window restarts from that exchange
+(:attr:`ClockSync.steps` counts it; the drift, the oscillator's, is kept). A step smaller
+than the tolerance leaves at most half of it in the offset.
 
 A reply longer than its request spends longer on a slow wire: :meth:`add` takes that
 known down − up difference (``asym_us``, the two frames' serialisation times; link latency
@@ -49,13 +56,15 @@ from ..errors import DeviceError
 
 _DRIFT_SEARCH_PPM = 2000.0   # the drift is searched in ±this (an MCU oscillator is far better)
 DRIFT_QUANTILE = 0.1         # the drift fits each direction's lower tenth, not its single minimum
-# µs: a one-way delay this far below zero against the model is a clock step. Queueing only adds
-# delay; the model's own error is tens of µs (a drift off by 10 ppm over the 256 s window: 2.6 ms)
-STEP_US = 20_000.0
 # An MCU time the model maps more than this (s) outside the host times that bound it (a capture
 # between its request and its reply, a streamed frame's exposure end before its arrival) means
 # the model no longer fits the head's clock (it stepped): callers re-synchronise
 CLOCK_CHECK_TOL_S = 2e-3
+# µs: a one-way delay this far below zero against the model, at the newest exchange's time, is a
+# clock step (the same tolerance as the frame check's). Queueing only adds delay; the model's own
+# error there is tens of µs (its envelopes' scatter; a drift fitted over a 0.5 s baseline through
+# 200 µs of jitter is off by up to ~400 ppm, 0.4 ms a second on)
+STEP_MIN_US = CLOCK_CHECK_TOL_S * 1e6
 
 
 @njit(cache=True)
@@ -106,6 +115,7 @@ class ClockSync:
         self.count = 0
         self.rejected = 0
         self.steps = 0            # clock steps seen (the window restarted at each)
+        self._half_rtt_us = 0.0   # half the envelopes' round trip (µs)
 
     @property
     def ready(self) -> bool:
@@ -125,12 +135,20 @@ class ClockSync:
         t_mid = 0.5 * (t1 + t4)
         if self._ex:
             theta = self.offset_at(t_mid)
-            if min(u - theta, d + theta) < -STEP_US:
+            if min(u - theta, d + theta) < -self.step_tolerance_us(t_mid):
                 self._ex.clear()          # the old exchanges describe the clock before the step
                 self.steps += 1
         self._ex.append((t_mid, u, d))
         self.count += 1
         self._fit()
+
+    def step_tolerance_us(self, t_host: float) -> float:
+        """How far below zero (µs) an exchange at ``t_host`` (s) may put a one-way delay
+        against the model before it counts as a clock step: half the envelopes' round trip
+        (the hard bound), :data:`STEP_MIN_US` and the oscillator's tolerance over the time
+        since the newest exchange in the window."""
+        gap_s = max(0.0, t_host - self._ex[-1][0]) if self._ex else 0.0
+        return self._half_rtt_us + STEP_MIN_US + self.drift_sigma_ppm * gap_s
 
     def _fit(self) -> None:
         t, u, d = np.array(self._ex).T.copy()       # contiguous rows: the signature warm-up compiled
@@ -143,7 +161,9 @@ class ClockSync:
             penalty = DRIFT_QUANTILE * len(t) * self.slack_us / self.drift_sigma_ppm
             b = drift_fit(dt, u, d, DRIFT_QUANTILE, penalty, _DRIFT_SEARCH_PPM)
         self.drift = b * 1e-6
-        self.offset_us = 0.5 * (float(np.min(u - b * dt)) - float(np.min(d + b * dt)))
+        up, down = float(np.min(u - b * dt)), float(np.min(d + b * dt))
+        self.offset_us = 0.5 * (up - down)
+        self._half_rtt_us = 0.5 * (up + down)     # θ's hard bounds lie this far either side
 
     def offset_at(self, t_host: float) -> float:
         """Estimated MCU − host offset (µs) at host time ``t_host`` (s)."""

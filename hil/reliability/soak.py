@@ -5,7 +5,7 @@
 arrive as a Poisson process (mean every ``--fault-every`` s): reply-stream corruption
 (1 %), dropped bytes (0.1 %), garbage bursts, a head disconnect (1–3 s), gyro NACK bursts
 (20–200 ms), loop stalls that overrun the gyro FIFO (0.1–0.5 s) and head clock steps (the MCU
-clock jumps 0.1–5 s ahead or back, the link open). Prints one JSON
+clock jumps 5 ms–5 s ahead or back, log-uniform, the link open). Prints one JSON
 object: RSS of the loop process and of the head-emulator process at the start (after the
 first minute) and at the end, plus the series; overruns per 10-minute window (first vs
 last); exceptions escaping the loop; attitude error (cross-boresight, TRACK) per window;
@@ -45,7 +45,8 @@ def random_schedule(duration: float, seed: int, every_s: float = 45.0, quiet_sta
         elif kind == "gyro-nack":
             ev = Fault("gyro-nack", t, rng.uniform(0.02, 0.2))
         elif kind == "clock-step":
-            ev = Fault("head-clock-step", t, 0.0, step_s=rng.choice((-1.0, 1.0)) * rng.uniform(0.1, 5.0))
+            # log-uniform 5 ms .. 5 s: a few ms (a timer reload) up to a host suspend
+            ev = Fault("head-clock-step", t, 0.0, step_s=rng.choice((-1.0, 1.0)) * 10.0 ** rng.uniform(-2.3, 0.7))
         else:
             ev = Fault("gyro-fifo-overrun", t, rng.uniform(0.1, 0.5))
         if t + ev.seconds >= duration - 5.0:

@@ -202,6 +202,68 @@ def test_a_clock_step_restarts_the_model(step_s):
     assert abs(sync.mcu_to_host(mcu(t)) - t) < 60e-6
 
 
+@pytest.mark.parametrize("step_ms", [-5.0, 3.0, 15.0])
+def test_a_clock_step_of_a_few_ms_is_found(step_ms):
+    """Steps of a few ms (an MCU timer reload, a short host stall of CLOCK_MONOTONIC) at 1 Hz
+    syncs on a busy link: found at the first exchange after them, so the offset is the new
+    clock's at once. Kept as ordinary exchanges, half of such a step would stay in the
+    offset until 256 newer exchanges had pushed the old ones out (at 5 °/s, 7.5 ms of a
+    15 ms step is 135″ of attitude). Truth by hand: off_us + step after it."""
+    off_us, drift, t_step = 2_000_000_000.0, 37e-6, 230.0
+    step_us = step_ms * 1e3
+
+    def mcu(t):
+        return off_us + t * 1e6 * (1 + drift) + (step_us if t >= t_step else 0.0)
+
+    def truth(t):
+        return mcu(t) - t * 1e6
+
+    rng = np.random.default_rng(3)
+    sync = ClockSync()
+    for k in range(8):                      # the client's start: 8 exchanges at once
+        _exchange(sync, mcu, 100.0 + k * 0.002, 250e-6, 250e-6)
+    t = 101.0
+    while t < t_step - 0.5:
+        _exchange(sync, mcu, t, 250e-6 + rng.uniform(0, 50e-6) + (rng.uniform(0, 6e-3) if rng.random() < 0.3 else 0),
+                  250e-6 + rng.uniform(0, 50e-6) + (rng.uniform(0, 7e-3) if rng.random() < 0.7 else 0))
+        t += 1.0
+    assert sync.steps == 0 and abs(sync.offset_at(t - 1.0) - truth(t - 1.0)) < 30.0
+    t = t_step + 0.4
+    for k in range(5):
+        _exchange(sync, mcu, t, 250e-6 + rng.uniform(0, 50e-6), 250e-6 + rng.uniform(0, 50e-6))
+        assert abs(sync.offset_at(t) - truth(t)) < 60.0, k
+        t += 1.0
+    assert sync.steps == 1
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_busy_links_fast_oscillators_and_a_head_away_never_count_as_a_step(seed):
+    """The step test's tolerance against what the model's own error can be: oscillators up to
+    150 ppm off, a start of 8 exchanges in 14 ms (no drift known yet), one-sided waits up to
+    7 ms, sync gaps of 1–3 s and a head away for 60 s, 2 000 exchanges: no step found, and
+    the offset follows the truth."""
+    rng = np.random.default_rng(100 + seed)
+    off_us, drift = 1e9 * rng.random(), rng.choice([-1.0, 1.0]) * rng.uniform(50e-6, 150e-6)
+
+    def mcu(t):
+        return off_us + t * 1e6 * (1 + drift)
+
+    sync = ClockSync()
+    for k in range(8):
+        _exchange(sync, mcu, 50.0 + k * 0.002, 250e-6 + rng.uniform(0, 1e-3), 250e-6 + rng.uniform(0, 1e-3))
+    t, errors = 51.0, []
+    for i in range(2000):
+        if i == 1000:
+            t += 60.0                         # the head away a minute, the same clock after
+        _exchange(sync, mcu, t, 250e-6 + (rng.uniform(0, 6e-3) if rng.random() < 0.3 else rng.uniform(0, 50e-6)),
+                  250e-6 + (rng.uniform(0, 7e-3) if rng.random() < 0.7 else rng.uniform(0, 50e-6)))
+        if i > 30:
+            errors.append(abs(sync.offset_at(t) - (mcu(t) - t * 1e6)))
+        t += rng.uniform(1.0, 3.0)
+    assert sync.steps == 0
+    assert max(errors) < 200.0, max(errors)
+
+
 def test_queueing_never_counts_as_a_step():
     """A reply that waited 40 ms behind a long frame on a slow wire (or a host that read it
     late) is a one-sided delay: it only adds, so it never looks like a clock step."""

@@ -20,7 +20,7 @@ def _scenario(extra: str) -> str:
     (FAULT.format(at=3.0, s=3.0, rate=5.0), "[faults[0]] rate = 5.0 must be in [0, 1]"),
     (FAULT.format(at=3.0, s=3.0, rate=-0.1), "[faults[0]] rate = -0.1 must be in [0, 1]"),
     ('faults = [ { kind = "head-clock-step", at_s = 3.0 } ]\n', "[faults[0]] step_s = 0.0 must be a finite jump"),
-    ('faults = [ { kind = "head-clock-step", at_s = 3.0, step_s = 0.05 } ]\n', "of at least 0.1 s either way"),
+    ('faults = [ { kind = "head-clock-step", at_s = 3.0, step_s = 0.0005 } ]\n', "of at least 0.001 s either way"),
     ('faults = [ { kind = "head-clock-step", at_s = 3.0, step_s = inf } ]\n',
      "key 'faults[0].step_s' must be a finite number"),
     ("min_track_fraction = 1.5\n", "min_track_fraction = 1.5 must be in [0, 1]"),

@@ -17,7 +17,7 @@ def test_cum_counter_survives_client_restart():
 def test_campaign_faults_are_checked():
     """The campaign's faults are the scenario's, checked the same way before anything runs."""
     for bad, what in ((Fault("meteor", 1.0, 1.0), "kind"), (Fault("head-clock-step", 1.0), "step_s"),
-                      (Fault("head-clock-step", 1.0, step_s=0.05), "step_s"),
+                      (Fault("head-clock-step", 1.0, step_s=0.0005), "step_s"),
                       (Fault("head-clock-step", 1.0, step_s=float("nan")), "step_s"),
                       (Fault("link-corruption", 1.0, 1.0, rate=0.0), "injects nothing"),
                       (Fault("link-corruption", 1.0, 1.0, garbage_rate=1.5), "garbage_rate"),
