@@ -4,11 +4,14 @@ The loop composes one stage per job:
 
 * :mod:`~gyrostar.loop.attitude_filter` — MEKF state and attitude history; every FIFO batch
   in one numba call (:func:`gyrostar.loop.kernels.predict_batch`) that predicts each sample
-  and writes each output record;
+  and writes each output record (two when a streamed frame's update falls inside the batch:
+  the samples stamped before its arrival, then the rest);
 * :mod:`~gyrostar.loop.outputs` — latency stamp and the sinks;
 * :mod:`~gyrostar.loop.tracks` — tracked stars and the next exposure's windows;
 * :mod:`~gyrostar.loop.image` — centroiding on a measuring thread, lost-in-space;
 * :mod:`~gyrostar.loop.modes` — the pure mode machine (ACQUIRE → TRACK ⇄ COAST → ACQUIRE);
+* :mod:`~gyrostar.loop.mode_keeper` — the mode and the outputs' image flags from each frame's
+  outcome (:mod:`~gyrostar.loop.stream_images`: which streamed outcomes it hears);
 * :mod:`~gyrostar.loop.step_schedule` — when to step (FIFO watermark, a frame's arrival);
 * :mod:`~gyrostar.loop.head_link` — the head link up or down, unanswered jobs, reconnects;
 * :mod:`~gyrostar.loop.stream_plans` — the window plans of a streaming head's frames;
