@@ -216,24 +216,19 @@ def test_fast_head_clock_steps_keep_tracking(tmp_path):
 
 
 def test_fast_head_clock_steps_of_a_few_ms_are_found_while_slewing(tmp_path):
-    """Steps of 8 ms back and 5 ms ahead during a 3 °/s slew: too small for the frame check
-    (a frame stamped up to 2 ms outside its arrival passes) but not for the clock model's
-    (the exchanges' hard bounds), so each restarts the model at the next TIME_SYNC. Kept as
-    ordinary exchanges, half of each stayed in the offset: frames mapped 2.5–4 ms off, 19″
-    (p99 66″) instead of 3.2″ (floor 3.5″). Truth: the simulator's attitude."""
+    """The clock_step_small scenario (its first 16 s): steps of 8 ms back and 5 ms ahead
+    during a 3 °/s slew, too small for the old fixed 20 ms test but not for the clock model's
+    hard bounds, so each restarts the model at the next TIME_SYNC. Kept as ordinary
+    exchanges, half of each stayed in the offset: frames mapped 2.5–4 ms off, 19″ (p99 66″)
+    over the whole scenario instead of 3.2″ (floor 3.5″). Truth: the simulator's attitude."""
     from gyrostar.hil import config as hc
     from gyrostar.hil.analysis import attitude_errors
     from gyrostar.hil.replay import load_log
     from gyrostar.hil.runner import run_flatsat
 
-    path = tmp_path / "steps.toml"
-    path.write_text('name = "small_clock_steps"\nduration_s = 12.0\n'
-                    'segments = [ { seconds = 12.0, rate_dps = [2.0, 2.2, 0.0] } ]\n'
-                    'faults = [ { kind = "head-clock-step", at_s = 4.0, step_s = -0.008 },\n'
-                    '           { kind = "head-clock-step", at_s = 8.0, step_s = 0.005 } ]\n')
-    scen = hc.load_scenario(str(path))
-    res = run_flatsat(hc.load_flatsat(), scen, duration=scen.duration_s, seed=3, folder=tmp_path / "run",
-                      plots=False, status=False, fast=True)
+    scen = hc.load_scenario("clock_step_small")
+    res = run_flatsat(hc.load_flatsat(), scen, duration=16.0, seed=3, folder=tmp_path, plots=False,
+                      status=False, fast=True)
     assert res["link"]["clock_steps"] == 2
     log = load_log(res["log"])
     out = log["outputs"]
