@@ -115,7 +115,6 @@ class ClockSync:
         self.count = 0
         self.rejected = 0
         self.steps = 0            # clock steps seen (the window restarted at each)
-        self._half_rtt_us = 0.0   # half the envelopes' round trip (µs)
 
     @property
     def ready(self) -> bool:
@@ -148,7 +147,7 @@ class ClockSync:
         (the hard bound), :data:`STEP_MIN_US` and the oscillator's tolerance over the time
         since the newest exchange in the window."""
         gap_s = max(0.0, t_host - self._ex[-1][0]) if self._ex else 0.0
-        return self._half_rtt_us + STEP_MIN_US + self.drift_sigma_ppm * gap_s
+        return 0.5 * self.min_delay_us + STEP_MIN_US + self.drift_sigma_ppm * gap_s
 
     def _fit(self) -> None:
         t, u, d = np.array(self._ex).T.copy()       # contiguous rows: the signature warm-up compiled
@@ -161,9 +160,7 @@ class ClockSync:
             penalty = DRIFT_QUANTILE * len(t) * self.slack_us / self.drift_sigma_ppm
             b = drift_fit(dt, u, d, DRIFT_QUANTILE, penalty, _DRIFT_SEARCH_PPM)
         self.drift = b * 1e-6
-        up, down = float(np.min(u - b * dt)), float(np.min(d + b * dt))
-        self.offset_us = 0.5 * (up - down)
-        self._half_rtt_us = 0.5 * (up + down)     # θ's hard bounds lie this far either side
+        self.offset_us = 0.5 * (float(np.min(u - b * dt)) - float(np.min(d + b * dt)))
 
     def offset_at(self, t_host: float) -> float:
         """Estimated MCU − host offset (µs) at host time ``t_host`` (s)."""

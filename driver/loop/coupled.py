@@ -391,7 +391,7 @@ class CoupledLoop:
         smp = self.samples
         f = self.filter
         base = self.mode_keeper.flags
-        if f.valid and self.mode_keeper.mode != R.MODE_ACQUIRE:
+        if f.valid and self.mode != R.MODE_ACQUIRE:
             base |= R.FLAG_ATTITUDE_VALID
         if self.id_verified:
             base |= R.FLAG_ID_VERIFIED
@@ -402,7 +402,7 @@ class CoupledLoop:
         else:
             refs, ids, slots = _NO_REFS, _NO_IDS, _NO_SLOTS
         # the tracked stars' predicted centroids go straight into the tracks' table (uv)
-        self.c.gyro_stuck += f.predict(smp, self.flags_pending, base, self.mode_keeper.mode, refs, ids, self.cam, slots,
+        self.c.gyro_stuck += f.predict(smp, self.flags_pending, base, self.mode, refs, ids, self.cam, slots,
                                        self.tracks.uv, self._out[lo:hi], lo, hi)
         self.flags_pending = 0
 
@@ -446,7 +446,7 @@ class CoupledLoop:
             # centroid the readout on the measuring thread (nogil kernel) while this step
             # plans the next exposure; the update is applied at the next step
             self.image.submit(pend, res)
-        if ok_windows and self.mode_keeper.mode != R.MODE_ACQUIRE and now >= self.next_frame_t - 0.5 / self.p.frame_hz:
+        if ok_windows and self.mode != R.MODE_ACQUIRE and now >= self.next_frame_t - 0.5 / self.p.frame_hz:
             # next exposure first (windows from the prediction), then this image's update:
             # the head exposes while the loop centroids
             self.next_frame_t = max(self.next_frame_t + 1.0 / self.p.frame_hz, now)
@@ -461,7 +461,7 @@ class CoupledLoop:
                     self._head_failed(res.error)
                     return
                 if res.kind == "windows":
-                    self._heard(self.mode_keeper.image(now, 0), now)
+                    self._after_image(now, 0)
             elif res.kind == "frame":
                 self.link.answered()
                 self.c.full_frames += 1
@@ -470,7 +470,7 @@ class CoupledLoop:
                 self.link.answered()
         if self.head.busy:
             return
-        if self.mode_keeper.mode == R.MODE_ACQUIRE and not self.filter.valid:
+        if self.mode == R.MODE_ACQUIRE and not self.filter.valid:
             if now >= self.next_acquire_t:
                 self.next_acquire_t = now + self.p.acquire_every_s
                 self.head.submit_frame(self.image.lost_in_space)
@@ -519,7 +519,7 @@ class CoupledLoop:
             speed = math.sqrt(float(self.filter.omega @ self.filter.omega)) * self.f_px
             if late > 0 and late * head.period_s * speed > 0.5:
                 self.c.frames_stale_windows += 1
-                self._heard(self.mode_keeper.image(now, 0), now)
+                self._after_image(now, 0)
                 continue
             self._process_windows(pend, res, res.measured, now)
             self.updates_owed.append(res.t_mid)
@@ -536,7 +536,7 @@ class CoupledLoop:
             return
         if head.busy:
             return
-        if self.mode_keeper.mode == R.MODE_ACQUIRE and not self.filter.valid:
+        if self.mode == R.MODE_ACQUIRE and not self.filter.valid:
             if now >= self.next_acquire_t:
                 self.next_acquire_t = now + self.p.acquire_every_s
                 self.plans.restart()
@@ -608,7 +608,7 @@ class CoupledLoop:
             lag, jitter = self.exposure_lag, self.lag_jitter
         plan = self.tracks.plan(f.q, f.omega, f.b, sig, lag, jitter, self.gyro.odr_hz, budget=self.budget)
         if plan is None:
-            self._heard(self.mode_keeper.image(now, 0), now)
+            self._after_image(now, 0)
             return
         plan["t_submit"] = now
         if self.budget is not None:
@@ -644,8 +644,8 @@ class CoupledLoop:
         # cross-covariance) alike. The same holds for a regain after a COAST that left the
         # attitude uncertain by more than CONFIRM_PRIOR_PX (seed 100194: after a 21.6 °/s
         # tumble, σ ≈ 35 px, two windows each caught the next star of a row of three)
-        wide = self.mode_keeper.mode == R.MODE_ACQUIRE or (
-            self.mode_keeper.mode == R.MODE_COAST
+        wide = self.mode == R.MODE_ACQUIRE or (
+            self.mode == R.MODE_COAST
             and math.sqrt(max(f.P[0, 0], f.P[1, 1])) * self.f_px > CONFIRM_PRIOR_PX)
         min_used = max(CONFIRM_MIN_STARS, self.p.min_stars) if wide else self.p.min_stars
         # one compiled call: windows whose slot was dropped or refilled meanwhile are skipped,
@@ -674,13 +674,17 @@ class CoupledLoop:
                     tr.drop_wrong(int(s), now)
                     self.c.wrong_ids_dropped += 1
         self.id_verified = updated >= 3 and updated == n_measured
-        self._heard(self.mode_keeper.image(now, updated), now)
+        self._after_image(now, updated)
 
     def _frames_missing(self, now: float) -> None:
         """Streaming: frames that stopped coming count as starless images, one per period
         (:meth:`ModeKeeper.frame_missing`)."""
         period = 1.0 / (self.budget.frame_hz if self.budget is not None else self.p.frame_hz)
         self._heard(self.mode_keeper.frame_missing(now, period, self.link.up), now)
+
+    def _after_image(self, now: float, updated: int) -> None:
+        """An image at ``now`` updated ``updated`` stars (0: it failed): to the mode keeper."""
+        self._heard(self.mode_keeper.image(now, updated), now)
 
     def _heard(self, heard: Heard | None, now: float) -> None:
         """Carry out what an image's outcome asked (:class:`ModeKeeper`), if it was heard."""
