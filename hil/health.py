@@ -73,7 +73,7 @@ def plot_overview(folder: Path, out: np.ndarray) -> Path | None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .plots import shade_modes
+    from .plots import fixed_margins, plain_log_labels, shade_modes
 
     t = out["t"] - out["t"][0]
     sig = sigma(out["cov"])
@@ -99,11 +99,12 @@ def plot_overview(folder: Path, out: np.ndarray) -> Path | None:
     ax[2].legend(fontsize=7, loc="upper right")
     for i, lab in enumerate(("x", "y", "roll")):
         ax[3].semilogy(t, 3.0 * sig[:, i] * ARCSEC, lw=0.8, label=lab)
+    plain_log_labels(ax[3].yaxis)
     ax[3].set_ylabel("attitude 3σ (″)")
     ax[3].set_xlabel("time (s)")
     ax[3].legend(fontsize=7, loc="upper right")
     path = folder / "overview.png"
-    fig.tight_layout()
+    fixed_margins(fig, hspace=0.12)
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return path

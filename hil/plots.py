@@ -25,6 +25,25 @@ def shade_modes(ax, t, mode):
             ax.axvspan(t[a], t[b], color=colour, lw=0, zorder=0)
 
 
+def plain_log_labels(axis) -> None:
+    """Label a log axis 10, 100, 1000 … (``%g``) instead of mathtext powers of ten, whose
+    first use builds the mathtext parser (about 0.1 s of a run's plotting)."""
+    from matplotlib.ticker import FormatStrFormatter, NullFormatter
+
+    axis.set_major_formatter(FormatStrFormatter("%g"))
+    axis.set_minor_formatter(NullFormatter())
+
+
+def fixed_margins(fig, left_in: float = 0.85, right_in: float = 0.2, bottom_in: float = 0.55,
+                  top_in: float = 0.4, hspace: float | None = None) -> None:
+    """Margins in inches around the axes (room for tick labels, axis labels and a title),
+    set once instead of ``tight_layout``, which measures every tick label by drawing the
+    figure an extra time (a run's plots take about a third less time)."""
+    w, h = fig.get_size_inches()
+    fig.subplots_adjust(left=left_in / w, right=1.0 - right_in / w, bottom=bottom_in / h, top=1.0 - top_in / h,
+                        hspace=hspace)
+
+
 def write_plots(folder: Path, out: np.ndarray, truth: np.ndarray | None,
                 centroid_err: np.ndarray | None = None) -> list[Path]:
     """Write the PNGs of one run into ``folder``; returns their paths.
@@ -79,6 +98,7 @@ def write_plots(folder: Path, out: np.ndarray, truth: np.ndarray | None,
     if len(lat):
         fig, ax = plt.subplots(figsize=(6, 4))
         ax.hist(lat, bins=100, log=True)
+        plain_log_labels(ax.yaxis)
         p99 = np.percentile(lat, 99)
         ax.axvline(p99, color="r", lw=0.8, label=f"p99 {p99:.0f} µs")
         ax.set_xlabel("gyro sample → output latency (µs)")
@@ -90,7 +110,7 @@ def write_plots(folder: Path, out: np.ndarray, truth: np.ndarray | None,
 
 
 def _save(fig, path: Path) -> Path:
-    fig.tight_layout()
+    fixed_margins(fig)
     fig.savefig(path, dpi=110)
     import matplotlib.pyplot as plt
 
