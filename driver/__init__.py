@@ -17,41 +17,34 @@ _os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 
 def _numba_cache_dir() -> None:
-    """Point numba's on-disk cache at a folder named after the package's sources.
+    """Point numba's on-disk cache at a folder named after the sources compiled code uses.
 
     ``@njit(cache=True)`` revalidates a cached function against its own source file only: a
     changed kernel or constant it uses from another module leaves its cached machine code
     stale (after a ``git pull``, the old code would run). The cache therefore lives in
-    ``$XDG_CACHE_HOME/gyrostar/numba/<hash of every .py file of the package, tests aside>`` (default
-    ``~/.cache``): any change starts a fresh cache (one cold compile), the newest four are
-    kept. An explicit ``NUMBA_CACHE_DIR`` wins.
+    ``$XDG_CACHE_HOME/gyrostar/numba/<hash of the modules that use numba and every package
+    module they import, transitively>`` (default ``~/.cache``; :mod:`gyrostar.kernel_sources`):
+    a change there starts a fresh cache (one cold compile), a change elsewhere (the command
+    line, plots, the runner) keeps it; the newest four are kept. An explicit
+    ``NUMBA_CACHE_DIR`` wins.
     """
-    import hashlib
     import shutil
     import sys
     from pathlib import Path
 
+    from .kernel_sources import kernel_sources_key
+
     if _os.environ.get("NUMBA_CACHE_DIR"):
         return
     here = Path(__file__).resolve().parent
-    dirs = [here]
+    roots = [("gyrostar", here)]
     for name in ("mocks", "hil"):                  # sub-packages inside (installed) or beside (editable)
         for cand in (here / name, here.parent / name):
             if cand.is_dir() and cand != here:
-                dirs.append(cand)
+                roots.append((f"gyrostar.{name}", cand))
                 break
-    h = hashlib.sha256()
-    for d in dirs:
-        for p in sorted(d.rglob("*.py")):
-            if p.name == "conftest.py" or p.name.startswith("test_"):
-                continue                           # the HIL tests beside hil/ hold no kernels
-            h.update(str(p.relative_to(d)).encode())
-            try:
-                h.update(p.read_bytes())
-            except OSError:
-                pass
     base = Path(_os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "gyrostar" / "numba"
-    target = base / h.hexdigest()[:16]
+    target = base / kernel_sources_key(roots)[:16]
     try:
         target.mkdir(parents=True, exist_ok=True)
         old = sorted((p for p in base.iterdir() if p.is_dir() and p != target), key=lambda p: p.stat().st_mtime)
