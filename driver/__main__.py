@@ -1,7 +1,5 @@
 """``python -m gyrostar`` is the ``gyrostar`` command."""
 
-import sys
+from .cli.console import console
 
-from .cli.main import main
-
-sys.exit(main())
+console()
