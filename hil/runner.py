@@ -82,6 +82,9 @@ def run(args) -> int:
     duration = scen.duration_s if getattr(args, "duration", None) is None else float(args.duration)
     if not (duration > 0 and np.isfinite(duration)):
         raise ConfigError(f"--duration must be a finite number of seconds > 0, got {duration}")
+    from .run_memory import check_kept_outputs_fit
+
+    check_kept_outputs_fit(duration, cfg.gyro.odr_hz)     # before the run folder is made
     folder = make_run_folder(getattr(args, "out", None), scen.name)
     result = run_flatsat(cfg, scen, duration=duration, seed=int(getattr(args, "seed", 1) or 0), folder=folder,
                          realtime=bool(getattr(args, "realtime", False)),
@@ -132,6 +135,9 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
     record = cfg.outputs.record if record is None else record
     if fast and (realtime or probe is not None):
         raise ConfigError("--fast runs on a simulated clock: it cannot be combined with --realtime or a probe")
+    from .run_memory import check_kept_outputs_fit
+
+    check_kept_outputs_fit(duration, cfg.gyro.odr_hz)     # before a log or a device is touched
     from ..telemetry import timescale
     from . import flatsat
 
@@ -194,6 +200,7 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
     import sys
 
     from ..loop.floor import ARCSEC, pointing_bias_arcsec
+    from ..loop.record import OUTPUT_DTYPE
     from ..loop.scheduler import PeriodicScheduler, StepGate, realtime_setup
     from ..loop.sinks import ArraySink, CallbackSink, RecorderSink, SpacePacketSink, UdpSink
     from ..recording import logfile as lf
@@ -216,8 +223,14 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
     warm = warmup()
     warm["seconds"] = time.perf_counter() - t_w
 
-    # every output of the run, for its figures: room for the run at the gyro's ODR (grows past 2^20)
-    kept = ArraySink(min(int(duration * cfg.gyro.odr_hz * 1.05) + 4096, 1 << 20))
+    # every output of the run, for its figures: one array with room for the run at the gyro's ODR,
+    # its pages touched as the run goes, between steps (ArraySink.reserve; run_memory checked it fits)
+    try:
+        kept = ArraySink(int(duration * cfg.gyro.odr_hz * 1.05) + 4096)
+    except MemoryError:
+        raise ConfigError(f"a run of {duration:g} s: no room for its outputs in memory (the kernel refused "
+                          f"{duration * cfg.gyro.odr_hz * 1.05 * OUTPUT_DTYPE.itemsize / 1e9:.1f} GB of "
+                          "address space): choose a shorter --duration") from None
     sinks = [kept]
     if on_output is not None:
         sinks.append(CallbackSink(on_output))
@@ -281,11 +294,11 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
                 if fs.lockstep is not None:
                     loop.image.threaded = False      # centroid in the step: same result, no hand-over per frame
                     _run_lockstep(fs, loop, duration, period, step_wall, line if status else None, boundary,
-                                  writer, cpu_box)
+                                  writer, cpu_box, kept)
                 else:
                     sched = PeriodicScheduler(period)
                     _run_realtime(fs, loop, gate, sched, duration, step_wall, line if status else None, probe,
-                                  boundary, writer, cpu_box)
+                                  boundary, writer, cpu_box, kept)
         except KeyboardInterrupt:       # Ctrl-C: stop here, keep and report the part that ran
             interrupted = True
         except lf.LogWriteError as exc:  # the disk took no more: stop, keep and report the part that ran
@@ -470,11 +483,12 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
 
 
 def _run_realtime(fs, loop, gate, sched, duration: float, step_wall: list, line, probe, boundary, writer,
-                  cpu_box) -> None:
+                  cpu_box, kept) -> None:
     """Real time: a tick every gyro period on the monotonic clock, a loop step at each tick the
     loop says is due (:meth:`CoupledLoop.step_due`). The loop's CPU seconds in its steps go to
     ``cpu_box[0]`` after every step, and the thread's with its idle ticks (less the status
-    line's drawing) to ``cpu_box[1]`` (a run stopped early keeps them)."""
+    line's drawing) to ``cpu_box[1]`` (a run stopped early keeps them). The keeping sink
+    ``kept`` makes its next rows after a step, in the tick's slack (:meth:`ArraySink.reserve`)."""
     cpu = line_cpu = 0.0
     thread0 = time.thread_time()
     if probe is not None:
@@ -503,6 +517,7 @@ def _run_realtime(fs, loop, gate, sched, duration: float, step_wall: list, line,
             sched.done()
             gate.loop_exit(sched.deadline)
             boundary.step_done()
+            kept.reserve()
             if writer is not None and writer.error is not None:
                 raise writer.failure()
             if line is not None and loop.last_output is not None and line.due():
@@ -516,7 +531,7 @@ def _run_realtime(fs, loop, gate, sched, duration: float, step_wall: list, line,
 
 
 def _run_lockstep(fs, loop, duration: float, period: float, step_wall: list, line, boundary, writer,
-                  cpu_box) -> None:
+                  cpu_box, kept) -> None:
     """Fast mode: tick every gyro period of simulated time, step when the loop says a step is
     due (:meth:`CoupledLoop.step_due`). The head port's jobs (and
     a streaming port's turns) run at once on their own time line (:meth:`Lockstep.run_job`); a worker
@@ -562,6 +577,7 @@ def _run_lockstep(fs, loop, duration: float, period: float, step_wall: list, lin
             loop.step()
             step_wall.append(time.perf_counter() - w0)
             boundary.step_done()
+            kept.reserve()
             if writer is not None and writer.error is not None:
                 raise writer.failure()
             if not inline:

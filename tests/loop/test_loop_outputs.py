@@ -22,6 +22,33 @@ def test_record_layout_is_fixed_little_endian():
     assert record.flag_names(record.FLAG_ATTITUDE_VALID | record.FLAG_GYRO_GAP) == ["attitude_valid", "gyro_gap"]
 
 
+def _numbered(n: int):
+    recs = record.empty(n)
+    recs["t"] = np.arange(n, dtype=float)
+    recs["cov"] = np.arange(n, dtype=float)[:, None, None] * np.ones((6, 6))
+    return recs
+
+
+def test_array_sink_reserve_keeps_page_touching_and_growth_out_of_put():
+    recs = _numbered(40)
+    sink = sinks.ArraySink(capacity=30, chunk_rows=4)    # sized for the run: 4 rows touched
+    sink.put(recs[:3])
+    sink.put(recs[3:9])                                  # past the touched rows: this put touches
+    assert sink.touched_in_put == 5 and sink.grown_in_put == 0
+    for a, b in ((9, 10), (10, 13), (13, 13), (13, 17), (17, 21), (21, 25)):
+        sink.reserve()                                   # between steps: the next rows' pages
+        sink.put(recs[a:b])
+    assert sink.touched_in_put == 5                      # no put touched memory after a reserve
+    kept = sink.records
+    assert len(kept) == 25 and kept.dtype == record.OUTPUT_DTYPE
+    assert kept.tobytes() == recs[:25].tobytes()
+    sink.put(recs[25:40])                                # more than the capacity: the put grows it
+    assert sink.grown_in_put == 1
+    assert sink.records.tobytes() == recs.tobytes()
+    assert (sink.records["t"] == np.arange(40)).all()
+    assert len(sinks.ArraySink(capacity=3).records) == 0
+
+
 def test_array_sink_keeps_every_record_across_growth():
     rng = np.random.default_rng(3)
     recs = record.empty(37)
