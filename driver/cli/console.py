@@ -38,6 +38,6 @@ def console() -> None:
     """Entry point of the ``gyrostar`` script and of ``python -m gyrostar``."""
     from .main import main
 
-    code = main()
+    code = int(main() or 0)
     _exit_code.append(code)
     sys.exit(code)

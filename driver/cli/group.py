@@ -66,7 +66,7 @@ def add_targets(parser, targets: dict[str, str], dest: str) -> None:
         p = sub.add_parser(name, help=module.HELP, description=module.HELP)
         add_verbosity(p)
         module.configure(p)
-        p.set_defaults(_target_run=module.run)
+        p.set_defaults(_target_run=module.run, _parser=p)
 
 
 def run_target(args) -> int:

@@ -76,7 +76,7 @@ def build_parser() -> argparse.ArgumentParser:
         group.add_verbosity(p)
         module = importlib.import_module(module_path)
         module.configure(p)
-        p.set_defaults(_run=module.run)
+        p.set_defaults(_run=module.run, _parser=p)     # a target's own parser overrides _parser
     return parser
 
 
@@ -84,7 +84,9 @@ def main(argv: list[str] | None = None) -> int:
     with interrupt.watch():
         try:
             parser = build_parser()
-            args = parser.parse_args(argv)
+            args, extra = parser.parse_known_args(argv)
+            if extra:       # named by the deepest (sub-)command that took the rest: its own --help
+                getattr(args, "_parser", parser).error(f"unrecognized arguments: {' '.join(extra)}")
         except KeyboardInterrupt:
             sys.stderr.write(f"gyrostar: ERROR: {interrupt.reason()}\n")
             emit_error(_argv_has_json(argv), interrupt.reason(), 130)

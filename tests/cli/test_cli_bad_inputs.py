@@ -63,7 +63,12 @@ CASES = [
     # --- usage: unknown commands, flags, bad numbers
     ("no-command", [], USAGE, ["COMMAND"]),
     ("unknown-command", ["fly"], USAGE, ["fly"]),
-    ("run-unknown-flag", ["run", "--bogus"], USAGE, ["--bogus"]),
+    ("run-unknown-flag", ["run", "--bogus"], USAGE, ["gyrostar run: error: unrecognized arguments: --bogus",
+                                                      "see gyrostar run --help"]),
+    # an unknown flag is named by the target that took the rest, with that target's --help
+    ("target-unknown-flag", ["fw", "ping", "/dev/ttyNOPE", "--port", "x"], USAGE,
+     ["gyrostar fw ping: error: unrecognized arguments: --port x", "see gyrostar fw ping --help"]),
+    ("eval-unknown-flag", ["eval", "starid", "--nope"], USAGE, ["gyrostar eval starid: error", "--nope"]),
     ("run-duration-0", ["run", "--duration", "0"], USAGE, ["--duration"]),
     ("run-duration-nan", ["run", "--duration", "nan"], USAGE, ["--duration"]),
     ("run-duration-inf", ["run", "--duration", "inf"], USAGE, ["--duration"]),
