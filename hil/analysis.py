@@ -122,3 +122,48 @@ def mid_exposure_errors(out: np.ndarray, truth_at) -> dict:
 
 
 REST_RAD_S = 0.01 * np.pi / 180.0    # "at rest": true body rate below 0.01 °/s
+
+
+def dcm_many(q: np.ndarray) -> np.ndarray:
+    """Attitude matrices A(q) (n, 3, 3), inertial → body, of quaternions (n, 4) [x, y, z, w]
+    (vectorised :func:`gyrostar.attitude.quat_to_dcm`)."""
+    x, y, z, w = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    a = np.empty((len(q), 3, 3))
+    a[:, 0, 0] = w * w + x * x - y * y - z * z
+    a[:, 0, 1] = 2.0 * (x * y + w * z)
+    a[:, 0, 2] = 2.0 * (x * z - w * y)
+    a[:, 1, 0] = 2.0 * (x * y - w * z)
+    a[:, 1, 1] = w * w - x * x + y * y - z * z
+    a[:, 1, 2] = 2.0 * (y * z + w * x)
+    a[:, 2, 0] = 2.0 * (x * z + w * y)
+    a[:, 2, 1] = 2.0 * (y * z - w * x)
+    a[:, 2, 2] = w * w - x * x - y * y + z * z
+    return a
+
+
+def tracked_centroid_errors(out: np.ndarray, truth_rows, cat_ids: np.ndarray, cat_vectors: np.ndarray,
+                            camera_params: np.ndarray, every: int = 10) -> np.ndarray:
+    """[t, du, dv] (n, 3), px: each tracked star's output centroid minus its true position
+    (its catalog direction through the truth attitude and the camera ``camera_params``), at
+    every ``every``-th TRACK output with stars; ``truth_rows(t)`` gives the truth at output
+    times. Stars missing from the catalog (``cat_ids``, ``cat_vectors``) or falling off the
+    sensor are left out. Rows in output order, stars in slot order."""
+    from ..camera import project_many
+
+    sel = np.flatnonzero((out["n_stars"] > 0) & (out["mode"] == MODE_TRACK))[::every]
+    if not len(sel):
+        return np.zeros((0, 3))
+    q_true = truth_rows(out["t"][sel])["q"]
+    n_stars = out["n_stars"][sel].astype(np.int64)
+    row, slot = np.nonzero(np.arange(out["star_id"].shape[1])[None, :] < n_stars[:, None])
+    ids = out["star_id"][sel][row, slot]
+    order = np.argsort(cat_ids, kind="stable")
+    sorted_ids = np.asarray(cat_ids)[order]
+    at = np.minimum(np.searchsorted(sorted_ids, ids), len(sorted_ids) - 1)
+    known = sorted_ids[at] == ids
+    row, slot, k = row[known], slot[known], order[at[known]]
+    body = np.einsum("nij,nj->ni", dcm_many(q_true)[row], cat_vectors[k])
+    uv, on_sensor = project_many(np.asarray(camera_params, np.float64), np.ascontiguousarray(body))
+    row, slot, uv = row[on_sensor], slot[on_sensor], uv[on_sensor]
+    c = out["centroid_px"][sel][row, slot].astype(np.float64)
+    return np.column_stack([out["t"][sel][row], c[:, 0] - uv[:, 0], c[:, 1] - uv[:, 1]])

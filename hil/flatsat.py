@@ -382,31 +382,16 @@ class Flatsat:
         return self.truth.rows(t) if self.truth is not None else None
 
     def centroid_errors(self, out: np.ndarray) -> np.ndarray | None:
-        """[t, du, dv] (px) of tracked stars' output centroids against their true positions."""
+        """[t, du, dv] (px) of tracked stars' output centroids against their true positions
+        (every 10th TRACK output: :func:`analysis.tracked_centroid_errors`)."""
         if self.truth is None:
             return None
-        from ..attitude import quat_to_dcm
-        from ..camera import project_point
         from ..catalog import load_catalog
+        from .analysis import tracked_centroid_errors
 
         cat = load_catalog(self.cfg.sim.catalog, max(self.cfg.loop.mag_limit, self.cfg.sim.mag_limit))
-        pos = {int(i): k for k, i in enumerate(cat.ids)}
-        params = (self.true_camera or self.camera).as_array()
-        sel = np.flatnonzero((out["n_stars"] > 0) & (out["mode"] == 1))[::10]
-        if not len(sel):
-            return np.zeros((0, 3))
-        tr = self.truth.rows(out["t"][sel])
-        rows = []
-        for j, i in enumerate(sel):
-            a = quat_to_dcm(tr["q"][j])
-            for s in range(int(out["n_stars"][i])):
-                k = pos.get(int(out["star_id"][i, s]))
-                if k is None:
-                    continue
-                u, v, ok = project_point(params, a @ cat.vectors[k])
-                if ok:
-                    rows.append((out["t"][i], out["centroid_px"][i, s, 0] - u, out["centroid_px"][i, s, 1] - v))
-        return np.array(rows) if rows else np.zeros((0, 3))
+        return tracked_centroid_errors(out, self.truth.rows, cat.ids, cat.vectors,
+                                       (self.true_camera or self.camera).as_array())
 
     def close(self) -> None:
         if self.faults is not None:
