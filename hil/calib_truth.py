@@ -69,7 +69,7 @@ def compare(log_path, cal_path) -> dict:
     from .flatsat import simulated_gyro, true_camera, true_mounting
     from .replay import load_log
 
-    meta = load_log(log_path)["meta"]
+    meta = load_log(log_path, keep_records=False)["meta"]
     cfg = gconfig.from_dict(meta["config"], hc.FlatsatConfig, source="log META")
     scen = gconfig.from_dict(meta["scenario"], hc.Scenario, source="log META")
     if not cfg.simulated:
@@ -97,7 +97,7 @@ def compare(log_path, cal_path) -> dict:
     dt_true = scen.truth.gyro_time_offset_ms * 1e-3 - filter_delay_s(gp)
     m_cal, b_cal, dt_cal = calfile.gyro_to_camera(cal)
     npz = Path(log_path).with_name("calib.npz")
-    measured = measured_time_offset(load_log(log_path)["truth"], npz) if npz.exists() else None
+    measured = measured_time_offset(load_log(log_path, keep_records=False)["truth"], npz) if npz.exists() else None
     res["gyro"] = {"map_max_error_ppm": float(np.abs(m_cal - m_true).max() * 1e6),
                    "time_offset_ms": dt_cal * 1e3, "time_offset_true_ms": dt_true * 1e3,
                    "time_offset_error_ms": (dt_cal - dt_true) * 1e3,

@@ -32,12 +32,16 @@ from ..loop.record import OUTPUT_DTYPE, TRUTH_DTYPE
 from ..recording import logfile as lf
 
 
-def load_log(path: str | Path, on_progress=None) -> dict:
+def load_log(path: str | Path, on_progress=None, keep_records: bool = True) -> dict:
     """Split a log into its META, records by kind, outputs and truth. ``report`` tells what
     the reader skipped (corrupt stretches) or ignored (a cut-off tail); ``complete`` is
-    False for a log without the run's closing summary (cut short by a crash or a kill)."""
+    False for a log without the run's closing summary (cut short by a crash or a kill).
+    ``keep_records`` False keeps only the META, OUTPUT, TRUTH and EVENT records (``records``
+    is then those): an export of a long log holds its outputs, not every bus transaction
+    and link frame."""
     report = lf.ReadReport()
-    recs = list(lf.read_records(path, report, on_progress))
+    wanted = None if keep_records else (lf.META, lf.OUTPUT, lf.TRUTH, lf.EVENT)
+    recs = [r for r in lf.read_records(path, report, on_progress) if wanted is None or r.kind in wanted]
     metas = [json.loads(r.payload) for r in recs if r.kind == lf.META]
     if not metas:
         raise ConfigError(f"log {path} has no META record: not a flatsat log "
@@ -181,7 +185,7 @@ def export(path: str | Path, fmt: str, out: str | Path, force: bool = False) -> 
         from .calib_export import export_calib
 
         return export_calib(path, out)
-    log = load_log(path)
+    log = load_log(path, keep_records=False)
     recs = log["outputs"]
     res = {"log": str(path), "export": fmt, "out": str(out), "outputs": int(len(recs)),
            "truth": log["truth"] is not None} | log_state(log)

@@ -178,3 +178,29 @@ def test_clock_record_packed_in_one_go_is_the_same_bytes(tmp_path):
     assert (tmp_path / "a.gslog").read_bytes() == (tmp_path / "b.gslog").read_bytes()
     recs = list(lf.read_records(tmp_path / "b.gslog", lf.ReadReport()))
     assert [r.channel for r in recs] == [0, 2, 5, 0, 1] and all(r.kind == lf.CLOCK for r in recs)
+
+
+def test_load_log_for_an_export_keeps_the_outputs_and_drops_the_device_records(tmp_path):
+    from gyrostar.hil.replay import load_log
+    from gyrostar.loop.record import OUTPUT_DTYPE, TRUTH_DTYPE
+
+    path = tmp_path / "b.gslog"
+    outs = np.zeros(5, OUTPUT_DTYPE)
+    outs["t"] = np.arange(5.0)
+    truth = np.zeros(5, TRUTH_DTYPE)
+    truth["t"] = np.arange(5.0)
+    with lf.LogWriter(path) as w:
+        w.meta({"format": "gyrostar flatsat log 1"})
+        w.event({"scenario_t0": 0.5})
+        for i in range(5):
+            w.append(lf.RX, os.urandom(64), channel=1, t_ns=i)       # link bytes, bus reads …
+            w.append(lf.OUTPUT, outs[i:i + 1].tobytes(), t_ns=i)
+        w.append(lf.TRUTH, truth.tobytes(), t_ns=0)
+        w.event({"summary": {}})
+    whole, lean = load_log(path), load_log(path, keep_records=False)
+    assert len(whole["records"]) == 14 and len(lean["records"]) == 9
+    assert {r.kind for r in lean["records"]} == {lf.META, lf.OUTPUT, lf.TRUTH, lf.EVENT}
+    assert lean["outputs"].tobytes() == whole["outputs"].tobytes() == outs.tobytes()
+    assert lean["truth"].tobytes() == truth.tobytes()
+    assert lean["meta"] == whole["meta"] and lean["events"] == whole["events"]
+    assert lean["t0"] == 0.5 and lean["complete"] and whole["complete"]
