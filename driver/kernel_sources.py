@@ -17,6 +17,7 @@ import re
 from pathlib import Path
 
 _FROM = re.compile(r"^[ \t]*from[ \t]+([.\w]+)[ \t]+import[ \t]+(\([^)]*\)|[^\n#]*)", re.MULTILINE)
+_COMMENT = re.compile(r"#[^\n]*")
 _IMPORT = re.compile(r"^[ \t]*import[ \t]+([\w.]+(?:[ \t]*,[ \t]*[\w.]+)*)", re.MULTILINE)
 _IMPORTS_NUMBA = re.compile(r"^[ \t]*(?:from[ \t]+numba\b|import[ \t]+numba\b)", re.MULTILINE)
 
@@ -63,8 +64,8 @@ def _imported(name: str, path: Path, text: str, mods: dict[str, Path]) -> set[st
         else:
             target = src
         add(target)
-        for item in names.strip("()").replace("\n", " ").split(","):
-            item = item.split("#")[0].split(" as ")[0].strip()
+        for item in _COMMENT.sub("", names).strip("()").replace("\n", " ").split(","):
+            item = item.split(" as ")[0].strip()
             if item and f"{target}.{item}" in mods:
                 found.add(f"{target}.{item}")
     for group in _IMPORT.findall(text):

@@ -18,7 +18,7 @@ def _write(root: Path, files: dict[str, str]) -> None:
 def _fake_package(tmp_path: Path) -> list[tuple[str, Path]]:
     _write(tmp_path / "pkg", {
         "__init__.py": "",
-        "kern.py": "from numba import njit\nfrom .consts import SCALE\nfrom . import tables as T\n",
+        "kern.py": "from numba import njit\nfrom .consts import SCALE\nfrom . import (  # the tables\n    tables as T,\n)\n",
         "consts.py": "from .sub.deep import BASE\nSCALE = 2 * BASE\n",
         "tables.py": "X = 1\n",
         "sub/__init__.py": "",
@@ -30,7 +30,7 @@ def _fake_package(tmp_path: Path) -> list[tuple[str, Path]]:
     })
     _write(tmp_path / "side", {
         "__init__.py": "",
-        "render.py": "import numba\nfrom ..tables import X\nfrom pkg.sub import (\n    deep,  # the base\n)\n",
+        "render.py": "import numba\nfrom ..consts import SCALE\nfrom pkg.sub import (\n    deep,  # the base\n)\n",
         "runner.py": "from .render import X\n",
     })
     return [("pkg", tmp_path / "pkg"), ("pkg.side", tmp_path / "side")]
