@@ -18,7 +18,8 @@ def _write(root: Path, files: dict[str, str]) -> None:
 def _fake_package(tmp_path: Path) -> list[tuple[str, Path]]:
     _write(tmp_path / "pkg", {
         "__init__.py": "",
-        "kern.py": "from numba import njit\nfrom .consts import SCALE\nfrom . import (  # the tables\n    tables as T,\n)\n",
+        "kern.py": ("from numba import njit\nfrom .consts import SCALE\n"
+                    "from . import (  # the tables\n    tables as T,\n)\n"),
         "consts.py": "from .sub.deep import BASE\nSCALE = 2 * BASE\n",
         "tables.py": "X = 1\n",
         "sub/__init__.py": "",
