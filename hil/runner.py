@@ -331,7 +331,7 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
         out = kept.records
         truth = fs.truth_rows(out["t"]) if len(out) else None
         if writer and truth is not None:
-            writer.append(lf.TRUTH, truth.tobytes(), t_ns=0)
+            writer.append_rows(lf.TRUTH, truth, t_ns=0)     # as many records as the size limit asks
         seen = _bias_seen_by_loop(truth, calib)     # the bias the loop estimates: after the calibration's
         res = summarize(out, seen, loop.gyro.odr_hz)
         floor = loop.floor_summary()

@@ -204,3 +204,23 @@ def test_load_log_for_an_export_keeps_the_outputs_and_drops_the_device_records(t
     assert lean["truth"].tobytes() == truth.tobytes()
     assert lean["meta"] == whole["meta"] and lean["events"] == whole["events"]
     assert lean["t0"] == 0.5 and lean["complete"] and whole["complete"]
+
+
+def test_rows_longer_than_a_record_are_split_into_whole_rows_and_read_back_joined(tmp_path, monkeypatch):
+    from gyrostar.hil.replay import load_log
+    from gyrostar.loop.record import TRUTH_DTYPE
+
+    truth = np.zeros(10, TRUTH_DTYPE)
+    truth["t"] = np.arange(10.0)
+    truth["q"][:, 3] = 1.0
+    monkeypatch.setattr(lf, "MAX_PAYLOAD", 3 * TRUTH_DTYPE.itemsize + 5)   # 3 rows a record at most
+    path = tmp_path / "c.gslog"
+    with lf.LogWriter(path) as w:
+        w.meta({"format": "gyrostar flatsat log 1"})
+        with pytest.raises(ValueError, match="exceeds"):
+            w.append(lf.TRUTH, truth.tobytes())                            # one record: refused
+        assert w.append_rows(lf.TRUTH, truth) == 4                         # 3 + 3 + 3 + 1 rows
+        assert w.append_rows(lf.TRUTH, truth[:0]) == 0
+    sizes = [len(r.payload) for r in lf.read_records(path) if r.kind == lf.TRUTH]
+    assert sizes == [3 * 88, 3 * 88, 3 * 88, 88]
+    assert load_log(path)["truth"].tobytes() == truth.tobytes()
