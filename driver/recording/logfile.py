@@ -109,20 +109,16 @@ class LogWriter:
         head = HEADER.pack(SYNC, kind, channel, len(payload), int(t_ns))
         self._add(head, payload, crc32c.crc32c(payload, crc32c.crc32c(head)))
 
-    def append_rows(self, kind: int, rows, channel: int = 0, t_ns: int = 0, rows_per_record: int | None = None) -> int:
+    def append_rows(self, kind: int, rows, channel: int = 0, t_ns: int = 0) -> int:
         """Add a numpy array of fixed-size rows as consecutive records of whole rows, each at
-        most :data:`MAX_PAYLOAD` bytes (or ``rows_per_record`` rows): a reader joins them
-        (``b"".join`` of the payloads of that kind). A run's truth at every output is one such
-        array — 88 bytes a row, past the record limit after 32 min at 400 Hz. Returns the
-        count of records added."""
-        n = len(rows)
-        size = max(rows.dtype.itemsize, 1)
-        per = max(1, min(rows_per_record or MAX_PAYLOAD // size, MAX_PAYLOAD // size))
-        added = 0
-        for lo in range(0, n, per):
+        most :data:`MAX_PAYLOAD` bytes: a reader joins them (``b"".join`` of the payloads of
+        that kind). A run's truth at every output is one such array — 88 bytes a row, past
+        the record limit after 32 min at 400 Hz. Returns the count of records added."""
+        per = max(1, MAX_PAYLOAD // max(rows.dtype.itemsize, 1))
+        starts = range(0, len(rows), per)
+        for lo in starts:
             self.append(kind, rows[lo:lo + per].tobytes(), channel=channel, t_ns=t_ns)
-            added += 1
-        return added
+        return len(starts)
 
     def append_f8(self, kind: int, value: float, channel: int, t_ns: int) -> None:
         """Add one record whose payload is one f8 (a clock reading): the same bytes as
