@@ -86,7 +86,9 @@ def replay(path: str | Path, progress=None) -> dict:
     ``corrupt`` (the reader skipped corrupt bytes: the replay is not a check of the whole
     run) or ``different`` (``first_difference_at`` names the first differing output)."""
     from . import flatsat
+    from .run_memory import check_log_fits
 
+    check_log_fits(path, replay=True)         # one line, not the kernel's OOM killer
     if progress is None:
         progress = _no_progress
     with progress("reading log", None) as advance_read:
@@ -181,6 +183,9 @@ def export(path: str | Path, fmt: str, out: str | Path, force: bool = False) -> 
     _check_target(Path(path), out, force)
     if fmt not in ("csv", "hdf5", "aem", "calib"):
         raise ConfigError(f"unknown export format {fmt!r} (csv, hdf5, aem, calib)")
+    from .run_memory import check_log_fits
+
+    check_log_fits(path, replay=fmt == "calib")      # calib replays the log; the others read its outputs
     if fmt == "calib":
         from .calib_export import export_calib
 

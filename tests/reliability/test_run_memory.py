@@ -49,3 +49,30 @@ def test_the_command_refuses_a_run_longer_than_memory_with_one_line_and_no_folde
     assert "GB available" in proc.stderr and "Traceback" not in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1
     assert not out.exists()
+
+
+def test_a_log_too_large_to_read_back_is_refused_with_the_export_named(tmp_path):
+    from gyrostar.hil.run_memory import check_log_fits
+
+    log = tmp_path / "big.gslog"
+    log.write_bytes(b"\0" * 1_000_000)                         # 1 MB: a replay takes about 3.8 MB
+    check_log_fits(log, replay=True, available=10_000_000)
+    with pytest.raises(ConfigError) as exc:
+        check_log_fits(log, replay=True, available=4_000_000)
+    assert "replaying" in str(exc.value) and "--export" in str(exc.value)
+    check_log_fits(log, replay=False, available=4_000_000)     # an export: about 1.6 MB
+    with pytest.raises(ConfigError, match="exporting"):
+        check_log_fits(log, replay=False, available=1_000_000)
+    check_log_fits(tmp_path / "missing.gslog", replay=True, available=1)   # the reader reports it
+
+
+def test_replay_refuses_a_log_larger_than_memory_before_reading_it(tmp_path, monkeypatch):
+    from gyrostar.hil import replay, run_memory
+
+    log = tmp_path / "a.gslog"
+    log.write_bytes(b"\0" * 1000)
+    monkeypatch.setattr(run_memory, "available_bytes", lambda meminfo="/proc/meminfo": 100)
+    with pytest.raises(ConfigError, match="takes about"):
+        replay.replay(log)
+    with pytest.raises(ConfigError, match="exporting"):
+        replay.export(log, "csv", tmp_path / "out.csv")
