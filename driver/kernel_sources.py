@@ -42,17 +42,24 @@ def package_modules(roots: list[tuple[str, Path]]) -> dict[str, Path]:
     return mods
 
 
+def _with_packages(name: str, mods: dict[str, Path]) -> set[str]:
+    """Module ``name`` and the packages above it that are in ``mods`` (their ``__init__``
+    runs first and may set what it uses)."""
+    found = set()
+    while name:
+        if name in mods:
+            found.add(name)
+        name = name.rpartition(".")[0]
+    return found
+
+
 def _imported(name: str, path: Path, text: str, mods: dict[str, Path]) -> set[str]:
     """Package modules that module ``name`` (file ``path``, source ``text``) imports."""
     here = name if path.name == "__init__.py" else name.rpartition(".")[0]
     found: set[str] = set()
 
     def add(target: str) -> None:
-        # a module, and the packages above it (their __init__ runs first and may set what it uses)
-        while target:
-            if target in mods:
-                found.add(target)
-            target = target.rpartition(".")[0]
+        found.update(_with_packages(target, mods))
 
     for src, names in _FROM.findall(text):
         dots = len(src) - len(src.lstrip("."))
@@ -83,15 +90,11 @@ def kernel_closure(mods: dict[str, Path]) -> list[str]:
             texts[name] = path.read_text(encoding="utf-8", errors="replace")
         except OSError:
             texts[name] = ""
-    todo = [n for n, t in texts.items() if _uses_numba(t)]
-    for name in list(todo):             # the packages above a kernel module run their __init__ first
-        parent = name.rpartition(".")[0]
-        while parent:
-            if parent in mods:
-                todo.append(parent)
-            parent = parent.rpartition(".")[0]
-    todo = sorted(set(todo))
-    seen = set(todo)
+    seen: set[str] = set()
+    for name, text in texts.items():
+        if _uses_numba(text):
+            seen |= _with_packages(name, mods)
+    todo = sorted(seen)
     while todo:
         name = todo.pop()
         for dep in _imported(name, mods[name], texts[name], mods):

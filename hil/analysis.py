@@ -125,20 +125,11 @@ REST_RAD_S = 0.01 * np.pi / 180.0    # "at rest": true body rate below 0.01 °/s
 
 
 def dcm_many(q: np.ndarray) -> np.ndarray:
-    """Attitude matrices A(q) (n, 3, 3), inertial → body, of quaternions (n, 4) [x, y, z, w]
-    (vectorised :func:`gyrostar.attitude.quat_to_dcm`)."""
-    x, y, z, w = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
-    a = np.empty((len(q), 3, 3))
-    a[:, 0, 0] = w * w + x * x - y * y - z * z
-    a[:, 0, 1] = 2.0 * (x * y + w * z)
-    a[:, 0, 2] = 2.0 * (x * z - w * y)
-    a[:, 1, 0] = 2.0 * (x * y - w * z)
-    a[:, 1, 1] = w * w - x * x + y * y - z * z
-    a[:, 1, 2] = 2.0 * (y * z + w * x)
-    a[:, 2, 0] = 2.0 * (x * z + w * y)
-    a[:, 2, 1] = 2.0 * (y * z - w * x)
-    a[:, 2, 2] = w * w - x * x - y * y + z * z
-    return a
+    """Attitude matrices A(q) (n, 3, 3), inertial → body, of quaternions (n, 4) [x, y, z, w]:
+    :func:`gyrostar.attitude.quat_to_dcm` of each."""
+    from ..attitude import quat_to_dcm
+
+    return np.array([quat_to_dcm(x) for x in q]).reshape(len(q), 3, 3)
 
 
 def tracked_centroid_errors(out: np.ndarray, truth_rows, cat_ids: np.ndarray, cat_vectors: np.ndarray,
