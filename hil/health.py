@@ -68,27 +68,22 @@ def plot_overview(folder: Path, out: np.ndarray) -> Path | None:
     """``overview.png``: modes, stars tracked, rates, bias ± 3σ, attitude 3σ bounds."""
     if not len(out):
         return None
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from .plots import fixed_margins, plain_log_labels, shade_modes
+    from .plots import band_envelope, envelope, fixed_margins, new_figure, plain_log_labels, shade_modes
 
     t = out["t"] - out["t"][0]
     sig = sigma(out["cov"])
-    fig, ax = plt.subplots(4, 1, figsize=(10, 10), sharex=True)
+    fig, ax = new_figure(4, 1, figsize=(10, 10), sharex=True)
     for a in ax:
         shade_modes(a, t, out["mode"])
-    ax[0].plot(t, out["n_stars"], lw=0.8)
+    ax[0].plot(*envelope(t, out["n_stars"].astype(np.float64)), lw=0.8)
     ax[0].set_ylabel("stars tracked")
     ax[0].set_title("run overview without truth (green: TRACK, orange: COAST)")
     for i, c in enumerate("rgb"):
-        ax[1].plot(t, out["omega"][:, i] * DEG, c, lw=0.7, label="ω" + "xyz"[i])
+        ax[1].plot(*envelope(t, out["omega"][:, i] * DEG), c, lw=0.7, label="ω" + "xyz"[i])
         b = out["bias"][:, i] * DEG * 3600
         s3 = 3.0 * sig[:, 3 + i] * DEG * 3600
-        ax[2].plot(t, b, c, lw=0.8, label="bias " + "xyz"[i])
-        ax[2].fill_between(t, b - s3, b + s3, color=c, alpha=0.12, lw=0)
+        ax[2].plot(*envelope(t, b), c, lw=0.8, label="bias " + "xyz"[i])
+        ax[2].fill_between(*band_envelope(t, b - s3, b + s3), color=c, alpha=0.12, lw=0, step="post")
     ax[1].set_ylabel("body rate (°/s)")
     ax[1].legend(fontsize=7, loc="upper right")
     tr = out["mode"] == MODE_TRACK
@@ -98,7 +93,7 @@ def plot_overview(folder: Path, out: np.ndarray) -> Path | None:
     ax[2].set_ylabel("bias ± 3σ (°/h)")
     ax[2].legend(fontsize=7, loc="upper right")
     for i, lab in enumerate(("x", "y", "roll")):
-        ax[3].semilogy(t, 3.0 * sig[:, i] * ARCSEC, lw=0.8, label=lab)
+        ax[3].semilogy(*envelope(t, 3.0 * sig[:, i] * ARCSEC), lw=0.8, label=lab)
     plain_log_labels(ax[3].yaxis)
     ax[3].set_ylabel("attitude 3σ (″)")
     ax[3].set_xlabel("time (s)")
@@ -106,5 +101,4 @@ def plot_overview(folder: Path, out: np.ndarray) -> Path | None:
     path = folder / "overview.png"
     fixed_margins(fig, hspace=0.12)
     fig.savefig(path, dpi=100)
-    plt.close(fig)
     return path

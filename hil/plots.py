@@ -10,6 +10,67 @@ from ..loop.record import MODE_COAST, MODE_TRACK
 from .analysis import ARCSEC, attitude_errors
 
 MODE_COLOURS = {MODE_TRACK: "#d8f0d8", MODE_COAST: "#f6e2c0"}
+# pixel columns a run plot's traces are reduced to (a 9 in figure at 110 dpi is 990 px wide)
+COLUMNS = 1200
+# points a run's scatter plot draws at most (and its outliers): 100 000 draw in about 0.1 s
+SCATTER_POINTS = 100_000
+
+
+def envelope(x: np.ndarray, y: np.ndarray, columns: int = COLUMNS) -> tuple[np.ndarray, np.ndarray]:
+    """``(x, y)`` of a line reduced to what ``columns`` pixel columns show of it: per run of
+    consecutive samples, its smallest and largest value, in the order they came (x of the
+    run's first and last sample). A run of only NaN stays NaN (a gap in the line); shorter
+    lines come back as they are. A 60 s run's 24 000 points take a third of the drawing."""
+    n = len(y)
+    per = n // columns
+    if per < 4:
+        return x, y
+    m = per * columns
+    blk = y[:m].reshape(columns, per)
+    with np.errstate(invalid="ignore"):
+        lo = np.fmin.reduce(blk, axis=1)
+        hi = np.fmax.reduce(blk, axis=1)
+    first_lo = np.argmin(np.where(np.isnan(blk), np.inf, blk), axis=1) <= \
+        np.argmax(np.where(np.isnan(blk), -np.inf, blk), axis=1)
+    xs = x[:m].reshape(columns, per)
+    ex = np.empty(2 * columns + (n - m))
+    ey = np.empty_like(ex)
+    ex[0:2 * columns:2], ex[1:2 * columns:2] = xs[:, 0], xs[:, -1]
+    ey[0:2 * columns:2] = np.where(first_lo, lo, hi)
+    ey[1:2 * columns:2] = np.where(first_lo, hi, lo)
+    ex[2 * columns:], ey[2 * columns:] = x[m:], y[m:]
+    return ex, ey
+
+
+def scatter_sample(err: np.ndarray, rms: float, most: int = SCATTER_POINTS) -> tuple[np.ndarray, int]:
+    """``(rows to draw, k)`` of a scatter of ``err`` (n, d): every ``k``-th row, and every row
+    with a value beyond 3 × ``rms`` — all rows (k = 1) when there are no more than ``most``."""
+    n = len(err)
+    if n <= most:
+        return np.arange(n), 1
+    every = -(-n // most)
+    keep = np.zeros(n, bool)
+    keep[::every] = True
+    keep |= (np.abs(err) > 3.0 * rms).any(axis=1)
+    return np.flatnonzero(keep), every
+
+
+def band_envelope(x: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                  columns: int = COLUMNS) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(x, lo, hi)`` of a shaded band reduced to ``columns`` pixel columns, to draw as steps
+    (``fill_between(..., step="post")``): per run of consecutive samples the lowest ``lo``
+    and highest ``hi``, held from the run's first sample to the next run's, so the band drawn
+    covers every sample's. Shorter bands come back as they are."""
+    n = len(x)
+    per = n // columns
+    if per < 4:
+        return x, lo, hi
+    m = per * columns
+    with np.errstate(invalid="ignore"):
+        blo = np.fmin.reduce(lo[:m].reshape(columns, per), axis=1)
+        bhi = np.fmax.reduce(hi[:m].reshape(columns, per), axis=1)
+    # the last whole run is held to its last sample, then the samples after it as they are
+    return np.r_[x[:m:per], x[m - 1], x[m:]], np.r_[blo, blo[-1], lo[m:]], np.r_[bhi, bhi[-1], hi[m:]]
 
 
 def shade_modes(ax, t, mode):
@@ -23,6 +84,20 @@ def shade_modes(ax, t, mode):
         colour = MODE_COLOURS.get(int(mode[a]))
         if colour:
             ax.axvspan(t[a], t[b], color=colour, lw=0, zorder=0)
+
+
+def new_figure(nrows: int = 1, ncols: int = 1, **kw):
+    """``(figure, axes)`` drawn by Agg, outside pyplot: no figure manager to close, and a
+    tenth of a second less to import (``matplotlib.figure`` without ``pyplot``'s backend
+    machinery). ``kw``: ``figsize`` and the rest go to the figure, ``sharex``/``sharey`` to
+    its subplots."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    share = {k: kw.pop(k) for k in ("sharex", "sharey") if k in kw}
+    fig = Figure(**kw)
+    FigureCanvasAgg(fig)
+    return fig, fig.subplots(nrows, ncols, **share)
 
 
 def plain_log_labels(axis) -> None:
@@ -51,19 +126,14 @@ def write_plots(folder: Path, out: np.ndarray, truth: np.ndarray | None,
     ``centroid_err`` (optional) is an (n, 3) array of [t, error_col_px, error_row_px] of
     tracked stars' predicted centroids against the truth.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     paths = []
     t = out["t"] - (out["t"][0] if len(out) else 0.0)
     if truth is not None and len(truth) == len(out):
         err = attitude_errors(out, truth) * ARCSEC
-        fig, ax = plt.subplots(figsize=(9, 4))
+        fig, ax = new_figure(figsize=(9, 4))
         shade_modes(ax, t, out["mode"])
         for i, lab in enumerate(("x (cross-boresight)", "y (cross-boresight)", "roll")):
-            ax.plot(t, err[:, i], lw=0.7, label=lab)
+            ax.plot(*envelope(t, err[:, i]), lw=0.7, label=lab)
         lim = np.percentile(np.abs(err[:, :2]), 99) * 3 if len(err) else 10
         ax.set_ylim(-max(lim, 5), max(lim, 5))
         ax.set_xlabel("time (s)")
@@ -72,32 +142,35 @@ def write_plots(folder: Path, out: np.ndarray, truth: np.ndarray | None,
         ax.legend(loc="upper right", fontsize=8)
         paths.append(_save(fig, folder / "attitude_error.png"))
 
-        fig, ax = plt.subplots(figsize=(9, 4))
+        fig, ax = new_figure(figsize=(9, 4))
         shade_modes(ax, t, out["mode"])
         deg_h = 180 / np.pi * 3600
         for i, c in enumerate("rgb"):
-            ax.plot(t, out["bias"][:, i] * deg_h, c, lw=0.8, label=f"estimate {'xyz'[i]}")
-            ax.plot(t, truth["bias"][:, i] * deg_h, c + "--", lw=0.8, label=f"truth {'xyz'[i]}")
+            ax.plot(*envelope(t, out["bias"][:, i] * deg_h), c, lw=0.8, label=f"estimate {'xyz'[i]}")
+            ax.plot(*envelope(t, truth["bias"][:, i] * deg_h), c + "--", lw=0.8, label=f"truth {'xyz'[i]}")
         ax.set_xlabel("time (s)")
         ax.set_ylabel("gyro bias (deg/h)")
         ax.set_title("gyro bias estimate")
         ax.legend(loc="upper right", fontsize=7, ncol=2)
         paths.append(_save(fig, folder / "bias_estimate.png"))
     if centroid_err is not None and len(centroid_err):
-        fig, ax = plt.subplots(figsize=(9, 4))
-        ax.plot(centroid_err[:, 0] - (out["t"][0] if len(out) else 0), centroid_err[:, 1], ".", ms=1, label="column")
-        ax.plot(centroid_err[:, 0] - (out["t"][0] if len(out) else 0), centroid_err[:, 2], ".", ms=1, label="row")
+        fig, ax = new_figure(figsize=(9, 4))
+        rms = np.sqrt(np.mean(centroid_err[:, 1:] ** 2))
+        shown, every = scatter_sample(centroid_err[:, 1:], rms)
+        ct = centroid_err[shown, 0] - (out["t"][0] if len(out) else 0)
+        ax.plot(ct, centroid_err[shown, 1], ".", ms=1, label="column")
+        ax.plot(ct, centroid_err[shown, 2], ".", ms=1, label="row")
         ax.set_ylim(-1, 1)
         ax.set_xlabel("time (s)")
         ax.set_ylabel("centroid error (px)")
-        rms = np.sqrt(np.mean(centroid_err[:, 1:] ** 2))
-        ax.set_title(f"tracked stars' centroid error vs truth (RMS {rms:.3f} px per axis)")
+        note = f"; every {every}th of {len(centroid_err)} shown, and all beyond 3×RMS" if every > 1 else ""
+        ax.set_title(f"tracked stars' centroid error vs truth (RMS {rms:.3f} px per axis{note})", fontsize=10)
         ax.legend(loc="upper right", fontsize=8)
         paths.append(_save(fig, folder / "centroid_error.png"))
     lat = out["latency_us"][np.isfinite(out["latency_us"])]
     if len(lat):
-        fig, ax = plt.subplots(figsize=(6, 4))
-        ax.hist(lat, bins=100, log=True)
+        fig, ax = new_figure(figsize=(6, 4))
+        ax.hist(lat, bins=100, log=True, histtype="stepfilled")     # one polygon, not 100 bars
         plain_log_labels(ax.yaxis)
         p99 = np.percentile(lat, 99)
         ax.axvline(p99, color="r", lw=0.8, label=f"p99 {p99:.0f} µs")
@@ -112,7 +185,4 @@ def write_plots(folder: Path, out: np.ndarray, truth: np.ndarray | None,
 def _save(fig, path: Path) -> Path:
     fixed_margins(fig)
     fig.savefig(path, dpi=110)
-    import matplotlib.pyplot as plt
-
-    plt.close(fig)
     return path
