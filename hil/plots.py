@@ -119,67 +119,124 @@ def fixed_margins(fig, left_in: float = 0.85, right_in: float = 0.2, bottom_in: 
                         hspace=hspace)
 
 
+RUN_FIGURES = ("attitude_error", "bias_estimate", "centroid_error", "latency_histogram", "overview")
+
+
 def write_plots(folder: Path, out: np.ndarray, truth: np.ndarray | None,
-                centroid_err: np.ndarray | None = None) -> list[Path]:
-    """Write the PNGs of one run into ``folder``; returns their paths.
+                centroid_err: np.ndarray | None = None, names: tuple = RUN_FIGURES[:4]) -> list[Path]:
+    """Write the PNGs ``names`` (of :data:`RUN_FIGURES`, in that order) of one run into
+    ``folder``; returns the paths of those it drew (one needing truth or centroid errors is
+    left out without them).
 
-    ``centroid_err`` (optional) is an (n, 3) array of [t, error_col_px, error_row_px] of
-    tracked stars' predicted centroids against the truth.
+    ``out``: the run's outputs (fields t, mode, q, bias, omega, cov, n_stars, latency_us);
+    ``truth`` (optional): the truth at each output (q, bias); ``centroid_err`` (optional): an
+    (n, 3) array of [t, error_col_px, error_row_px] of tracked stars' predicted centroids
+    against the truth.
     """
+    unknown = set(names) - set(RUN_FIGURES)
+    if unknown:
+        raise ValueError(f"no run figure {sorted(unknown)}: the figures are {', '.join(RUN_FIGURES)}")
     paths = []
-    t = out["t"] - (out["t"][0] if len(out) else 0.0)
-    if truth is not None and len(truth) == len(out):
-        err = attitude_errors(out, truth) * ARCSEC
-        fig, ax = new_figure(figsize=(9, 4))
-        shade_modes(ax, t, out["mode"])
-        for i, lab in enumerate(("x (cross-boresight)", "y (cross-boresight)", "roll")):
-            ax.plot(*envelope(t, err[:, i]), lw=0.7, label=lab)
-        lim = np.percentile(np.abs(err[:, :2]), 99) * 3 if len(err) else 10
-        ax.set_ylim(-max(lim, 5), max(lim, 5))
-        ax.set_xlabel("time (s)")
-        ax.set_ylabel("attitude error (arcsec)")
-        ax.set_title("attitude error vs truth (green: TRACK, orange: COAST)")
-        ax.legend(loc="upper right", fontsize=8)
-        paths.append(_save(fig, folder / "attitude_error.png"))
-
-        fig, ax = new_figure(figsize=(9, 4))
-        shade_modes(ax, t, out["mode"])
-        deg_h = 180 / np.pi * 3600
-        for i, c in enumerate("rgb"):
-            ax.plot(*envelope(t, out["bias"][:, i] * deg_h), c, lw=0.8, label=f"estimate {'xyz'[i]}")
-            ax.plot(*envelope(t, truth["bias"][:, i] * deg_h), c + "--", lw=0.8, label=f"truth {'xyz'[i]}")
-        ax.set_xlabel("time (s)")
-        ax.set_ylabel("gyro bias (deg/h)")
-        ax.set_title("gyro bias estimate")
-        ax.legend(loc="upper right", fontsize=7, ncol=2)
-        paths.append(_save(fig, folder / "bias_estimate.png"))
-    if centroid_err is not None and len(centroid_err):
-        fig, ax = new_figure(figsize=(9, 4))
-        rms = np.sqrt(np.mean(centroid_err[:, 1:] ** 2))
-        shown, every = scatter_sample(centroid_err[:, 1:], rms)
-        ct = centroid_err[shown, 0] - (out["t"][0] if len(out) else 0)
-        ax.plot(ct, centroid_err[shown, 1], ".", ms=1, label="column")
-        ax.plot(ct, centroid_err[shown, 2], ".", ms=1, label="row")
-        ax.set_ylim(-1, 1)
-        ax.set_xlabel("time (s)")
-        ax.set_ylabel("centroid error (px)")
-        note = f"; every {every}th of {len(centroid_err)} shown, and all beyond 3×RMS" if every > 1 else ""
-        ax.set_title(f"tracked stars' centroid error vs truth (RMS {rms:.3f} px per axis{note})", fontsize=10)
-        ax.legend(loc="upper right", fontsize=8)
-        paths.append(_save(fig, folder / "centroid_error.png"))
-    lat = out["latency_us"][np.isfinite(out["latency_us"])]
-    if len(lat):
-        fig, ax = new_figure(figsize=(6, 4))
-        ax.hist(lat, bins=100, log=True, histtype="stepfilled")     # one polygon, not 100 bars
-        plain_log_labels(ax.yaxis)
-        p99 = np.percentile(lat, 99)
-        ax.axvline(p99, color="r", lw=0.8, label=f"p99 {p99:.0f} µs")
-        ax.set_xlabel("gyro sample → output latency (µs)")
-        ax.set_ylabel("outputs")
-        ax.set_title("loop latency")
-        ax.legend()
-        paths.append(_save(fig, folder / "latency_histogram.png"))
+    for name in RUN_FIGURES:
+        if name in names:
+            path = _figure(name)(folder, out, truth, centroid_err)
+            if path is not None:
+                paths.append(path)
     return paths
+
+
+def _figure(name: str):
+    if name == "overview":
+        from .health import plot_overview
+
+        return lambda folder, out, truth, cerr: plot_overview(folder, out)
+    return globals()["_" + name]
+
+
+def figure_fields(names) -> tuple[list[str], bool, bool]:
+    """``(output fields, truth needed, centroid errors needed)`` to draw ``names``: what a
+    figure worker is sent of a run."""
+    fields = {"t", "mode"}
+    for name in names:
+        fields |= set(_FIGURE_FIELDS[name])
+    return sorted(fields), bool({"attitude_error", "bias_estimate"} & set(names)), "centroid_error" in names
+
+
+_FIGURE_FIELDS = {"attitude_error": ("q",), "bias_estimate": ("bias",), "centroid_error": (),
+                  "latency_histogram": ("latency_us",), "overview": ("n_stars", "omega", "bias", "cov")}
+
+
+def _rel_t(out: np.ndarray) -> np.ndarray:
+    return out["t"] - (out["t"][0] if len(out) else 0.0)
+
+
+def _attitude_error(folder: Path, out, truth, cerr) -> Path | None:
+    if truth is None or len(truth) != len(out):
+        return None
+    t = _rel_t(out)
+    err = attitude_errors(out, truth) * ARCSEC
+    fig, ax = new_figure(figsize=(9, 4))
+    shade_modes(ax, t, out["mode"])
+    for i, lab in enumerate(("x (cross-boresight)", "y (cross-boresight)", "roll")):
+        ax.plot(*envelope(t, err[:, i]), lw=0.7, label=lab)
+    lim = np.percentile(np.abs(err[:, :2]), 99) * 3 if len(err) else 10
+    ax.set_ylim(-max(lim, 5), max(lim, 5))
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("attitude error (arcsec)")
+    ax.set_title("attitude error vs truth (green: TRACK, orange: COAST)")
+    ax.legend(loc="upper right", fontsize=8)
+    return _save(fig, folder / "attitude_error.png")
+
+
+def _bias_estimate(folder: Path, out, truth, cerr) -> Path | None:
+    if truth is None or len(truth) != len(out):
+        return None
+    t = _rel_t(out)
+    fig, ax = new_figure(figsize=(9, 4))
+    shade_modes(ax, t, out["mode"])
+    deg_h = 180 / np.pi * 3600
+    for i, c in enumerate("rgb"):
+        ax.plot(*envelope(t, out["bias"][:, i] * deg_h), c, lw=0.8, label=f"estimate {'xyz'[i]}")
+        ax.plot(*envelope(t, truth["bias"][:, i] * deg_h), c + "--", lw=0.8, label=f"truth {'xyz'[i]}")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("gyro bias (deg/h)")
+    ax.set_title("gyro bias estimate")
+    ax.legend(loc="upper right", fontsize=7, ncol=2)
+    return _save(fig, folder / "bias_estimate.png")
+
+
+def _centroid_error(folder: Path, out, truth, centroid_err) -> Path | None:
+    if centroid_err is None or not len(centroid_err):
+        return None
+    fig, ax = new_figure(figsize=(9, 4))
+    rms = np.sqrt(np.mean(centroid_err[:, 1:] ** 2))
+    shown, every = scatter_sample(centroid_err[:, 1:], rms)
+    ct = centroid_err[shown, 0] - (out["t"][0] if len(out) else 0)
+    ax.plot(ct, centroid_err[shown, 1], ".", ms=1, label="column")
+    ax.plot(ct, centroid_err[shown, 2], ".", ms=1, label="row")
+    ax.set_ylim(-1, 1)
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("centroid error (px)")
+    note = f"; every {every}th of {len(centroid_err)} shown, and all beyond 3×RMS" if every > 1 else ""
+    ax.set_title(f"tracked stars' centroid error vs truth (RMS {rms:.3f} px per axis{note})", fontsize=10)
+    ax.legend(loc="upper right", fontsize=8)
+    return _save(fig, folder / "centroid_error.png")
+
+
+def _latency_histogram(folder: Path, out, truth, cerr) -> Path | None:
+    lat = out["latency_us"][np.isfinite(out["latency_us"])]
+    if not len(lat):
+        return None
+    fig, ax = new_figure(figsize=(6, 4))
+    ax.hist(lat, bins=100, log=True, histtype="stepfilled")     # one polygon, not 100 bars
+    plain_log_labels(ax.yaxis)
+    p99 = np.percentile(lat, 99)
+    ax.axvline(p99, color="r", lw=0.8, label=f"p99 {p99:.0f} µs")
+    ax.set_xlabel("gyro sample → output latency (µs)")
+    ax.set_ylabel("outputs")
+    ax.set_title("loop latency")
+    ax.legend()
+    return _save(fig, folder / "latency_histogram.png")
 
 
 def _save(fig, path: Path) -> Path:

@@ -168,11 +168,18 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
     except BaseException:
         held.release()
         raise
+    figures = None
     try:
         # a Ctrl-C held while the log came into being is delivered here, where the log records it
         held.release()
+        if plots and fast:
+            # helpers import matplotlib while the loop runs, then draw the figures side by side
+            # (real time leaves the host's second core to the loop's other threads: drawn after)
+            from .figure_workers import FigureWorkers
+
+            figures = FigureWorkers.start()
         return _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer, on_output, probe,
-                        fast, keep_arrays, calib=calib, timemap=timemap)
+                        fast, keep_arrays, calib=calib, timemap=timemap, figures=figures)
     except BaseException as exc:
         if writer:
             # a Ctrl-C inside native code (numba compiling, a C extension) can surface as another
@@ -190,12 +197,14 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
                 pass
         raise
     finally:
+        if figures is not None:
+            figures.close()
         if writer:
             writer.close()
 
 
 def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer, on_output, probe, fast,
-             keep_arrays=False, calib=None, timemap=None) -> dict:
+             keep_arrays=False, calib=None, timemap=None, figures=None) -> dict:
     """The body of :func:`run_flatsat` once its log holds the META record."""
     import sys
 
@@ -462,14 +471,18 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
         if late:
             raise KeyboardInterrupt
         if plots and len(out):
-            from .plots import write_plots
+            from .plots import RUN_FIGURES, write_plots
 
             cerr = fs.centroid_errors(out) if truth is not None else None
             if cerr is not None and len(cerr):
                 res_top["centroid_error_px_rms"] = float(np.sqrt(np.mean(cerr[:, 1:] ** 2)))
-            from .health import plot_overview
-
-            res_top["plots"] = [str(p) for p in write_plots(folder, out, seen, cerr) + [plot_overview(folder, out)]]
+            if figures is not None:
+                drawn = figures.draw(folder, out, seen, cerr)
+                for why in figures.fallbacks:
+                    log.warning("figure helper: %s; drawn here instead", why)
+            else:
+                drawn = write_plots(folder, out, seen, cerr, names=RUN_FIGURES)
+            res_top["plots"] = [str(p) for p in drawn]
             _write_summary(folder, res_top)
     except KeyboardInterrupt:      # Ctrl-C while winding up or plotting: the summary stands, no plots
         res_top["interrupted"] = True

@@ -1,0 +1,173 @@
+"""A run's figures drawn by two helper processes beside the loop (``gyrostar run --fast``).
+
+The helpers start with the run and import matplotlib while the loop runs (0.5 s of a
+60 s fast run's wall time otherwise); when the loop has ended each is sent the outputs its
+figures need and draws them, side by side with the other. A helper that cannot start,
+fails or falls silent costs nothing but time: the runner draws its figures itself
+(:func:`gyrostar.hil.plots.write_plots`), so a run's figures never depend on it.
+
+Run as ``python -m gyrostar.hil.figure_workers``: one job (a pickle on stdin), one JSON
+line on stdout (``{"paths": [...]}`` or ``{"error": "..."}``).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import pickle
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .plots import RUN_FIGURES, figure_fields, write_plots
+
+# the figures each helper draws: about the same time each on a run's outputs
+GROUPS = (("attitude_error", "bias_estimate", "centroid_error"), ("latency_histogram", "overview"))
+# seconds a helper may take for its figures before the runner draws them itself: a fixed
+# part and a part per million outputs (a 60 s run's take 0.3 s, 2000 s's about 1.5 s)
+WAIT_S = 30.0
+WAIT_S_PER_MILLION = 30.0
+
+
+class FigureWorkers:
+    """The run's helper processes, one per group of figures (:data:`GROUPS`)."""
+
+    def __init__(self, procs: list):
+        self.procs = procs
+        self.fallbacks: list[str] = []      # why a group was drawn in the runner's process
+
+    @classmethod
+    def start(cls) -> FigureWorkers:
+        """Start the helpers (any that cannot start is left to the runner)."""
+        procs = []
+        for _ in GROUPS:
+            try:
+                # stderr to a file: a helper that says much can never block on a full pipe
+                err = tempfile.TemporaryFile()
+                proc = subprocess.Popen(
+                    [sys.executable, "-m", "gyrostar.hil.figure_workers"], stdin=subprocess.PIPE,
+                    stdout=subprocess.PIPE, stderr=err,
+                    # a Ctrl-C at the terminal is the runner's to handle: it ends the helpers
+                    start_new_session=True)
+                proc.err_file = err
+                procs.append(proc)
+            except OSError as exc:
+                procs.append(f"could not start: {exc}")
+        return cls(procs)
+
+    def draw(self, folder: Path, out: np.ndarray, truth: np.ndarray | None,
+             centroid_err: np.ndarray | None) -> list[Path]:
+        """Draw the run's figures into ``folder`` (helpers first, the runner for any group
+        a helper did not draw); the paths in :data:`RUN_FIGURES` order."""
+        sent = []
+        for names, proc in zip(GROUPS, self.procs):
+            sent.append(self._send(proc, folder, names, out, truth, centroid_err))
+        wait = WAIT_S + WAIT_S_PER_MILLION * len(out) / 1e6
+        deadline = time.monotonic() + wait
+        paths: list[Path] = []
+        for names, proc, ok in zip(GROUPS, self.procs, sent):
+            got = self._reply(proc, deadline) if ok is None else ok
+            if isinstance(got, list):
+                paths += got
+            else:
+                self.fallbacks.append(f"{'/'.join(names)}: {got}")
+                paths += write_plots(folder, out, truth, centroid_err, names=names)
+        order = {f"{n}.png": i for i, n in enumerate(RUN_FIGURES)}
+        return sorted(paths, key=lambda p: order.get(p.name, len(order)))
+
+    @staticmethod
+    def _send(proc, folder, names, out, truth, centroid_err):
+        """None once the job is on its way, else why not (str)."""
+        if isinstance(proc, str):
+            return proc
+        from numpy.lib.recfunctions import repack_fields
+
+        fields, with_truth, with_cerr = figure_fields(names)
+        job = {"folder": str(folder), "names": names, "out": repack_fields(out[fields]),
+               "truth": repack_fields(truth[["q", "bias"]]) if with_truth and truth is not None else None,
+               "centroid_err": centroid_err if with_cerr else None}
+        try:
+            pickle.dump(job, proc.stdin, protocol=pickle.HIGHEST_PROTOCOL)
+            proc.stdin.close()
+        except (OSError, ValueError) as exc:      # it has gone (a broken pipe)
+            return f"gone before its job: {exc}"
+        return None
+
+    @staticmethod
+    def _reply(proc, deadline: float):
+        """The helper's paths (list), or why it drew none (str)."""
+        try:
+            proc.wait(timeout=max(0.1, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+            return "no answer in time"
+        line = proc.stdout.read()
+        proc.stdout.close()
+        try:
+            reply = json.loads(line.decode().strip().splitlines()[-1])
+        except (ValueError, IndexError):
+            return f"exit code {proc.returncode}" + (f": {_last_line(proc)}" if _last_line(proc) else "")
+        if "error" in reply:
+            return reply["error"]
+        return [Path(p) for p in reply["paths"]]
+
+    def close(self) -> None:
+        """End any helper still running (a run stopped before its figures)."""
+        for proc in self.procs:
+            if isinstance(proc, str) or proc.poll() is not None:
+                continue
+            proc.kill()
+            try:
+                proc.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                pass
+        for proc in self.procs:
+            if not isinstance(proc, str):
+                for f in (proc.stdin, proc.stdout, proc.err_file):
+                    try:
+                        f.close()
+                    except OSError:       # a job's bytes the helper never read (it had gone)
+                        pass
+
+
+def _last_line(proc) -> str:
+    """The last line a helper wrote to stderr (why it ended), or ''."""
+    err = proc.err_file
+    err.seek(0)
+    lines = err.read().decode(errors="replace").strip().splitlines()
+    return lines[-1][:300] if lines else ""
+
+
+def main() -> int:
+    # the drawing modules are imported first: this is what the helper does while the loop runs
+    from . import (
+        health,  # noqa: F401  (overview)
+        plots,
+    )
+
+    plots.new_figure()
+    try:
+        job = pickle.load(sys.stdin.buffer)
+    except (EOFError, pickle.UnpicklingError):      # the runner went away, or stopped before its figures
+        return 0
+    try:
+        paths = write_plots(Path(job["folder"]), job["out"], job["truth"], job["centroid_err"], names=job["names"])
+        reply = {"paths": [str(p) for p in paths]}
+    except Exception as exc:       # the runner draws them itself and says why
+        reply = {"error": f"{type(exc).__name__}: {exc}"[:300]}
+    sys.stdout.write(json.dumps(reply) + "\n")
+    sys.stdout.flush()
+    return 0
+
+
+if __name__ == "__main__":
+    try:
+        code = main()
+    except KeyboardInterrupt:
+        code = 130
+    os._exit(code)     # no interpreter teardown: the runner waits for this line only
