@@ -751,11 +751,21 @@ def _sim_head(cfg, scen, sim, truth, seed, faults, lockstep):
                        clock=dev_clock)
     # its kernels compiled (cold cache) or loaded now, not at its first frame inside the run
     emu.warm_up(truth.q0)
+    from . import render_ahead
+
+    closers = []
+    if render_ahead.usable():
+        # streamed frames rendered by a forked copy while the loop steps (the same pixels)
+        emu.renderer = render_ahead.RenderAhead(emu)
+        closers.append(emu.renderer.close)
+        renderer = emu.renderer
+        lockstep.job_waits = lambda: renderer.wait_s    # the loop's CPU figure leaves the waits out
     head = SimHead(emu, dev_clock, link_preset(cfg.head.link), lockstep)
     head.start()
     faults.head_emulator = head
-    return (head.open_link, f"Python head emulator (mocks) in process on a simulated clock, link "
-            f"{head.preset.description}", [head.stop])
+    where = "its streamed windows rendered ahead in a forked child process, " if emu.renderer is not None else ""
+    return (head.open_link, f"Python head emulator (mocks) in process on a simulated clock, {where}link "
+            f"{head.preset.description}", [head.stop] + closers)
 
 
 def _head_devices(cfg, scen, sim, truth, seed, faults, lockstep=None):

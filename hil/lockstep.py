@@ -64,6 +64,9 @@ class Lockstep:
         self.on_time = None            # f(t): the head's faults due by simulated time t (inline jobs)
         self.on_time_due = None        # f(t) -> bool: on_time(t) would apply one (None: assume so)
         self.job_cpu_s = 0.0           # CPU s the inline jobs took (the head's and its client's work)
+        # f() -> s: wall seconds the inline jobs have waited on another process so far (the head
+        # emulator's render process, gyrostar.hil.render_ahead), left out of job_cpu_s
+        self.job_waits = None
 
     # -- StepGate interface (called by the head port) ----------------------------------
     def loop_enter(self) -> None:
@@ -111,12 +114,14 @@ class Lockstep:
         its first step from then on, as it would from a worker woken at the same times —
         without two thread hand-overs per reply."""
         self._job_t = self.clock.now()
+        waits = self.job_waits
+        w0 = waits() if waits is not None else 0.0
         c0 = self.cpu_clock()
         try:
             fn()
         finally:
             t, self._job_t = self._job_t, None
-            self.job_cpu_s += self.cpu_clock() - c0
+            self.job_cpu_s += self.cpu_clock() - c0 - ((waits() - w0) if waits is not None else 0.0)
         return t
 
     # -- the runner's side ---------------------------------------------------------------

@@ -36,6 +36,7 @@ import tty
 
 import numpy as np
 from cobs import cobs
+from gyrostar.core.windows import span_pixel_count
 from gyrostar.protocol import MsgType
 from gyrostar.protocol.defs import (
     ERROR_TEXT,
@@ -121,6 +122,9 @@ class HeadEmulator:
         # bytes handed to the link and not yet on the wire: the pty's queue by default; a
         # link model in the same process (fast mode's gyrostar.hil.lockstep.SimHead) gives its own
         self.backlog_source = None
+        # fast runs: the stream's window renders done elsewhere, ahead of their readout (an
+        # object with submit/result/discard/eclipse: gyrostar.hil.render_ahead.RenderAhead)
+        self.renderer = None
         self._reset_state()
 
     # --- clocks -------------------------------------------------------------------------------
@@ -165,6 +169,8 @@ class HeadEmulator:
         elif not on and getattr(self, "_eclipsed", None) is not None:
             sky.electrons[:] = self._eclipsed
             self._eclipsed = None
+        if self.renderer is not None:
+            self.renderer.eclipse(on, self.exposure_us)
 
     def _sky_for(self, exposure_us: int):
         sky = self._skies.get(exposure_us)
@@ -521,35 +527,63 @@ class HeadEmulator:
             return None
         return s.t_start if s.prepared is None else s.t_start + s.exposure_us * 1e-6
 
+    def render_windows(self, spans: np.ndarray, t_start: float, frame: int, exposure_us: int) -> np.ndarray:
+        """The 10-bit pixels (uint16, span order) of ``spans`` over an exposure of
+        ``exposure_us`` starting at host time ``t_start`` (s), sensor frame ``frame`` (its
+        noise): the rendering itself, with no emulator state changed but the scene's."""
+        q_start, omega = self.scene.at(t_start)
+        pixels = self._sky_for(exposure_us).window_pixels(spans, q_start, omega, frame=frame, noise=self.noise)
+        return np.minimum(pixels, 0x3FF).astype(np.uint16)
+
     def _render(self, s, active) -> np.ndarray:
         """The pixels of the windows ``active`` over frame ``s.frame``'s exposure (the scene is
         known ahead, so this may run while the frame integrates)."""
+        return self._resolve(self._render_ahead(s, active))
+
+    def _render_ahead(self, s, active):
+        """Start rendering ``active`` over frame ``s.frame``'s exposure: the pixels, or (with a
+        :attr:`renderer`) its handle for :meth:`_resolve`."""
         spans, ids, _ = active
         if not ids:
             return np.zeros(0, np.uint16)
-        q_start, omega = self.scene.at(s.t_start)
         self.sensor_frame += 1
-        pixels = self._sky_for(s.exposure_us).window_pixels(spans, q_start, omega, frame=self.sensor_frame,
-                                                             noise=self.noise)
-        self.rendered_pixels += len(pixels)
-        return np.minimum(pixels, 0x3FF).astype(np.uint16)
+        self.rendered_pixels += int(span_pixel_count(spans))
+        if self.renderer is not None:
+            return self.renderer.submit(spans, s.t_start, self.sensor_frame, s.exposure_us)
+        return self.render_windows(spans, s.t_start, self.sensor_frame, s.exposure_us)
+
+    def _resolve(self, pixels) -> np.ndarray:
+        return pixels if isinstance(pixels, np.ndarray) else self.renderer.result(pixels)
+
+    def _drop(self, prepared) -> None:
+        """A prepared frame that will not be read: its render, if still under way, is not waited for."""
+        if prepared is not None and not isinstance(prepared[1], np.ndarray):
+            self.renderer.discard(prepared[1])
 
     def _prepare(self, s) -> None:
         """Render frame ``s.frame`` with the window set due for it as known now, and encode its
-        FRAME messages with the counters as they stand (the MCU's DMA buffer, ready at readout)."""
+        FRAME messages with the counters as they stand (the MCU's DMA buffer, ready at readout).
+        With a :attr:`renderer` the render goes on beside the caller, and the messages are
+        encoded at readout from what stood now."""
         set_frame, active = s.due()
-        pixels = self._render(s, active)
-        s.prepared = (active, pixels, self._encode_stream_frame(s, active, set_frame, pixels),
-                      (set_frame, s.late_sets, s.dropped, s.backpressure))
+        self._drop(s.prepared)
+        pixels = self._render_ahead(s, active)
+        counters = (set_frame, s.late_sets, s.dropped, s.backpressure)
+        if isinstance(pixels, np.ndarray):
+            s.prepared = (active, pixels, self._encode_stream_frame(s, active, set_frame, pixels), counters)
+        else:
+            t_us = (self.mcu_us(s.t_start), self.mcu_us(s.t_start + s.exposure_us * 1e-6))
+            s.prepared = (active, pixels, t_us, counters)
 
-    def _encode_stream_frame(self, s, active, set_frame: int, pixels: np.ndarray) -> list[bytes]:
-        """The FRAME messages (one or more parts) of frame ``s.frame`` read with ``active``."""
+    def _encode_stream_frame(self, s, active, set_frame: int, pixels: np.ndarray, t_us=None) -> list[bytes]:
+        """The FRAME messages (one or more parts) of frame ``s.frame`` read with ``active``
+        (``t_us``: the exposure's MCU start and end µs as they were stamped, else now's)."""
         _, ids, slices = active[:3]
         px, bounds = _window_pixels(pixels, slices)
         sums = _bounded_sums(px, bounds)
         b = bounds.tolist()
         counts = [b[j + 1] - b[j] for j in range(len(b) - 1)]
-        t0_us, t1_us = self.mcu_us(s.t_start), self.mcu_us(s.t_start + s.exposure_us * 1e-6)
+        t0_us, t1_us = t_us or (self.mcu_us(s.t_start), self.mcu_us(s.t_start + s.exposure_us * 1e-6))
         out, start = [], 0
         fixed = struct.calcsize("<" + REPLY_LAYOUT[MsgType.FRAME][0])
         while True:
@@ -576,14 +610,23 @@ class HeadEmulator:
         if self.tx_backlog() > LIMITS["stream_tx_backlog_max"]:
             s.dropped += 1
             s.backpressure += 1
+            self._drop(prepared)
             return []
         self.has_capture = False
         self.last_exposure_host = (s.t_start, t_end)
         if prepared is not None and prepared[0][1] is s.active[1]:
-            # rendered during the exposure with this very set; encoded then unless a counter moved
+            # rendered during the exposure with this very set; encoded then (or now, as it stood
+            # then, after a render beside us) unless a counter moved
             same = prepared[3] == (s.set_frame, s.late_sets, s.dropped, s.backpressure)
-            out = prepared[2] if same else self._encode_stream_frame(s, s.active, s.set_frame, prepared[1])
+            pixels = self._resolve(prepared[1])
+            if not same:
+                out = self._encode_stream_frame(s, s.active, s.set_frame, pixels)
+            elif isinstance(prepared[2], list):
+                out = prepared[2]
+            else:
+                out = self._encode_stream_frame(s, s.active, s.set_frame, pixels, t_us=prepared[2])
         else:
+            self._drop(prepared)
             out = self._encode_stream_frame(s, s.active, s.set_frame, self._render(s, s.active))
         s.frames += 1
         s.last_frame = s.frame
