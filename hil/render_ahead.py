@@ -2,9 +2,11 @@
 
 In lock-step the head emulator renders frame k+1's windows when its exposure starts, just
 after frame k is read out, and the loop steps through frame k before it needs frame k+1's
-pixels. Here that render goes to a forked copy of the emulator (its sky and scene, the same
-code and numbers), and the loop's step runs meanwhile on the other core: the same pixels,
-bit for bit, a quarter of a 60 s fast run's wall time less.
+pixels. Here that render — and the frame's FRAME messages, encoded with the header as it
+stood at the exposure's start — goes to a forked copy of the emulator (its sky and scene, the
+same code and numbers), and the loop's step runs meanwhile on the other core: the same
+bytes, bit for bit. The emulator re-encodes a frame itself when a counter in its header
+moved before the readout, as it would in-process.
 
 The child renders requests in the order they are submitted (the scene's attitude and each
 frame's noise are what the in-process emulator would have used); an eclipse is forwarded in
@@ -17,6 +19,7 @@ from __future__ import annotations
 import logging
 import multiprocessing as mp
 import os
+import pickle
 import struct
 import time
 from collections import deque
@@ -29,8 +32,11 @@ log = logging.getLogger(__name__)
 
 # messages (raw bytes: a pickle per frame costs more than the render saves): a kind byte, then
 _RENDER, _ECLIPSE, _ORIGIN, _STOP = b"R"[0], b"E"[0], b"O"[0], b"S"[0]
-_REQ = struct.Struct("<qdqqi")     # render: handle, t_start (s), sensor frame, exposure (µs), spans; int32 (n, 4)
-_ANS = struct.Struct("<q")         # answer: handle; uint16 pixels in span order
+_REQ = struct.Struct("<qdqqi?")    # render: handle, t_start (s), sensor frame, exposure (µs), spans, encode;
+#                                    int32 spans (n, 4); then, to encode, the FRAME header fields and format, seq:
+_ENC = struct.Struct("<10q")
+_HEAD = ("frame", "set_frame", "t_start_us", "t_end_us", "exposure_us", "late_sets", "dropped", "backpressure")
+_ANS = struct.Struct("<qq")        # answer: handle, pixels; uint16 pixels in span order; pickled FRAME messages
 _ECL = struct.Struct("<?q")        # eclipse: on, the emulator's exposure (µs)
 _ORG = struct.Struct("<d")         # scenario origin (host s)
 
@@ -64,11 +70,13 @@ def _child(conn, emu, parent_pid: int) -> None:
             return
         kind = msg[0]
         if kind == _RENDER:
-            handle, t_start, frame, exposure_us, n = _REQ.unpack_from(msg, 1)
+            handle, t_start, frame, exposure_us, n, enc = _REQ.unpack_from(msg, 1)
             # a writable copy: a read-only array is another type to the compiled kernels
             spans = np.frombuffer(msg, np.int32, n * 4, 1 + _REQ.size).reshape(n, 4).copy()
-            pixels = emu.render_windows(spans, t_start, frame, exposure_us)
-            conn.send_bytes(_ANS.pack(handle) + pixels.tobytes())
+            encode = _unpack_encode(msg, 1 + _REQ.size + spans.nbytes) if enc else None
+            pixels, messages = _render(emu, (spans, t_start, frame, exposure_us, encode))
+            conn.send_bytes(_ANS.pack(handle, len(pixels)) + pixels.tobytes()
+                            + (pickle.dumps(messages, pickle.HIGHEST_PROTOCOL) if messages is not None else b""))
         elif kind == _ECLIPSE:
             on, exposure_us = _ECL.unpack_from(msg, 1)
             emu.exposure_us = exposure_us
@@ -77,6 +85,27 @@ def _child(conn, emu, parent_pid: int) -> None:
             emu.scene.truth.restart(_ORG.unpack_from(msg, 1)[0])
         elif kind == _STOP:
             return
+
+
+def _render(emu, req) -> tuple:
+    """``(pixels, FRAME messages or None)`` of one request."""
+    spans, t_start, frame, exposure_us, encode = req
+    pixels = emu.render_windows(spans, t_start, frame, exposure_us)
+    if encode is None:
+        return pixels, None
+    head, fmt, seq = encode
+    ids, slices = emu.window_set(spans)
+    return pixels, emu.frame_messages(head, ids, slices, pixels, fmt, seq)
+
+
+def _pack_encode(encode) -> bytes:
+    head, fmt, seq = encode
+    return _ENC.pack(*(head[k] for k in _HEAD), fmt, seq)
+
+
+def _unpack_encode(msg: bytes, at: int):
+    v = _ENC.unpack_from(msg, at)
+    return dict(zip(_HEAD, v[:8])), v[8], v[9]
 
 
 class RenderAhead:
@@ -100,22 +129,24 @@ class RenderAhead:
         emu.scene.truth.on_restart.append(self.origin)
 
     # -- the emulator's side -------------------------------------------------------------
-    def submit(self, spans: np.ndarray, t_start: float, frame: int, exposure_us: int) -> int:
-        """Start a render (``HeadEmulator.render_windows`` arguments); returns its handle."""
+    def submit(self, spans: np.ndarray, t_start: float, frame: int, exposure_us: int, encode=None) -> int:
+        """Start a render (``HeadEmulator.render_windows`` arguments; ``encode``: (FRAME header
+        fields, pixel format, seq) to encode its messages too); returns its handle."""
         handle = self._next
         self._next += 1
         self.renders += 1
-        req = (spans, t_start, frame, exposure_us)
+        req = (spans, t_start, frame, exposure_us, encode)
         if self.local:
-            self._done[handle] = self.emu.render_windows(*req)
+            self._done[handle] = _render(self.emu, req)
         else:
             self._sent.append((handle, req))
             sp = np.ascontiguousarray(spans, np.int32)
-            self._send(bytes((_RENDER,)) + _REQ.pack(handle, t_start, frame, exposure_us, len(sp)) + sp.tobytes())
+            self._send(bytes((_RENDER,)) + _REQ.pack(handle, t_start, frame, exposure_us, len(sp), encode is not None)
+                       + sp.tobytes() + (_pack_encode(encode) if encode is not None else b""))
         return handle
 
-    def result(self, handle: int) -> np.ndarray:
-        """The pixels of render ``handle`` (waits for the child)."""
+    def result(self, handle: int) -> tuple:
+        """``(pixels, FRAME messages or None)`` of render ``handle`` (waits for the child)."""
         while handle not in self._done:
             if self.local or not self._sent:
                 raise KeyError(f"render {handle} was never submitted or was discarded")
@@ -127,8 +158,10 @@ class RenderAhead:
                 continue
             finally:
                 self.wait_s += time.perf_counter() - w0
-            (got,) = _ANS.unpack_from(msg)
-            pixels = np.frombuffer(msg, np.uint16, offset=_ANS.size).copy()
+            got, n = _ANS.unpack_from(msg)
+            end = _ANS.size + 2 * n
+            pixels = np.frombuffer(msg, np.uint16, n, _ANS.size).copy()
+            answer = (pixels, pickle.loads(msg[end:]) if len(msg) > end else None)
             want, _ = self._sent.popleft()
             if got != want:
                 self._fail(RuntimeError(f"answer {got} for render {want}"))
@@ -136,7 +169,7 @@ class RenderAhead:
             if got in self._dropped:
                 self._dropped.discard(got)
             else:
-                self._done[got] = pixels
+                self._done[got] = answer
         return self._done.pop(handle)
 
     def discard(self, handle: int) -> None:
@@ -170,7 +203,7 @@ class RenderAhead:
             if handle in self._dropped:
                 self._dropped.discard(handle)
             else:
-                self._done[handle] = self.emu.render_windows(*req)
+                self._done[handle] = _render(self.emu, req)
 
     def close(self) -> None:
         if self._proc is None:

@@ -540,20 +540,25 @@ class HeadEmulator:
         known ahead, so this may run while the frame integrates)."""
         return self._resolve(self._render_ahead(s, active))
 
-    def _render_ahead(self, s, active):
+    def _render_ahead(self, s, active, encode=None):
         """Start rendering ``active`` over frame ``s.frame``'s exposure: the pixels, or (with a
-        :attr:`renderer`) its handle for :meth:`_resolve`."""
+        :attr:`renderer`) its handle for :meth:`_resolve` — the renderer also encodes the
+        frame's messages with ``encode`` = (header fields, pixel format, seq) if given."""
         spans, ids, _ = active
         if not ids:
             return np.zeros(0, np.uint16)
         self.sensor_frame += 1
         self.rendered_pixels += int(span_pixel_count(spans))
         if self.renderer is not None:
-            return self.renderer.submit(spans, s.t_start, self.sensor_frame, s.exposure_us)
+            return self.renderer.submit(spans, s.t_start, self.sensor_frame, s.exposure_us, encode)
         return self.render_windows(spans, s.t_start, self.sensor_frame, s.exposure_us)
 
     def _resolve(self, pixels) -> np.ndarray:
-        return pixels if isinstance(pixels, np.ndarray) else self.renderer.result(pixels)
+        return self._resolve_frame(pixels)[0]
+
+    def _resolve_frame(self, pixels) -> tuple:
+        """``(pixels, FRAME messages or None)`` of a render (or its handle)."""
+        return (pixels, None) if isinstance(pixels, np.ndarray) else self.renderer.result(pixels)
 
     def _drop(self, prepared) -> None:
         """A prepared frame that will not be read: its render, if still under way, is not waited for."""
@@ -567,42 +572,58 @@ class HeadEmulator:
         encoded at readout from what stood now."""
         set_frame, active = s.due()
         self._drop(s.prepared)
-        pixels = self._render_ahead(s, active)
         counters = (set_frame, s.late_sets, s.dropped, s.backpressure)
-        if isinstance(pixels, np.ndarray):
+        if self.renderer is None:
+            pixels = self._render_ahead(s, active)
             s.prepared = (active, pixels, self._encode_stream_frame(s, active, set_frame, pixels), counters)
         else:
-            t_us = (self.mcu_us(s.t_start), self.mcu_us(s.t_start + s.exposure_us * 1e-6))
-            s.prepared = (active, pixels, t_us, counters)
+            head = self._frame_head(s, set_frame)
+            s.prepared = (active, self._render_ahead(s, active, (head, s.fmt, s.seq)),
+                          (head["t_start_us"], head["t_end_us"]), counters)
 
     def _encode_stream_frame(self, s, active, set_frame: int, pixels: np.ndarray, t_us=None) -> list[bytes]:
         """The FRAME messages (one or more parts) of frame ``s.frame`` read with ``active``
         (``t_us``: the exposure's MCU start and end µs as they were stamped, else now's)."""
-        _, ids, slices = active[:3]
+        return self.frame_messages(self._frame_head(s, set_frame, t_us), active[1], active[2], pixels, s.fmt, s.seq)
+
+    def _frame_head(self, s, set_frame: int, t_us=None) -> dict:
+        """The FRAME header fields of frame ``s.frame`` as they stand (parts aside)."""
+        t0_us, t1_us = t_us or (self.mcu_us(s.t_start), self.mcu_us(s.t_start + s.exposure_us * 1e-6))
+        return dict(frame=s.frame, set_frame=set_frame, t_start_us=t0_us, t_end_us=t1_us, exposure_us=s.exposure_us,
+                    late_sets=s.late_sets, dropped=s.dropped, backpressure=s.backpressure)
+
+    @staticmethod
+    def frame_messages(head: dict, ids: list, slices: list, pixels: np.ndarray, fmt: int, seq: int) -> list[bytes]:
+        """A stream frame's FRAME messages, encoded and framed (one or more parts, each under
+        the payload limit): header fields ``head`` (:meth:`_frame_head`), the windows ``ids``
+        whose pixels are ``pixels[slices[j]]``, pixel format ``fmt``, stream ``seq``."""
         px, bounds = _window_pixels(pixels, slices)
         sums = _bounded_sums(px, bounds)
         b = bounds.tolist()
         counts = [b[j + 1] - b[j] for j in range(len(b) - 1)]
-        t0_us, t1_us = t_us or (self.mcu_us(s.t_start), self.mcu_us(s.t_start + s.exposure_us * 1e-6))
         out, start = [], 0
         fixed = struct.calcsize("<" + REPLY_LAYOUT[MsgType.FRAME][0])
         while True:
             size, stop = fixed, start
             while stop < len(ids):
-                need = _WIN_HEADER + pixel_bytes(counts[stop], s.fmt)
+                need = _WIN_HEADER + pixel_bytes(counts[stop], fmt)
                 if size + need > MAX_PAYLOAD:
                     break
                 size += need
                 stop += 1
-            head = encode_reply(MsgType.FRAME, frame=s.frame, set_frame=set_frame, t_start_us=t0_us,
-                                t_end_us=t1_us, exposure_us=s.exposure_us, late_sets=s.late_sets, dropped=s.dropped,
-                                backpressure=s.backpressure, n_pixels=len(pixels), start=start, count=stop - start,
-                                total=len(ids), pixel_format=s.fmt)
-            tail = encode_windows_arrays(ids[start:stop], sums[start:stop], px, bounds[start:stop + 1], s.fmt)
-            out.append(encode_frame(MsgType.FRAME | REPLY_FLAG, s.seq, head + tail))
+            part = encode_reply(MsgType.FRAME, **head, n_pixels=len(pixels), start=start, count=stop - start,
+                                total=len(ids), pixel_format=fmt)
+            tail = encode_windows_arrays(ids[start:stop], sums[start:stop], px, bounds[start:stop + 1], fmt)
+            out.append(encode_frame(MsgType.FRAME | REPLY_FLAG, seq, part + tail))
             start = stop
             if start >= len(ids):
                 return out
+
+    def window_set(self, spans: np.ndarray) -> tuple[list, list]:
+        """``(window ids, pixel slices per window)`` of a valid span set (as the emulator
+        checked it when it came)."""
+        _, ids, slices, _ = self._validate_spans(spans)
+        return ids, slices
 
     def _read_stream_frame(self, s, t_end: float) -> list[bytes]:
         s.install_due()
@@ -618,11 +639,13 @@ class HeadEmulator:
             # rendered during the exposure with this very set; encoded then (or now, as it stood
             # then, after a render beside us) unless a counter moved
             same = prepared[3] == (s.set_frame, s.late_sets, s.dropped, s.backpressure)
-            pixels = self._resolve(prepared[1])
+            pixels, messages = self._resolve_frame(prepared[1])
             if not same:
                 out = self._encode_stream_frame(s, s.active, s.set_frame, pixels)
             elif isinstance(prepared[2], list):
                 out = prepared[2]
+            elif messages is not None:
+                out = messages
             else:
                 out = self._encode_stream_frame(s, s.active, s.set_frame, pixels, t_us=prepared[2])
         else:

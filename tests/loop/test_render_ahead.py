@@ -72,7 +72,7 @@ def test_the_child_renders_what_the_emulator_renders_in_order_with_eclipse_and_o
             handles.append(ra.submit(spans, t, k + 1, EXP))
             expect.append(ref.render_windows(spans, t, k + 1, EXP))
         ra.discard(handles[1])
-        got = [ra.result(h) for h in handles if h != handles[1]]
+        got = [ra.result(h)[0] for h in handles if h != handles[1]]
         for g, e in zip(got, [x for i, x in enumerate(expect) if i != 1]):
             assert g.dtype == np.uint16 and np.array_equal(g, e)
         # the eclipse reached the child: the stars gone, the background (about 20 ADU a pixel) left
@@ -80,6 +80,28 @@ def test_the_child_renders_what_the_emulator_renders_in_order_with_eclipse_and_o
         assert ra.wait_s >= 0.0 and not ra.local
         with pytest.raises(KeyError):
             ra.result(handles[1])
+    finally:
+        ra.close()
+
+
+def test_the_child_encodes_the_frame_messages_the_emulator_would():
+    emu, truth = _world()
+    ref, ref_truth = _world()
+    ra = render_ahead.RenderAhead(emu)
+    emu.renderer = ra
+    try:
+        spans = _spans_about(ref, ref_truth, 50.0)
+        head = dict(frame=7, set_frame=5, t_start_us=123_456_789, t_end_us=123_466_789, exposure_us=EXP,
+                    late_sets=1, dropped=2, backpressure=0)
+        for fmt in (0, 1):
+            h = ra.submit(spans, 50.0 + fmt * 0.01, 3 + fmt, EXP, (head, fmt, 42))
+            pixels, messages = ra.result(h)
+            expect = ref.render_windows(spans, 50.0 + fmt * 0.01, 3 + fmt, EXP)
+            ids, slices = ref.window_set(spans)
+            assert np.array_equal(pixels, expect)
+            assert messages == ref.frame_messages(head, ids, slices, expect, fmt, 42) and len(messages) >= 1
+        # without the header, no messages
+        assert ra.result(ra.submit(spans, 50.02, 5, EXP))[1] is None
     finally:
         ra.close()
 
@@ -92,14 +114,14 @@ def test_a_child_that_dies_leaves_its_renders_to_this_process(caplog):
     try:
         spans = _spans_about(ref, ref_truth, 50.0)
         h1 = ra.submit(spans, 50.0, 1, EXP)
-        assert np.array_equal(ra.result(h1), ref.render_windows(spans, 50.0, 1, EXP))
+        assert np.array_equal(ra.result(h1)[0], ref.render_windows(spans, 50.0, 1, EXP))
         ra._proc.kill()
         ra._proc.join()
         h2 = ra.submit(spans, 50.01, 2, EXP)
         h3 = ra.submit(spans, 50.02, 3, EXP)
         e2 = ref.render_windows(spans, 50.01, 2, EXP)
         e3 = ref.render_windows(spans, 50.02, 3, EXP)
-        assert np.array_equal(ra.result(h3), e3) and np.array_equal(ra.result(h2), e2)
+        assert np.array_equal(ra.result(h3)[0], e3) and np.array_equal(ra.result(h2)[0], e2)
         assert ra.local
         assert any("head render process ended" in r.getMessage() for r in caplog.records)
     finally:
