@@ -128,6 +128,11 @@ class RenderAhead:
         self.wait_s = 0.0                  # wall s spent waiting for the child's answers
         emu.scene.truth.on_restart.append(self.origin)
 
+    @property
+    def pid(self) -> int | None:
+        """The child's process id (None once closed)."""
+        return None if self._proc is None else self._proc.pid
+
     # -- the emulator's side -------------------------------------------------------------
     def submit(self, spans: np.ndarray, t_start: float, frame: int, exposure_us: int, encode=None) -> int:
         """Start a render (``HeadEmulator.render_windows`` arguments; ``encode``: (FRAME header

@@ -3,6 +3,8 @@ frames to the bit as the emulator renders in-process, eclipses and the scenario 
 forwarded in order, and a child that dies costs only its speed."""
 
 import dataclasses
+import os
+import signal
 
 import numpy as np
 import pytest
@@ -53,79 +55,73 @@ def _spans_about(emu, truth, t):
     return np.array(rows, np.int32)
 
 
-def test_the_child_renders_what_the_emulator_renders_in_order_with_eclipse_and_origin():
-    emu, truth = _world()
-    ref, ref_truth = _world()          # the same world, rendered here
-    ra = render_ahead.RenderAhead(emu)
-    emu.renderer = ra
-    try:
-        truth.restart(60.0)            # forwarded: the child's scene starts there too
-        ref_truth.restart(60.0)
-        spans = _spans_about(ref, ref_truth, 60.0)
-        assert len(spans) > 20
-        handles, expect = [], []
-        for k in range(6):
-            t = 60.0 + 0.01 * k
-            if k == 3:                 # stars off from the fourth frame on (background and noise stay)
-                emu.eclipse(True)
-                ref.eclipse(True)
-            handles.append(ra.submit(spans, t, k + 1, EXP))
-            expect.append(ref.render_windows(spans, t, k + 1, EXP))
-        ra.discard(handles[1])
-        got = [ra.result(h)[0] for h in handles if h != handles[1]]
-        for g, e in zip(got, [x for i, x in enumerate(expect) if i != 1]):
-            assert g.dtype == np.uint16 and np.array_equal(g, e)
-        # the eclipse reached the child: the stars gone, the background (about 20 ADU a pixel) left
-        assert expect[0].astype(int).sum() > 1.3 * expect[4].astype(int).sum()
-        assert ra.wait_s >= 0.0 and not ra.local
-        with pytest.raises(KeyError):
-            ra.result(handles[1])
-    finally:
-        ra.close()
-
-
-def test_the_child_encodes_the_frame_messages_the_emulator_would():
+@pytest.fixture
+def pair():
+    """``(emulator, its RenderAhead, the same world's emulator rendering here, its truth)``."""
     emu, truth = _world()
     ref, ref_truth = _world()
     ra = render_ahead.RenderAhead(emu)
     emu.renderer = ra
-    try:
-        spans = _spans_about(ref, ref_truth, 50.0)
-        head = dict(frame=7, set_frame=5, t_start_us=123_456_789, t_end_us=123_466_789, exposure_us=EXP,
-                    late_sets=1, dropped=2, backpressure=0)
-        for fmt in (0, 1):
-            h = ra.submit(spans, 50.0 + fmt * 0.01, 3 + fmt, EXP, (head, fmt, 42))
-            pixels, messages = ra.result(h)
-            expect = ref.render_windows(spans, 50.0 + fmt * 0.01, 3 + fmt, EXP)
-            ids, slices = ref.window_set(spans)
-            assert np.array_equal(pixels, expect)
-            assert messages == ref.frame_messages(head, ids, slices, expect, fmt, 42) and len(messages) >= 1
-        # without the header, no messages
-        assert ra.result(ra.submit(spans, 50.02, 5, EXP))[1] is None
-    finally:
-        ra.close()
+    yield emu, ra, ref, ref_truth
+    ra.close()
 
 
-def test_a_child_that_dies_leaves_its_renders_to_this_process(caplog):
-    emu, truth = _world()
-    ref, ref_truth = _world()
-    ra = render_ahead.RenderAhead(emu)
-    emu.renderer = ra
-    try:
-        spans = _spans_about(ref, ref_truth, 50.0)
-        h1 = ra.submit(spans, 50.0, 1, EXP)
-        assert np.array_equal(ra.result(h1)[0], ref.render_windows(spans, 50.0, 1, EXP))
-        ra._proc.kill()
-        ra._proc.join()
-        h2 = ra.submit(spans, 50.01, 2, EXP)
-        h3 = ra.submit(spans, 50.02, 3, EXP)
-        e2 = ref.render_windows(spans, 50.01, 2, EXP)
-        e3 = ref.render_windows(spans, 50.02, 3, EXP)
-        assert np.array_equal(ra.result(h3)[0], e3) and np.array_equal(ra.result(h2)[0], e2)
-        assert ra.local
-        assert any("head render process ended" in r.getMessage() for r in caplog.records)
-    finally:
-        ra.close()
+def test_the_child_renders_what_the_emulator_renders_in_order_with_eclipse_and_origin(pair):
+    emu, ra, ref, ref_truth = pair
+    truth = emu.scene.truth
+    truth.restart(60.0)            # forwarded: the child's scene starts there too
+    ref_truth.restart(60.0)
+    spans = _spans_about(ref, ref_truth, 60.0)
+    assert len(spans) > 20
+    handles, expect = [], []
+    for k in range(6):
+        t = 60.0 + 0.01 * k
+        if k == 3:                 # stars off from the fourth frame on (background and noise stay)
+            emu.eclipse(True)
+            ref.eclipse(True)
+        handles.append(ra.submit(spans, t, k + 1, EXP))
+        expect.append(ref.render_windows(spans, t, k + 1, EXP))
+    ra.discard(handles[1])
+    got = [ra.result(h)[0] for h in handles if h != handles[1]]
+    for g, e in zip(got, [x for i, x in enumerate(expect) if i != 1]):
+        assert g.dtype == np.uint16 and np.array_equal(g, e)
+    # the eclipse reached the child: the stars gone, the background (about 20 ADU a pixel) left
+    assert expect[0].astype(int).sum() > 1.3 * expect[4].astype(int).sum()
+    assert ra.wait_s >= 0.0 and not ra.local
+    with pytest.raises(KeyError):
+        ra.result(handles[1])
+
+
+def test_the_child_encodes_the_frame_messages_the_emulator_would(pair):
+    emu, ra, ref, ref_truth = pair
+    spans = _spans_about(ref, ref_truth, 50.0)
+    head = dict(frame=7, set_frame=5, t_start_us=123_456_789, t_end_us=123_466_789, exposure_us=EXP,
+                late_sets=1, dropped=2, backpressure=0)
+    for fmt in (0, 1):
+        h = ra.submit(spans, 50.0 + fmt * 0.01, 3 + fmt, EXP, (head, fmt, 42))
+        pixels, messages = ra.result(h)
+        expect = ref.render_windows(spans, 50.0 + fmt * 0.01, 3 + fmt, EXP)
+        ids, slices = ref.window_set(spans)
+        assert np.array_equal(pixels, expect)
+        assert messages == ref.frame_messages(head, ids, slices, expect, fmt, 42) and len(messages) >= 1
+    # without the header, no messages
+    assert ra.result(ra.submit(spans, 50.02, 5, EXP))[1] is None
+
+
+def test_a_child_that_dies_leaves_its_renders_to_this_process(pair, caplog):
+    emu, ra, ref, ref_truth = pair
+    spans = _spans_about(ref, ref_truth, 50.0)
+    h1 = ra.submit(spans, 50.0, 1, EXP)
+    assert np.array_equal(ra.result(h1)[0], ref.render_windows(spans, 50.0, 1, EXP))
+    os.kill(ra.pid, signal.SIGKILL)
+    os.waitpid(ra.pid, 0)
+    h2 = ra.submit(spans, 50.01, 2, EXP)
+    h3 = ra.submit(spans, 50.02, 3, EXP)
+    e2 = ref.render_windows(spans, 50.01, 2, EXP)
+    e3 = ref.render_windows(spans, 50.02, 3, EXP)
+    assert np.array_equal(ra.result(h3)[0], e3) and np.array_equal(ra.result(h2)[0], e2)
+    assert ra.local
+    assert any("head render process ended" in r.getMessage() for r in caplog.records)
 
 
 def _run(tmp_path, name, monkeypatch, child: bool):
