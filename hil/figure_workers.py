@@ -1,7 +1,7 @@
-"""A run's figures drawn by two helper processes beside the loop (``gyrostar run --fast``).
+"""A run's figures drawn by two helper processes beside the runner (``gyrostar run --fast``).
 
-The helpers start with the run and import matplotlib while the loop runs (0.5 s of a
-60 s fast run's wall time otherwise); when the loop has ended each is sent the outputs its
+The helpers start with the run and import matplotlib while it starts up (0.3 s of a 60 s
+fast run's wall time otherwise); when the loop has ended each is sent the outputs its
 figures need and draws them, side by side with the other. A helper that cannot start,
 fails or falls silent costs nothing but time: the runner draws its figures itself
 (:func:`gyrostar.hil.plots.write_plots`), so a run's figures never depend on it.
@@ -36,12 +36,11 @@ WAIT_S_PER_MILLION = 30.0
 class FigureWorkers:
     """The run's helper processes, one per group of figures (:data:`GROUPS`)."""
 
-    def __init__(self, procs: list):
-        self.procs = procs
+    def __init__(self):
+        self.procs: list = ["not started"] * len(GROUPS)    # a helper each, or why there is none
         self.fallbacks: list[str] = []      # why a group was drawn in the runner's process
 
-    @classmethod
-    def start(cls) -> FigureWorkers:
+    def start(self) -> FigureWorkers:
         """Start the helpers (any that cannot start is left to the runner)."""
         procs = []
         for _ in GROUPS:
@@ -57,7 +56,8 @@ class FigureWorkers:
                 procs.append(proc)
             except OSError as exc:
                 procs.append(f"could not start: {exc}")
-        return cls(procs)
+        self.procs = procs
+        return self
 
     def draw(self, folder: Path, out: np.ndarray, truth: np.ndarray | None,
              centroid_err: np.ndarray | None) -> list[Path]:
@@ -144,6 +144,12 @@ def _last_line(proc) -> str:
 
 
 def main() -> int:
+    try:
+        # while the run starts up, the runner comes first (when the figures are drawn at the
+        # end, nothing else of the run is busy)
+        os.nice(10)
+    except OSError:
+        pass
     # the drawing modules are imported first: this is what the helper does while the loop runs
     from . import (
         health,  # noqa: F401  (overview)

@@ -173,11 +173,12 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
         # a Ctrl-C held while the log came into being is delivered here, where the log records it
         held.release()
         if plots and fast:
-            # helpers import matplotlib while the loop runs, then draw the figures side by side
-            # (real time leaves the host's second core to the loop's other threads: drawn after)
+            # helpers that import matplotlib while the run starts up, then draw the figures side
+            # by side (started with the loop instead, they slow it by more than they save; real
+            # time leaves the host's second core to the loop's other threads: drawn after)
             from .figure_workers import FigureWorkers
 
-            figures = FigureWorkers.start()
+            figures = FigureWorkers().start()
         return _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer, on_output, probe,
                         fast, keep_arrays, calib=calib, timemap=timemap, figures=figures)
     except BaseException as exc:

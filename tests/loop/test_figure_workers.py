@@ -44,7 +44,7 @@ def test_helpers_draw_the_runners_figures_to_the_byte(tmp_path, run_outputs):
     here.mkdir()
     there.mkdir()
     mine = write_plots(here, out, truth, cerr, names=RUN_FIGURES)
-    workers = fw.FigureWorkers.start()
+    workers = fw.FigureWorkers().start()
     try:
         theirs = workers.draw(there, out, truth, cerr)
     finally:
@@ -57,7 +57,7 @@ def test_helpers_draw_the_runners_figures_to_the_byte(tmp_path, run_outputs):
 
 def test_a_helper_that_died_is_drawn_by_the_runner(tmp_path, run_outputs):
     out, truth, cerr = run_outputs
-    workers = fw.FigureWorkers.start()
+    workers = fw.FigureWorkers().start()
     try:
         workers.procs[1].kill()
         workers.procs[1].wait()
@@ -76,7 +76,7 @@ def test_helpers_that_cannot_start_leave_the_figures_to_the_runner(tmp_path, run
         raise OSError(11, "Resource temporarily unavailable")
 
     monkeypatch.setattr(subprocess, "Popen", no_process)
-    workers = fw.FigureWorkers.start()
+    workers = fw.FigureWorkers().start()
     paths = workers.draw(tmp_path, out, truth, cerr)
     workers.close()
     assert [p.name for p in paths] == [f"{n}.png" for n in RUN_FIGURES]
@@ -88,7 +88,7 @@ def test_helpers_that_cannot_start_leave_the_figures_to_the_runner(tmp_path, run
 
 def test_a_helpers_error_is_reported_and_its_figures_drawn_here(tmp_path, run_outputs):
     out, truth, cerr = run_outputs
-    workers = fw.FigureWorkers.start()
+    workers = fw.FigureWorkers().start()
     try:
         # the helper is sent a folder it cannot write into; the runner's own is fine
         job_folder = tmp_path / "not-a-folder"
@@ -101,7 +101,7 @@ def test_a_helpers_error_is_reported_and_its_figures_drawn_here(tmp_path, run_ou
 
 
 def test_close_ends_helpers_that_got_no_job():
-    workers = fw.FigureWorkers.start()
+    workers = fw.FigureWorkers().start()
     procs = list(workers.procs)
     workers.close()
     assert all(p.poll() is not None for p in procs)
