@@ -41,7 +41,11 @@ class FigureWorkers:
         self.fallbacks: list[str] = []      # why a group was drawn in the runner's process
 
     def start(self) -> FigureWorkers:
-        """Start the helpers (any that cannot start is left to the runner)."""
+        """Start the helpers (any that cannot start is left to the runner; on one CPU none
+        starts: they would only take it from the runner)."""
+        if _cpus() < 2:
+            self.procs = ["one CPU"] * len(GROUPS)
+            return self
         procs = []
         for _ in GROUPS:
             try:
@@ -133,6 +137,13 @@ class FigureWorkers:
                         f.close()
                     except OSError:       # a job's bytes the helper never read (it had gone)
                         pass
+
+
+def _cpus() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
 
 
 def _last_line(proc) -> str:
