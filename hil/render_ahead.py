@@ -124,6 +124,7 @@ class RenderAhead:
         self._done: dict = {}              # handle → pixels answered before they were asked for
         self._dropped: set = set()         # handles nobody will ask for
         self.local = False                 # the child has ended: renders done here
+        self.failed: str | None = None     # why it ended (a run's warning line says it)
         self.renders = 0
         self.wait_s = 0.0                  # wall s spent waiting for the child's answers
         emu.scene.truth.on_restart.append(self.origin)
@@ -200,8 +201,9 @@ class RenderAhead:
     def _fail(self, exc) -> None:
         """The child has gone: render what it owed here, in order, and all later renders."""
         if not self.local:
+            self.failed = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
             log.warning("head render process ended (%s): rendering in the loop's process from frame %d on",
-                        exc, self._sent[0][1][2] if self._sent else -1)
+                        self.failed, self._sent[0][1][2] if self._sent else -1)
         self.local = True
         while self._sent:
             handle, req = self._sent.popleft()

@@ -568,8 +568,8 @@ class HeadEmulator:
     def _prepare(self, s) -> None:
         """Render frame ``s.frame`` with the window set due for it as known now, and encode its
         FRAME messages with the counters as they stand (the MCU's DMA buffer, ready at readout).
-        With a :attr:`renderer` the render goes on beside the caller, and the messages are
-        encoded at readout from what stood now."""
+        With a :attr:`renderer` the render and the encoding (with the header as it stands now)
+        go on beside the caller."""
         set_frame, active = s.due()
         self._drop(s.prepared)
         counters = (set_frame, s.late_sets, s.dropped, s.backpressure)

@@ -3,7 +3,6 @@ frames to the bit as the emulator renders in-process, eclipses and the scenario 
 forwarded in order, and a child that dies costs only its speed."""
 
 import dataclasses
-import logging
 import os
 import signal
 
@@ -111,10 +110,6 @@ def test_the_child_encodes_the_frame_messages_the_emulator_would(pair):
 
 def test_a_child_that_dies_leaves_its_renders_to_this_process(pair):
     emu, ra, ref, ref_truth = pair
-    said = []
-    handler = logging.Handler()
-    handler.emit = lambda record: said.append(record.getMessage())
-    render_ahead.log.addHandler(handler)     # the CLI's logging set-up may keep it from the root
     spans = _spans_about(ref, ref_truth, 50.0)
     h1 = ra.submit(spans, 50.0, 1, EXP)
     assert np.array_equal(ra.result(h1)[0], ref.render_windows(spans, 50.0, 1, EXP))
@@ -125,9 +120,7 @@ def test_a_child_that_dies_leaves_its_renders_to_this_process(pair):
     e2 = ref.render_windows(spans, 50.01, 2, EXP)
     e3 = ref.render_windows(spans, 50.02, 3, EXP)
     assert np.array_equal(ra.result(h3)[0], e3) and np.array_equal(ra.result(h2)[0], e2)
-    render_ahead.log.removeHandler(handler)
-    assert ra.local
-    assert len(said) == 1 and said[0].startswith("head render process ended")
+    assert ra.local and "Error" in ra.failed      # EOFError, BrokenPipeError: how the pipe told it
 
 
 def _run(tmp_path, name, monkeypatch, child: bool):
