@@ -480,7 +480,7 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
             if figures is not None:
                 drawn = figures.draw(folder, out, seen, cerr)
                 for why in figures.fallbacks:
-                    if not why.endswith(": one CPU"):
+                    if not why.endswith((": one CPU", " outputs")):
                         log.warning("figure helper: %s; drawn here instead", why)
             else:
                 drawn = write_plots(folder, out, seen, cerr, names=RUN_FIGURES)

@@ -115,3 +115,15 @@ def test_on_one_cpu_no_helper_starts_and_the_runner_draws(tmp_path, run_outputs,
     paths = workers.draw(tmp_path, out, truth, cerr)
     workers.close()
     assert [p.name for p in paths] == [f"{n}.png" for n in RUN_FIGURES]
+
+
+def test_a_long_run_is_drawn_by_the_runner(tmp_path, run_outputs, monkeypatch):
+    out, truth, cerr = run_outputs
+    monkeypatch.setattr(fw, "HELPER_MAX_OUTPUTS", len(out) - 1)
+    workers = fw.FigureWorkers().start()
+    procs = list(workers.procs)
+    paths = workers.draw(tmp_path, out, truth, cerr)
+    workers.close()
+    assert [p.name for p in paths] == [f"{n}.png" for n in RUN_FIGURES]
+    assert workers.fallbacks[0].endswith(f"a run of {len(out)} outputs")
+    assert all(p.poll() is not None for p in procs)      # ended, not left waiting for a job
