@@ -43,6 +43,8 @@ class FigureWorkers:
     def __init__(self):
         self.procs: list = ["not started"] * len(GROUPS)    # a helper each, or why there is none
         self.fallbacks: list[str] = []      # why a group was drawn in the runner's process
+        self._sent: list = ["nothing sent"] * len(GROUPS)     # per group: None once sent, else why not
+        self._deadline = 0.0
 
     def start(self) -> FigureWorkers:
         """Start the helpers (any that cannot start is left to the runner; on one CPU none
@@ -71,17 +73,26 @@ class FigureWorkers:
              centroid_err: np.ndarray | None) -> list[Path]:
         """Draw the run's figures into ``folder`` (helpers first, the runner for any group
         a helper did not draw); the paths in :data:`RUN_FIGURES` order."""
+        self.send(folder, out, truth, centroid_err)
+        return self.collect(folder, out, truth, centroid_err)
+
+    def send(self, folder: Path, out: np.ndarray, truth: np.ndarray | None, centroid_err: np.ndarray | None) -> None:
+        """Give each helper its figures' data (they draw while the caller goes on); then
+        :meth:`collect` with the same arguments."""
         if len(out) > HELPER_MAX_OUTPUTS:
             self.close()      # a long run: the copies would cost more memory than the helpers save time
             self.procs = [f"a run of {len(out)} outputs"] * len(GROUPS)
-        sent = []
-        for names, proc in zip(GROUPS, self.procs):
-            sent.append(self._send(proc, folder, names, out, truth, centroid_err))
-        wait = WAIT_S + WAIT_S_PER_MILLION * len(out) / 1e6
-        deadline = time.monotonic() + wait
+        self._sent = [self._send(proc, folder, names, out, truth, centroid_err)
+                      for names, proc in zip(GROUPS, self.procs)]
+        self._deadline = time.monotonic() + WAIT_S + WAIT_S_PER_MILLION * len(out) / 1e6
+
+    def collect(self, folder: Path, out: np.ndarray, truth: np.ndarray | None,
+                centroid_err: np.ndarray | None) -> list[Path]:
+        """The figures :meth:`send` gave out (any group a helper did not draw is drawn here);
+        the paths in :data:`RUN_FIGURES` order."""
         paths: list[Path] = []
-        for names, proc, ok in zip(GROUPS, self.procs, sent):
-            got = self._reply(proc, deadline) if ok is None else ok
+        for names, proc, ok in zip(GROUPS, self.procs, self._sent):
+            got = self._reply(proc, self._deadline) if ok is None else ok
             if isinstance(got, list):
                 paths += got
             else:

@@ -343,6 +343,11 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
         if writer and truth is not None:
             writer.append_rows(lf.TRUTH, truth, t_ns=0)     # as many records as the size limit asks
         seen = _bias_seen_by_loop(truth, calib)     # the bias the loop estimates: after the calibration's
+        cerr = None
+        if plots and len(out):
+            cerr = fs.centroid_errors(out) if truth is not None else None
+            if figures is not None:
+                figures.send(folder, out, seen, cerr)      # the helpers draw while the summary is made
         res = summarize(out, seen, loop.gyro.odr_hz)
         floor = loop.floor_summary()
         if truth is not None and len(out):
@@ -474,11 +479,10 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
         if plots and len(out):
             from .plots import RUN_FIGURES, write_plots
 
-            cerr = fs.centroid_errors(out) if truth is not None else None
             if cerr is not None and len(cerr):
                 res_top["centroid_error_px_rms"] = float(np.sqrt(np.mean(cerr[:, 1:] ** 2)))
             if figures is not None:
-                drawn = figures.draw(folder, out, seen, cerr)
+                drawn = figures.collect(folder, out, seen, cerr)
                 for why in figures.fallbacks:
                     if not why.endswith((": one CPU", " outputs")):
                         log.warning("figure helper: %s; drawn here instead", why)
