@@ -42,7 +42,8 @@ class FigureWorkers:
 
     def __init__(self):
         self.procs: list = ["not started"] * len(GROUPS)    # a helper each, or why there is none
-        self.fallbacks: list[str] = []      # why a group was drawn in the runner's process
+        self.fallbacks: list[str] = []      # why a helper failed and its group was drawn in the runner's process
+        self.planned: str | None = None     # why no helper draws, by design (one CPU, a long run)
         self._sent: list = ["nothing sent"] * len(GROUPS)     # per group: None once sent, else why not
         self._deadline = 0.0
 
@@ -50,7 +51,8 @@ class FigureWorkers:
         """Start the helpers (any that cannot start is left to the runner; on one CPU none
         starts: they would only take it from the runner)."""
         if _cpus() < 2:
-            self.procs = ["one CPU"] * len(GROUPS)
+            self.planned = "one CPU"
+            self.procs = [self.planned] * len(GROUPS)
             return self
         procs = []
         for _ in GROUPS:
@@ -81,7 +83,8 @@ class FigureWorkers:
         :meth:`collect` with the same arguments."""
         if len(out) > HELPER_MAX_OUTPUTS:
             self.close()      # a long run: the copies would cost more memory than the helpers save time
-            self.procs = [f"a run of {len(out)} outputs"] * len(GROUPS)
+            self.planned = f"a run of {len(out)} outputs"
+            self.procs = [self.planned] * len(GROUPS)
         self._sent = [self._send(proc, folder, names, out, truth, centroid_err)
                       for names, proc in zip(GROUPS, self.procs)]
         self._deadline = time.monotonic() + WAIT_S + WAIT_S_PER_MILLION * len(out) / 1e6
@@ -96,7 +99,8 @@ class FigureWorkers:
             if isinstance(got, list):
                 paths += got
             else:
-                self.fallbacks.append(f"{'/'.join(names)}: {got}")
+                if self.planned is None:
+                    self.fallbacks.append(f"{'/'.join(names)}: {got}")
                 paths += write_plots(folder, out, truth, centroid_err, names=names)
         order = {f"{n}.png": i for i, n in enumerate(RUN_FIGURES)}
         return sorted(paths, key=lambda p: order.get(p.name, len(order)))

@@ -146,11 +146,13 @@ def write_plots(folder: Path, out: np.ndarray, truth: np.ndarray | None,
 
 
 def _figure(name: str):
+    """The function that draws run figure ``name``: ``f(folder, out, truth, centroid_err)``."""
     if name == "overview":
         from .health import plot_overview
 
         return lambda folder, out, truth, cerr: plot_overview(folder, out)
-    return globals()["_" + name]
+    return {"attitude_error": _attitude_error, "bias_estimate": _bias_estimate, "centroid_error": _centroid_error,
+            "latency_histogram": _latency_histogram}[name]
 
 
 def figure_fields(names) -> tuple[list[str], bool, bool]:

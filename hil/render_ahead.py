@@ -125,7 +125,6 @@ class RenderAhead:
         self._dropped: set = set()         # handles nobody will ask for
         self.local = False                 # the child has ended: renders done here
         self.failed: str | None = None     # why it ended (a run's warning line says it)
-        self.renders = 0
         self.wait_s = 0.0                  # wall s spent waiting for the child's answers
         emu.scene.truth.on_restart.append(self.origin)
 
@@ -140,7 +139,6 @@ class RenderAhead:
         fields, pixel format, seq) to encode its messages too); returns its handle."""
         handle = self._next
         self._next += 1
-        self.renders += 1
         req = (spans, t_start, frame, exposure_us, encode)
         if self.local:
             self._done[handle] = _render(self.emu, req)

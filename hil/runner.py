@@ -484,8 +484,7 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
             if figures is not None:
                 drawn = figures.collect(folder, out, seen, cerr)
                 for why in figures.fallbacks:
-                    if not why.endswith((": one CPU", " outputs")):
-                        log.warning("figure helper: %s; drawn here instead", why)
+                    log.warning("figure helper: %s; drawn here instead", why)
             else:
                 drawn = write_plots(folder, out, seen, cerr, names=RUN_FIGURES)
             res_top["plots"] = [str(p) for p in drawn]

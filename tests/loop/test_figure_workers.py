@@ -86,18 +86,22 @@ def test_helpers_that_cannot_start_leave_the_figures_to_the_runner(tmp_path, run
                                  "[Errno 11] Resource temporarily unavailable"]
 
 
-def test_a_helpers_error_is_reported_and_its_figures_drawn_here(tmp_path, run_outputs):
+def test_a_helper_answers_an_error_as_one_json_line(tmp_path, run_outputs):
+    """The helper's own protocol (``python -m gyrostar.hil.figure_workers``): a job whose
+    folder cannot take the PNGs gets ``{"error": ...}`` naming it, exit 0, no traceback."""
+    import json
+    import pickle
+    import sys
+
     out, truth, cerr = run_outputs
-    workers = fw.FigureWorkers().start()
-    try:
-        # the helper is sent a folder it cannot write into; the runner's own is fine
-        job_folder = tmp_path / "not-a-folder"
-        job_folder.write_text("")
-        fw.FigureWorkers._send(workers.procs[0], job_folder, fw.GROUPS[0], out, truth, cerr)
-        why = fw.FigureWorkers._reply(workers.procs[0], deadline=1e18)
-    finally:
-        workers.close()
-    assert isinstance(why, str) and "not-a-folder" in why
+    not_a_folder = tmp_path / "not-a-folder"
+    not_a_folder.write_text("")
+    job = {"folder": str(not_a_folder), "names": fw.GROUPS[0], "out": out, "truth": truth, "centroid_err": cerr}
+    proc = subprocess.run([sys.executable, "-m", "gyrostar.hil.figure_workers"], input=pickle.dumps(job),
+                          capture_output=True, timeout=120)
+    assert proc.returncode == 0 and b"Traceback" not in proc.stderr
+    reply = json.loads(proc.stdout.decode().strip().splitlines()[-1])
+    assert "not-a-folder" in reply["error"]
 
 
 def test_close_ends_helpers_that_got_no_job():
@@ -115,6 +119,7 @@ def test_on_one_cpu_no_helper_starts_and_the_runner_draws(tmp_path, run_outputs,
     paths = workers.draw(tmp_path, out, truth, cerr)
     workers.close()
     assert [p.name for p in paths] == [f"{n}.png" for n in RUN_FIGURES]
+    assert workers.planned == "one CPU" and workers.fallbacks == []      # by design: nothing to warn of
 
 
 def test_a_long_run_is_drawn_by_the_runner(tmp_path, run_outputs, monkeypatch):
@@ -125,5 +130,5 @@ def test_a_long_run_is_drawn_by_the_runner(tmp_path, run_outputs, monkeypatch):
     paths = workers.draw(tmp_path, out, truth, cerr)
     workers.close()
     assert [p.name for p in paths] == [f"{n}.png" for n in RUN_FIGURES]
-    assert workers.fallbacks[0].endswith(f"a run of {len(out)} outputs")
+    assert workers.planned == f"a run of {len(out)} outputs" and workers.fallbacks == []
     assert all(p.poll() is not None for p in procs)      # ended, not left waiting for a job
