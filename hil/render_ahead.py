@@ -26,7 +26,7 @@ from collections import deque
 
 import numpy as np
 
-from ..cli.interrupt import ignore_in_child
+from ..cli.interrupt import ignore_in_child, signals_held
 
 log = logging.getLogger(__name__)
 
@@ -53,6 +53,13 @@ def usable() -> bool:
 
 def _child(conn, emu, parent_pid: int) -> None:
     ignore_in_child()          # a terminal's Ctrl-C is the parent's: it stops us, no traceback
+    try:
+        _serve(conn, emu, parent_pid)
+    except Exception:          # noqa: BLE001 — ended quietly: the parent renders from here on, where
+        return                 # the same error (the same inputs) surfaces as the run's own
+
+
+def _serve(conn, emu, parent_pid: int) -> None:
     emu.renderer = None
     emu.scene.truth.on_restart = []     # the parent's forwarders stay with the parent
     # the forked pages touched and the caches warmed now, while the parent starts its loop: not
@@ -117,11 +124,12 @@ class RenderAhead:
         self._conn, child_conn = ctx.Pipe()
         self._proc = ctx.Process(target=_child, args=(child_conn, emu, os.getpid()), name="head-render",
                                  daemon=True)
-        self._proc.start()
+        with signals_held():   # the child ignores SIGINT (SIGTERM: default) before any signal reaches it
+            self._proc.start()
         child_conn.close()
         self._next = 0
         self._sent: deque = deque()        # (handle, request) sent and not yet answered, in order
-        self._done: dict = {}              # handle → pixels answered before they were asked for
+        self._done: dict = {}              # handle → (pixels, messages) answered before asked for
         self._dropped: set = set()         # handles nobody will ask for
         self.local = False                 # the child has ended: renders done here
         self.failed: str | None = None     # why it ended (a run's warning line says it)
