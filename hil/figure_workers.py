@@ -192,8 +192,11 @@ def main() -> int:
     plots.new_figure()
     try:
         job = pickle.load(sys.stdin.buffer)
-    except (EOFError, pickle.UnpicklingError):      # the runner went away, or stopped before its figures
+    except EOFError:         # the runner went away, or stopped before its figures
         return 0
+    except Exception as exc:     # noqa: BLE001 — not a job the runner sends (someone typed at it)
+        sys.stderr.write(f"gyrostar figure helper: stdin holds no figure job ({type(exc).__name__})\n")
+        return 2
     try:
         paths = write_plots(Path(job["folder"]), job["out"], job["truth"], job["centroid_err"], names=job["names"])
         reply = {"paths": [str(p) for p in paths]}

@@ -132,3 +132,13 @@ def test_a_long_run_is_drawn_by_the_runner(tmp_path, run_outputs, monkeypatch):
     assert [p.name for p in paths] == [f"{n}.png" for n in RUN_FIGURES]
     assert workers.planned == f"a run of {len(out)} outputs" and workers.fallbacks == []
     assert all(p.poll() is not None for p in procs)      # ended, not left waiting for a job
+
+
+@pytest.mark.parametrize("stdin, code, said", [(b"", 0, b""), (b"hello\n", 2, b"stdin holds no figure job")])
+def test_a_helper_given_no_job_or_garbage(stdin, code, said):
+    import sys
+
+    proc = subprocess.run([sys.executable, "-m", "gyrostar.hil.figure_workers"], input=stdin, capture_output=True,
+                          timeout=120)
+    assert proc.returncode == code and proc.stdout == b""
+    assert said in proc.stderr and b"Traceback" not in proc.stderr and len(proc.stderr.splitlines()) <= 1
