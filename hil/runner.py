@@ -35,6 +35,7 @@ from . import acceptance
 from . import config as hc
 
 log = logging.getLogger(__name__)
+FAST_NOT_REALTIME = "--fast runs on a simulated clock: it cannot be combined with --realtime or a probe"
 
 
 def make_run_folder(out: str | None, scenario: str) -> Path:
@@ -82,6 +83,8 @@ def run(args) -> int:
     duration = scen.duration_s if getattr(args, "duration", None) is None else float(args.duration)
     if not (duration > 0 and np.isfinite(duration)):
         raise ConfigError(f"--duration must be a finite number of seconds > 0, got {duration}")
+    if getattr(args, "fast", False) and getattr(args, "realtime", False):     # refused before the run folder is made
+        raise ConfigError(FAST_NOT_REALTIME)
     from .run_memory import check_kept_outputs_fit
 
     check_kept_outputs_fit(duration, cfg.gyro.odr_hz)     # before the run folder is made
@@ -134,7 +137,7 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
 
     record = cfg.outputs.record if record is None else record
     if fast and (realtime or probe is not None):
-        raise ConfigError("--fast runs on a simulated clock: it cannot be combined with --realtime or a probe")
+        raise ConfigError(FAST_NOT_REALTIME)
     from .run_memory import check_kept_outputs_fit
 
     check_kept_outputs_fit(duration, cfg.gyro.odr_hz)     # before a log or a device is touched

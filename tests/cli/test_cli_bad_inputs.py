@@ -77,6 +77,7 @@ CASES = [
     ("run-seed-negative", ["run", "--seed", "-1"], USAGE, ["--seed", "at least 0"]),
     ("run-duration-tiny", ["run", "--duration", "1e-9"], USAGE, ["--duration", "at least"]),
     ("run-fwhost-fast", ["run", "--config", FWHOST, "--fast"], USAGE, ["--fast", "firmware-host"]),
+    ("run-fast-realtime", ["run", "--fast", "--realtime", "--duration", "2"], USAGE, ["--fast", "--realtime"]),
     # outputs to another machine without outputs.allow_remote: refused before a run folder exists
     ("run-udp-remote", ["run", "--fast", "--config", ("outputs", "udp", "true"), '+udp_host="192.0.2.1"'], USAGE,
      ["UDP output", "192.0.2.1", "allow_remote"]),
