@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import host_cpus
 from .plots import RUN_FIGURES, figure_fields, write_plots
 
 # the figures each helper draws: about the same time each on a run's outputs
@@ -50,7 +51,7 @@ class FigureWorkers:
     def start(self) -> FigureWorkers:
         """Start the helpers (any that cannot start is left to the runner; on one CPU none
         starts: they would only take it from the runner)."""
-        if _cpus() < 2:
+        if host_cpus.cpus() < 2:
             self.planned = "one CPU"
             self.procs = [self.planned] * len(GROUPS)
             return self
@@ -159,13 +160,6 @@ class FigureWorkers:
                         f.close()
                     except OSError:       # a job's bytes the helper never read (it had gone)
                         pass
-
-
-def _cpus() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except (AttributeError, OSError):
-        return os.cpu_count() or 1
 
 
 def _last_line(proc) -> str:

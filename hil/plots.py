@@ -123,7 +123,7 @@ RUN_FIGURES = ("attitude_error", "bias_estimate", "centroid_error", "latency_his
 
 
 def write_plots(folder: Path, out: np.ndarray, truth: np.ndarray | None,
-                centroid_err: np.ndarray | None = None, names: tuple = RUN_FIGURES[:4]) -> list[Path]:
+                centroid_err: np.ndarray | None = None, names: tuple = RUN_FIGURES) -> list[Path]:
     """Write the PNGs ``names`` (of :data:`RUN_FIGURES`, in that order) of one run into
     ``folder``; returns the paths of those it drew (one needing truth or centroid errors is
     left out without them).

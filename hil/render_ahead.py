@@ -27,6 +27,7 @@ from collections import deque
 import numpy as np
 
 from ..cli.interrupt import ignore_in_child, signals_held
+from .host_cpus import cpus
 
 log = logging.getLogger(__name__)
 
@@ -44,11 +45,7 @@ _ORG = struct.Struct("<d")         # scenario origin (host s)
 def usable() -> bool:
     """True when a render process can help: two or more CPUs for this process, and a process
     allowed children (a Dask or multiprocessing worker, one run per CPU, is not)."""
-    try:
-        cpus = len(os.sched_getaffinity(0))
-    except (AttributeError, OSError):
-        cpus = os.cpu_count() or 1
-    return cpus >= 2 and not mp.current_process().daemon
+    return cpus() >= 2 and not mp.current_process().daemon
 
 
 def _child(conn, emu, parent_pid: int) -> None:

@@ -480,7 +480,7 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
         if late:
             raise KeyboardInterrupt
         if plots and len(out):
-            from .plots import RUN_FIGURES, write_plots
+            from .plots import write_plots
 
             if cerr is not None and len(cerr):
                 res_top["centroid_error_px_rms"] = float(np.sqrt(np.mean(cerr[:, 1:] ** 2)))
@@ -489,7 +489,7 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
                 for why in figures.fallbacks:
                     log.warning("figure helper: %s; drawn here instead", why)
             else:
-                drawn = write_plots(folder, out, seen, cerr, names=RUN_FIGURES)
+                drawn = write_plots(folder, out, seen, cerr)
             res_top["plots"] = [str(p) for p in drawn]
             _write_summary(folder, res_top)
     except KeyboardInterrupt:      # Ctrl-C while winding up or plotting: the summary stands, no plots

@@ -113,7 +113,7 @@ def test_close_ends_helpers_that_got_no_job():
 
 def test_on_one_cpu_no_helper_starts_and_the_runner_draws(tmp_path, run_outputs, monkeypatch):
     out, truth, cerr = run_outputs
-    monkeypatch.setattr(fw, "_cpus", lambda: 1)
+    monkeypatch.setattr(fw.host_cpus, "cpus", lambda: 1)
     workers = fw.FigureWorkers().start()
     assert workers.procs == ["one CPU", "one CPU"]
     paths = workers.draw(tmp_path, out, truth, cerr)
