@@ -104,9 +104,9 @@ def mid_exposure_errors(out: np.ndarray, truth_at) -> dict:
         if not np.any(m):
             res[f"{tag}_error_arcsec_1sigma"] = None
             continue
-        tm = tcol[m]
-        first = np.flatnonzero(np.r_[True, tm[1:] != tm[:-1]])
-        rec = out[m][first]
+        rows = np.flatnonzero(m)
+        tm = tcol[rows]
+        rec = out[rows[np.flatnonzero(np.r_[True, tm[1:] != tm[:-1]])]]   # each frame's first output
         tr = truth_at(rec["t_mid" + suffix])
         err = quat_error_angles_many(rec["q_mid" + suffix], tr["q"])
         e = err * ARCSEC

@@ -152,3 +152,24 @@ def test_a_fast_run_streams_the_same_frames_rendered_ahead(tmp_path, monkeypatch
     # the loop's CPU leaves out the waits for the child (counted as head work it came out
     # negative); its size moves with the host's load, so only its sign is checked here
     assert r1["cpu_percent"] > 0 and r2["cpu_percent"] > 0
+
+
+def test_child_polls_without_sleeping_then_gives_up():
+    """The child's wait for a request: True at once when one is in the pipe, and False only
+    after polling an empty pipe for its whole spin time (then it blocks in the kernel)."""
+    import multiprocessing as mp
+    import time
+
+    a, b = mp.get_context("fork").Pipe()
+    try:
+        t0 = time.perf_counter()
+        assert render_ahead.await_request(b, 0.02) is False
+        assert time.perf_counter() - t0 >= 0.02
+        a.send_bytes(b"R")
+        t0 = time.perf_counter()
+        assert render_ahead.await_request(b, 5.0) is True
+        assert time.perf_counter() - t0 < 1.0
+        assert b.recv_bytes() == b"R"
+    finally:
+        a.close()
+        b.close()
