@@ -79,15 +79,35 @@ class FigureWorkers:
         self.send(folder, out, truth, centroid_err)
         return self.collect(folder, out, truth, centroid_err)
 
+    @property
+    def sent(self) -> list[tuple[str, ...]]:
+        """The groups of figures whose jobs are on their way to a helper."""
+        return [names for names, why in zip(GROUPS, self._sent) if why is None]
+
+    def send_outputs_only(self, folder: Path, out: np.ndarray) -> None:
+        """Give the helpers whose figures need the outputs alone (no truth, no centroid
+        errors) their data now, while the caller still works out the truth; :meth:`send`
+        gives the others theirs."""
+        self._send_groups(folder, out, None, None, outputs_only=True)
+
     def send(self, folder: Path, out: np.ndarray, truth: np.ndarray | None, centroid_err: np.ndarray | None) -> None:
-        """Give each helper its figures' data (they draw while the caller goes on); then
-        :meth:`collect` with the same arguments."""
-        if len(out) > HELPER_MAX_OUTPUTS:
+        """Give each helper not yet sent its job (:meth:`send_outputs_only`) its figures' data
+        (they draw while the caller goes on); then :meth:`collect` with the same arguments."""
+        self._send_groups(folder, out, truth, centroid_err, outputs_only=False)
+
+    def _send_groups(self, folder, out, truth, centroid_err, outputs_only: bool) -> None:
+        if len(out) > HELPER_MAX_OUTPUTS and self.planned is None:
             self.close()      # a long run: the copies would cost more memory than the helpers save time
             self.planned = f"a run of {len(out)} outputs"
             self.procs = [self.planned] * len(GROUPS)
-        self._sent = [self._send(proc, folder, names, out, truth, centroid_err)
-                      for names, proc in zip(GROUPS, self.procs)]
+        sent = []
+        for names, proc, before in zip(GROUPS, self.procs, self._sent):
+            _, with_truth, with_cerr = figure_fields(names)
+            if before is None or (outputs_only and (with_truth or with_cerr)):
+                sent.append(before)            # sent already, or not yet
+            else:
+                sent.append(self._send(proc, folder, names, out, truth, centroid_err))
+        self._sent = sent
         self._deadline = time.monotonic() + WAIT_S + WAIT_S_PER_MILLION * len(out) / 1e6
 
     def collect(self, folder: Path, out: np.ndarray, truth: np.ndarray | None,

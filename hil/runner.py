@@ -342,6 +342,8 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
         wall = time.perf_counter() - t_wall0
         cpu_proc = time.process_time() - cpu0
         out = kept.records
+        if figures is not None and plots and len(out):
+            figures.send_outputs_only(folder, out)     # those drawing from the outputs alone start now
         truth = fs.truth_rows(out["t"]) if len(out) else None
         if writer and truth is not None:
             writer.append_rows(lf.TRUTH, truth, t_ns=0)     # as many records as the size limit asks
