@@ -38,7 +38,11 @@ def run_outputs():
     return out, truth, cerr
 
 
-def test_helpers_draw_the_runners_figures_to_the_byte(tmp_path, run_outputs):
+@pytest.mark.parametrize("outputs_first", [False, True], ids=["all-at-once", "outputs-only-first"])
+def test_helpers_draw_the_runners_figures_to_the_byte(tmp_path, run_outputs, outputs_first):
+    """The same PNGs as the runner draws, whether every helper gets its job at once or the one
+    whose figures need the outputs alone gets it first (the others wait for the truth and the
+    centroid errors: :meth:`FigureWorkers.send_outputs_only`)."""
     out, truth, cerr = run_outputs
     here, there = tmp_path / "here", tmp_path / "helpers"
     here.mkdir()
@@ -46,35 +50,14 @@ def test_helpers_draw_the_runners_figures_to_the_byte(tmp_path, run_outputs):
     mine = write_plots(here, out, truth, cerr, names=RUN_FIGURES)
     workers = fw.FigureWorkers().start()
     try:
+        if outputs_first:
+            workers.send_outputs_only(there, out)
+            assert workers.sent == ([("latency_histogram", "overview")] if workers.planned is None else [])
         theirs = workers.draw(there, out, truth, cerr)
     finally:
         workers.close()
     assert workers.fallbacks == []
     assert [p.name for p in theirs] == [p.name for p in mine] == [f"{n}.png" for n in RUN_FIGURES]
-    for a, b in zip(mine, theirs):
-        assert a.read_bytes() == b.read_bytes(), a.name
-
-
-def test_outputs_only_figures_start_before_the_truth_is_known(tmp_path, run_outputs):
-    """The helper whose figures need the outputs alone gets its job at once (the others wait
-    for the truth and the centroid errors), and every figure comes out as the runner draws it."""
-    out, truth, cerr = run_outputs
-    here, there = tmp_path / "here", tmp_path / "helpers"
-    here.mkdir()
-    there.mkdir()
-    mine = write_plots(here, out, truth, cerr, names=RUN_FIGURES)
-    workers = fw.FigureWorkers().start()
-    try:
-        workers.send_outputs_only(there, out)
-        early = workers.sent
-        workers.send(there, out, truth, cerr)
-        theirs = workers.collect(there, out, truth, cerr)
-    finally:
-        workers.close()
-    if isinstance(workers.procs[0], str):
-        pytest.skip(f"no figure helpers here ({workers.procs[0]})")
-    assert early == [("latency_histogram", "overview")]
-    assert workers.fallbacks == []
     for a, b in zip(mine, theirs):
         assert a.read_bytes() == b.read_bytes(), a.name
 
