@@ -35,6 +35,7 @@ HELPER_MAX_OUTPUTS = 1_000_000
 # seconds a helper may take for its figures before the runner draws them itself: a fixed
 # part and a part per million outputs (a 60 s run's take 0.3 s, 2000 s's about 1.5 s)
 WAIT_S = 30.0
+_NOT_SENT = "nothing sent"      # a group's state before its job is sent (once sent: None; failed: why)
 WAIT_S_PER_MILLION = 30.0
 
 
@@ -45,7 +46,7 @@ class FigureWorkers:
         self.procs: list = ["not started"] * len(GROUPS)    # a helper each, or why there is none
         self.fallbacks: list[str] = []      # why a helper failed and its group was drawn in the runner's process
         self.planned: str | None = None     # why no helper draws, by design (one CPU, a long run)
-        self._sent: list = ["nothing sent"] * len(GROUPS)     # per group: None once sent, else why not
+        self._sent: list = [_NOT_SENT] * len(GROUPS)     # per group: None once sent, else why not
         self._deadline = 0.0
 
     def start(self) -> FigureWorkers:
@@ -103,8 +104,8 @@ class FigureWorkers:
         sent = []
         for names, proc, before in zip(GROUPS, self.procs, self._sent):
             _, with_truth, with_cerr = figure_fields(names)
-            if before is None or (outputs_only and (with_truth or with_cerr)):
-                sent.append(before)            # sent already, or not yet
+            if before is not _NOT_SENT or (outputs_only and (with_truth or with_cerr)):
+                sent.append(before)            # sent (or failed) already, or not yet
             else:
                 sent.append(self._send(proc, folder, names, out, truth, centroid_err))
         self._sent = sent
