@@ -10,7 +10,9 @@ projection) executed as plain Python (the numba functions' ``py_func``). The gyr
 figure comes with this host's floor for it at the run's step schedule (``host_floor_us``:
 one compiled call per wake-up and one output record per sample, the thread asleep between
 wake-ups as many gyro periods as the run's mean samples per step; with the default FIFO
-watermark of 4 the loop steps every 4 samples or at once when a frame is measured).
+watermark of 4 the loop steps every 4 samples or at once when a frame is measured), and
+beside it the least any such path can cost here (``host_bare_call_us``: one compiled call
+per wake-up that writes the wake-up's records itself, no Python around it).
 """
 
 from __future__ import annotations
@@ -128,12 +130,32 @@ def _gyro_path_us(n_steps=4000) -> tuple[float, float, float]:
     return res[0], res[1], cpu / n_paced * 1e6
 
 
+def _paced_cpu_us(fn, args: tuple, n: int, samples_per_wake: float, period_s: float) -> float:
+    """CPU µs per sample of ``fn(*args, lo, m)`` called once per wake-up for the ``m``
+    samples ``lo …`` of that wake-up, the thread asleep ``m`` periods of ``period_s`` before
+    each (every ``samples_per_wake`` gyro periods on average, the run's own mean)."""
+    cpu = 0.0
+    carry = 0.0
+    samples = 0
+    for _ in range(n):
+        carry += samples_per_wake
+        m = max(1, int(carry))
+        carry -= m
+        time.sleep(period_s * m)
+        c0 = time.thread_time()
+        fn(*args, samples, m)
+        cpu += time.thread_time() - c0
+        samples += m
+    return cpu / samples * 1e6
+
+
 def _host_wake_floor_us(n: int = 1000, samples_per_wake: float = 1.0, period_s: float = 0.0025) -> float:
     """CPU µs per sample this host charges for the least a gyro path can do once its thread
     has slept: per wake-up (every ``samples_per_wake`` gyro periods of ``period_s``, the
     run's own mean) one compiled call (a quaternion normalised) and, per sample, one output
     record written into the next row of a preallocated buffer — a floor for
-    ``host_us_per_gyro_sample`` on this host at the run's step schedule, whatever the code."""
+    ``host_us_per_gyro_sample`` on this host at the run's step schedule for a path that
+    hands each record on from Python (:func:`_host_bare_floor_us`: for one that does not)."""
     from gyrostar.attitude import quat_normalize
     from gyrostar.loop import record as R
 
@@ -141,23 +163,38 @@ def _host_wake_floor_us(n: int = 1000, samples_per_wake: float = 1.0, period_s: 
     rec = R.empty(1)
     rows = R.empty(256)
     quat_normalize(q)
-    cpu = 0.0
-    carry = 0.0
-    samples = 0
-    i = 0
-    for _ in range(n):
-        carry += samples_per_wake
-        m = max(1, int(carry))
-        carry -= m
-        time.sleep(period_s * m)
-        c0 = time.thread_time()
+
+    def wake(lo, m):
         rec["q"][0] = quat_normalize(q)
-        for _ in range(m):
+        for i in range(lo, lo + m):
             rows[i % 256] = rec[0]
-            i += 1
-        cpu += time.thread_time() - c0
-        samples += m
-    return cpu / samples * 1e6
+
+    return _paced_cpu_us(wake, (), n, samples_per_wake, period_s)
+
+
+def _host_bare_floor_us(n: int = 1000, samples_per_wake: float = 1.0, period_s: float = 0.0025) -> float:
+    """CPU µs per sample this host charges for one compiled call per wake-up and nothing
+    else: the call (two array arguments) normalises a quaternion and writes it into the
+    wake-up's output records in compiled code; no Python runs around it but the loop that
+    sleeps. The least any 400 Hz path with one numba call per FIFO batch can cost on this
+    host at that schedule (the thread asleep ``samples_per_wake`` gyro periods between
+    calls, as in the run)."""
+    from gyrostar.loop import record as R
+    from numba import njit
+
+    @njit  # no cache: this module is loaded from a path by the bench runner
+    def write_records(q, out, lo, m):
+        s = np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+        for i in range(m):
+            r = out[(lo + i) % out.shape[0]]
+            for j in range(4):
+                r["q"][j] = q[j] / s
+        return m
+
+    q = np.array([0.1, 0.2, 0.3, 0.9])
+    rows = R.empty(256)
+    write_records(q, rows, 0, 1)
+    return _paced_cpu_us(write_records, (q, rows), n, samples_per_wake, period_s)
 
 
 def run(quick: bool) -> dict:
@@ -186,6 +223,7 @@ def run(quick: bool) -> dict:
     sps = res.get("samples_per_step") or 1.0
     floor_us = _host_wake_floor_us(samples_per_wake=sps, period_s=1.0 / cfg.gyro.odr_hz)
     floor_1_us = _host_wake_floor_us()
+    bare_us = _host_bare_floor_us(samples_per_wake=sps, period_s=1.0 / cfg.gyro.odr_hz)
     in_run_us = res["host_us_per_gyro_sample"]            # CPU of the loop thread in the path
     in_run_wall_us = res["host_us_per_gyro_sample_wall"]  # wall: with the turns other threads took in it
     dev = res.get("device_emulation_cpu_percent")
@@ -225,6 +263,7 @@ def run(quick: bool) -> dict:
             "us": in_run_us, "baseline_us": per_sample_us, "ratio": per_sample_us / in_run_us,
             "wall_us": in_run_wall_us, "isolated_us": stage_us, "isolated_ratio": per_sample_us / stage_us,
             "isolated_paced_us": paced_us, "host_floor_us": floor_us, "host_floor_us_one_sample_per_wake": floor_1_us,
+            "host_bare_call_us": bare_us,
             "samples_per_step": sps,
             "cpu_percent": res["cpu_percent"], "device_emulation_cpu_percent": dev,
             "loop_thread_cpu_percent": thread,
@@ -233,7 +272,9 @@ def run(quick: bool) -> dict:
                      f"{duration:.0f} s real-time run, {stage_us:.1f} µs isolated back to back, {paced_us:.1f} µs "
                      f"isolated once per 2.5 ms on an idle host (cold caches), {floor_us:.1f} µs this host's "
                      f"floor at the run's schedule (one compiled call per wake-up and one record written per "
-                     f"sample, asleep between; {floor_1_us:.1f} µs waking for every sample); "
+                     f"sample, asleep between; {floor_1_us:.1f} µs waking for every sample), {bare_us:.1f} µs for one "
+                     f"bare compiled call per wake-up writing its records (no Python around it: the least "
+                     f"any path with one numba call per FIFO batch costs here); "
                      f"baseline: the per-sample Python path it replaced, {per_sample_us:.1f} µs isolated; loop CPU "
                      f"{res['cpu_percent']:.1f} % of a core{dev_note}; host load {load[0]:.1f}")},
         "per_sample_predict": {"us": numba_us, "baseline_us": py_us, "ratio": py_us / numba_us,
