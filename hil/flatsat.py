@@ -600,13 +600,14 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
             wiring["gyro"] = (f"BMI088 register model on a fake spidev at {cfg.gyro.spi_hz / 1e6:g} MHz (mocks), "
                               "driven by gyrostar.gyro.Bmi088Gyro")
         else:
-            # fast mode: each transfer takes its wire time on the simulated clock at the BMI088's
-            # fastest I2C clock (a FIFO status read and a one-frame burst about 0.3 ms at 400 kHz).
-            # Real time keeps the emulated bus instantaneous: a blocking wait there hands the GIL
-            # to the threads around the loop while the simulator's processes hold the two cores
+            # each transfer takes its wire time at the BMI088's fastest I2C clock: on the simulated
+            # clock in fast mode, asleep in real time, the interpreter lock released as in i2c-dev's
+            # ioctl
             # (docs/FLATSAT.md §7, "The emulated gyro's bus")
-            smbus = FaultyBus(model.smbus(cfg.gyro.i2c_address, bus_hz=GYRO_I2C_HZ if fast else None),
-                              clock=base, seed=seed)
+            from ..mocks.fake_smbus import SleepingWire
+
+            wire = None if fast else SleepingWire()
+            smbus = FaultyBus(model.smbus(cfg.gyro.i2c_address, bus_hz=GYRO_I2C_HZ, wire=wire), clock=base, seed=seed)
             faults.gyro_bus = smbus
             regs = I2CRegisters(I2CBus(device_cpu.wrap(smbus), name="emulated i2c"), cfg.gyro.i2c_address)
             wiring["gyro"] = "BMI088 register model on a fake SMBus (mocks), driven by gyrostar.gyro.Bmi088Gyro"

@@ -9,7 +9,8 @@ pointer (and writes any further bytes), a read message reads from the pointer.
 A model implements ``i2c_decode(reg_byte) -> (reg, autoinc)``, ``read(reg, n, autoinc)`` and
 ``write(reg, data, autoinc)``. With ``clock`` and ``bus_hz`` set, every transaction advances
 the simulated clock by its wire time (9 clocks per byte plus start/stop) after the device
-has answered from its state at the start of the transfer, so bursts take time as on a real bus.
+has answered from its state at the start of the transfer, so bursts take time as on a real bus;
+in real time :class:`SleepingWire` takes the clock's place and spends that time asleep.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from __future__ import annotations
 import ctypes
 import errno
 import threading
+import time
 
 from smbus2 import i2c_msg
 
@@ -26,6 +28,16 @@ BLOCK_MAX = 32
 
 def nack(addr: int) -> OSError:
     return OSError(errno.EREMOTEIO, f"Remote I/O error (no ACK from 0x{addr:02X})")
+
+
+class SleepingWire:
+    """A transfer's wire time spent in real time: :meth:`advance` sleeps it with the
+    interpreter lock released, as a thread blocked in i2c-dev's ioctl waits for the bus
+    (a real-time run's emulated I2C gyro; a simulated clock advances instead)."""
+
+    def advance(self, dt: float) -> float:
+        time.sleep(dt)
+        return dt
 
 
 class FakeSMBus:

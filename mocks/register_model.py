@@ -35,9 +35,11 @@ class RegisterModelBase:
         """Model time (s) of global sample(s) ``k``, valid since the last ODR (re)start."""
         return self._t_next - self.period * (self._k_next - np.asarray(k, np.float64))
 
-    def smbus(self, address: int | None = None, bus_hz: float | None = 400e3) -> FakeSMBus:
-        """A fresh fake I2C adapter (smbus2.SMBus methods) with this model at ``address``."""
-        return FakeSMBus({address or self.default_address: self}, clock=self.clock, bus_hz=bus_hz)
+    def smbus(self, address: int | None = None, bus_hz: float | None = 400e3, wire=None) -> FakeSMBus:
+        """A fresh fake I2C adapter (smbus2.SMBus methods) with this model at ``address``;
+        ``wire``: what spends each transfer's time at ``bus_hz`` (an object with
+        ``advance(s)``; default the model's clock, which must then be a simulated one)."""
+        return FakeSMBus({address or self.default_address: self}, clock=wire or self.clock, bus_hz=bus_hz)
 
     def spidev(self, speed_hz: int = 5_000_000) -> FakeSpiDev:
         """A fake spidev device (SPI mode 3) with this model on its chip select."""

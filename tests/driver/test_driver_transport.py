@@ -53,6 +53,50 @@ def test_i2c_block_reads_and_rdwr_bursts():
         regs.bus.read(0x68, 0, 9000)
 
 
+def test_i2c_transfers_take_their_wire_time():
+    """A 32-byte block read at 400 kHz: address, register, repeated-start address and 32 data
+    bytes at 9 clocks each, plus start and stop, = 317 clocks = 0.7925 ms — on a simulated
+    clock exactly, and in real time (SleepingWire) at least that long, with the interpreter
+    lock free for other threads meanwhile (as a thread blocked in i2c-dev's ioctl)."""
+    import threading
+
+    from gyrostar.clock import SimulatedClock
+    from gyrostar.mocks.fake_smbus import SleepingWire
+
+    wire_s = (9 * 35 + 2) / 400e3
+    clock = SimulatedClock(5.0)
+    regs = I2CRegisters(I2CBus(FakeSMBus({0x68: Regs()}, clock=clock, bus_hz=400e3), "i2c-1"), 0x68)
+    assert regs.read(0x10, 32) == bytes(range(0x10, 0x30))
+    assert clock.now() - 5.0 == pytest.approx(wire_s, rel=1e-12)
+
+    regs = I2CRegisters(I2CBus(FakeSMBus({0x68: Regs()}, clock=SleepingWire(), bus_hz=400e3), "i2c-1"), 0x68)
+    ran = []
+    stop = threading.Event()
+
+    def other():
+        while not stop.is_set():
+            ran.append(1)
+            time.sleep(0)
+
+    switch = sys.getswitchinterval()
+    sys.setswitchinterval(1.0)     # a wait that held the lock would starve the other thread
+    t = threading.Thread(target=other)
+    t.start()
+    try:
+        t0 = time.monotonic()
+        n_before = len(ran)
+        for _ in range(20):
+            regs.read(0x10, 32)
+        elapsed = time.monotonic() - t0
+        n_during = len(ran) - n_before
+    finally:
+        stop.set()
+        t.join()
+        sys.setswitchinterval(switch)
+    assert elapsed >= 20 * wire_s
+    assert n_during > 0
+
+
 def test_st_autoincrement_bit_on_i2c_and_spi():
     dev = Regs(autoinc_bit=0x80)
     regs = I2CRegisters(I2CBus(FakeSMBus({0x6A: dev})), 0x6A, autoincrement=0x80)
