@@ -601,9 +601,8 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
                               "driven by gyrostar.gyro.Bmi088Gyro")
         else:
             # each transfer takes its wire time at the BMI088's fastest I2C clock: on the simulated
-            # clock in fast mode, asleep in real time, the interpreter lock released as in i2c-dev's
-            # ioctl
-            # (docs/FLATSAT.md §7, "The emulated gyro's bus")
+            # clock in fast mode, asleep in real time with the interpreter lock released, as in
+            # i2c-dev's ioctl (docs/FLATSAT.md §7, "The emulated gyro's bus")
             from ..mocks.fake_smbus import SleepingWire
 
             wire = None if fast else SleepingWire()

@@ -70,12 +70,12 @@ def test_i2c_transfers_take_their_wire_time():
     assert clock.now() - 5.0 == pytest.approx(wire_s, rel=1e-12)
 
     regs = I2CRegisters(I2CBus(FakeSMBus({0x68: Regs()}, clock=SleepingWire(), bus_hz=400e3), "i2c-1"), 0x68)
-    ran = []
+    turns = [0]        # the other thread's loop turns
     stop = threading.Event()
 
     def other():
         while not stop.is_set():
-            ran.append(1)
+            turns[0] += 1
             time.sleep(0)
 
     switch = sys.getswitchinterval()
@@ -84,11 +84,11 @@ def test_i2c_transfers_take_their_wire_time():
     t.start()
     try:
         t0 = time.monotonic()
-        n_before = len(ran)
+        n_before = turns[0]
         for _ in range(20):
             regs.read(0x10, 32)
         elapsed = time.monotonic() - t0
-        n_during = len(ran) - n_before
+        n_during = turns[0] - n_before
     finally:
         stop.set()
         t.join()
