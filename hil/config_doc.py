@@ -42,8 +42,8 @@ MEANING = {
     "head.gain": "sensor gain setting",
     "head.link": "line-rate model of the simulated link (uart-921k, uart-3m, usb-fs, usb-hs)",
     "gyro.kind": "emulator: BMI088 register model; i2c: /dev/i2c-N; spi: /dev/spidevB.D",
-    "gyro.emulator_bus": "the bus the emulated gyro sits on: i2c (400 kHz; each transfer takes its wire time, "
-                         "asleep in real time) or spi (gyro.spi_hz; its wire time charged in fast mode)",
+    "gyro.emulator_bus": "the bus the emulated gyro sits on: i2c (400 kHz) or spi (gyro.spi_hz); each transfer "
+                         "takes its wire time, on the simulated clock in fast mode and asleep in real time",
     "gyro.model": "gyro part",
     "gyro.i2c_bus": "N of /dev/i2c-N",
     "gyro.i2c_address": "7-bit address (BMI088 gyro: 0x68 SDO low, 0x69 high)",

@@ -592,10 +592,12 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
         if cfg.gyro.emulator_bus == "spi":
             from ..gyro import bmi088
 
-            # SPI needs no NACK injection (it has no acknowledge); a transfer of a status byte and a
-            # frame takes about 25 µs at 5 MHz: charged in fast mode, negligible in real time
+            # SPI needs no NACK injection (it has no acknowledge); each transfer takes its wire time
+            # (about 25 µs a step at 5 MHz) as on I2C below: simulated in fast mode, asleep in real time
+            from ..mocks.fake_smbus import SleepingWire
+
             spi = model.spidev(cfg.gyro.spi_hz)
-            spi.clock = base if fast else None
+            spi.clock = base if fast else SleepingWire()
             regs = bmi088.spi_registers(device_cpu.wrap(spi), name="emulated spi")
             wiring["gyro"] = (f"BMI088 register model on a fake spidev at {cfg.gyro.spi_hz / 1e6:g} MHz (mocks), "
                               "driven by gyrostar.gyro.Bmi088Gyro")

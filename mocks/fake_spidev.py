@@ -3,7 +3,8 @@ speed), backed by one register model behind one chip select.
 
 The model implements ``spi_decode(cmd) -> (reg, is_read, autoinc)``, ``read`` and ``write``
 (see :mod:`.fake_smbus`). The byte clocked out during the command byte is 0xFF (MISO idle).
-With ``clock`` set, each transfer advances it by its wire time at ``max_speed_hz``.
+With ``clock`` set, each transfer advances it by its wire time at ``max_speed_hz`` (in real
+time :class:`~.fake_smbus.SleepingWire` takes the clock's place and sleeps it).
 """
 
 from __future__ import annotations

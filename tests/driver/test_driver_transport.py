@@ -53,23 +53,35 @@ def test_i2c_block_reads_and_rdwr_bursts():
         regs.bus.read(0x68, 0, 9000)
 
 
-def test_i2c_transfers_take_their_wire_time():
-    """A 32-byte block read at 400 kHz: address, register, repeated-start address and 32 data
-    bytes at 9 clocks each, plus start and stop, = 317 clocks = 0.7925 ms — on a simulated
-    clock exactly, and in real time (SleepingWire) at least that long, with the interpreter
-    lock free for other threads meanwhile (as a thread blocked in i2c-dev's ioctl)."""
+def _regs_on_wire(bus, wire):
+    """A 256-byte register file on the fake bus ``bus`` whose transfers take time on ``wire``."""
+    from gyrostar.mocks.fake_spidev import FakeSpiDev
+
+    if bus == "i2c":
+        return I2CRegisters(I2CBus(FakeSMBus({0x68: Regs()}, clock=wire, bus_hz=400e3), "i2c-1"), 0x68)
+    return SPIRegisters(FakeSpiDev(Regs(), clock=wire), read_bit=0x80, multi_bit=0x40)     # 5 MHz
+
+
+# a 32-byte read: I2C at 400 kHz, address, register, repeated-start address and 32 data bytes at
+# 9 clocks each plus start and stop = 317 clocks; SPI at 5 MHz, command and 32 bytes = 264 clocks
+WIRE_S = {"i2c": (9 * 35 + 2) / 400e3, "spi": 8 * 33 / 5e6}
+
+
+@pytest.mark.parametrize("bus", ["i2c", "spi"])
+def test_transfers_take_their_wire_time(bus):
+    """On a simulated clock a transfer advances it by exactly its wire time; in real time
+    (SleepingWire) it lasts at least that long, with the interpreter lock free for other
+    threads meanwhile (as a thread blocked in i2c-dev's or spidev's ioctl)."""
     import threading
 
     from gyrostar.clock import SimulatedClock
     from gyrostar.mocks.fake_smbus import SleepingWire
 
-    wire_s = (9 * 35 + 2) / 400e3
     clock = SimulatedClock(5.0)
-    regs = I2CRegisters(I2CBus(FakeSMBus({0x68: Regs()}, clock=clock, bus_hz=400e3), "i2c-1"), 0x68)
-    assert regs.read(0x10, 32) == bytes(range(0x10, 0x30))
-    assert clock.now() - 5.0 == pytest.approx(wire_s, rel=1e-12)
+    assert _regs_on_wire(bus, clock).read(0x10, 32) == bytes(range(0x10, 0x30))
+    assert clock.now() - 5.0 == pytest.approx(WIRE_S[bus], rel=1e-12)
 
-    regs = I2CRegisters(I2CBus(FakeSMBus({0x68: Regs()}, clock=SleepingWire(), bus_hz=400e3), "i2c-1"), 0x68)
+    regs = _regs_on_wire(bus, SleepingWire())
     turns = [0]        # the other thread's loop turns
     stop = threading.Event()
 
@@ -93,7 +105,7 @@ def test_i2c_transfers_take_their_wire_time():
         stop.set()
         t.join()
         sys.setswitchinterval(switch)
-    assert elapsed >= 20 * wire_s
+    assert elapsed >= 20 * WIRE_S[bus]
     assert n_during > 0
 
 
