@@ -589,25 +589,23 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
         model = Bmi088GyroModel(base, StreamRates(gsamp, lambda: truth.t_origin - offset))
         model.truth_log = False    # the run's truth is the simulator's; the model's test log grows ~90 kB/s
         device_cpu = DeviceCpu(cpu_meter_clock(fast))
+        # each bus transfer takes its wire time (I2C at the BMI088's fastest clock: 0.73 ms a loop
+        # step; SPI at 5 MHz: about 25 µs): on the simulated clock in fast mode, asleep in real
+        # time with the interpreter lock released, as in the kernel's ioctl (docs/FLATSAT.md §7,
+        # "The emulated gyro's bus")
+        from ..mocks.fake_smbus import SleepingWire
+
+        wire = base if fast else SleepingWire()
         if cfg.gyro.emulator_bus == "spi":
             from ..gyro import bmi088
 
-            # SPI needs no NACK injection (it has no acknowledge); each transfer takes its wire time
-            # (about 25 µs a step at 5 MHz) as on I2C below: simulated in fast mode, asleep in real time
-            from ..mocks.fake_smbus import SleepingWire
-
+            # SPI needs no NACK injection (it has no acknowledge)
             spi = model.spidev(cfg.gyro.spi_hz)
-            spi.clock = base if fast else SleepingWire()
+            spi.clock = wire
             regs = bmi088.spi_registers(device_cpu.wrap(spi), name="emulated spi")
             wiring["gyro"] = (f"BMI088 register model on a fake spidev at {cfg.gyro.spi_hz / 1e6:g} MHz (mocks), "
                               "driven by gyrostar.gyro.Bmi088Gyro")
         else:
-            # each transfer takes its wire time at the BMI088's fastest I2C clock: on the simulated
-            # clock in fast mode, asleep in real time with the interpreter lock released, as in
-            # i2c-dev's ioctl (docs/FLATSAT.md §7, "The emulated gyro's bus")
-            from ..mocks.fake_smbus import SleepingWire
-
-            wire = None if fast else SleepingWire()
             smbus = FaultyBus(model.smbus(cfg.gyro.i2c_address, bus_hz=GYRO_I2C_HZ, wire=wire), clock=base, seed=seed)
             faults.gyro_bus = smbus
             regs = I2CRegisters(I2CBus(device_cpu.wrap(smbus), name="emulated i2c"), cfg.gyro.i2c_address)

@@ -32,8 +32,9 @@ def nack(addr: int) -> OSError:
 
 class SleepingWire:
     """A transfer's wire time spent in real time: :meth:`advance` sleeps it with the
-    interpreter lock released, as a thread blocked in i2c-dev's ioctl waits for the bus
-    (a real-time run's emulated I2C gyro; a simulated clock advances instead)."""
+    interpreter lock released, as a thread blocked in i2c-dev's or spidev's ioctl waits for
+    the bus (a real-time run's emulated gyro, on either bus; a simulated clock advances
+    instead)."""
 
     def advance(self, dt: float) -> float:
         time.sleep(dt)
