@@ -230,8 +230,11 @@ def fit(stars: StarFields, theta0: np.ndarray, free: np.ndarray | None = None, a
             sig = 1.4826 * np.median(norm[inlier]) / np.sqrt(np.log(4.0)) + 1e-12  # Rayleigh median → σ
             w = np.where(norm <= huber_k * sig, 1.0, huber_k * sig / np.maximum(norm, 1e-300)) * inlier / osig ** 2
             jt = jt[:, :, free]
-            u = np.einsum("n,nai,naj->ij", w, jt, jt) + np.diag(prior[free])
-            bt = np.einsum("n,nai,na->i", w, jt, res) - prior[free] * theta[free]
+            # the data term is in units of σ_eff (px without a table σ): the prior, a statement about
+            # the parameter, is scaled to them by the residual variance (σ_eff units: ~1; px: ~σ²)
+            pw = prior[free] * sig ** 2
+            u = np.einsum("n,nai,naj->ij", w, jt, jt) + np.diag(pw)
+            bt = np.einsum("n,nai,na->i", w, jt, res) - pw * theta[free]
             vj = np.zeros((nf, 3, 3))
             np.add.at(vj, fid, np.einsum("n,nai,naj->nij", w, ja, ja))
             wj = np.zeros((nf, jt.shape[2], 3))

@@ -41,6 +41,13 @@ TRUE_OFFSETS = {"dcx_px": 3.2, "dcy_px": -2.1, "f_scale": 1.0008, "k1": 0.3, "k2
                 "p1": 2.0e-4, "p2": -1.0e-4}
 
 
+# the largest displacement (px, at the sensor corner) each distortion term of a narrow-field
+# star camera plausibly makes: k1 a few px (the simulated truth: 2.6 px), the higher orders and the
+# tangential terms well under one; a fit beyond these by more than PLAUSIBLE_SIGMA of its σ is wrong
+PLAUSIBLE_CORNER_PX = {"k1": 50.0, "k2": 5.0, "k3": 5.0, "p1": 5.0, "p2": 5.0}
+PLAUSIBLE_SIGMA = 3.0
+TRUTH_SIGMA = 5.0         # --simulate: every fitted parameter within this many of its σ of the truth
+
 MAX_FIELDS = 20000        # --fields: 20000 simulate and fit in ≈ 3.5 min, 0.8 GB peak (10× the default)
 MAX_OUTLIER_FRACTION = 0.5  # --outliers: the fit's median-based σ and rejection break down at half the stars
 
@@ -174,6 +181,28 @@ def simulate(args, nominal):
     return StarFields(field, uv, ref), cam, bad
 
 
+def corner_px(name: str, value: float, f_px: float, r_corner: float) -> float:
+    """Displacement (px) a distortion term ``name`` of size ``value`` makes at the normalised
+    radius ``r_corner`` (the sensor corner) of a camera of focal length ``f_px``."""
+    power = {"k1": 3, "k2": 5, "k3": 7, "p1": 2, "p2": 2}[name]
+    return abs(value) * f_px * r_corner ** power * (3.0 if name in ("p1", "p2") else 1.0)
+
+
+def implausible(theta, sigma, free, f_px: float, r_corner: float) -> dict:
+    """The free distortion terms whose corner displacement lies beyond :data:`PLAUSIBLE_CORNER_PX`
+    by more than :data:`PLAUSIBLE_SIGMA` of its σ: ``{name: (px, σ px)}``."""
+    from ...calibration.intrinsics import NAMES
+
+    out = {}
+    for name, bound in PLAUSIBLE_CORNER_PX.items():
+        i = NAMES.index(name)
+        if free[i]:
+            px, spx = corner_px(name, theta[i], f_px, r_corner), corner_px(name, sigma[i], f_px, r_corner)
+            if px - bound > PLAUSIBLE_SIGMA * spx:
+                out[name] = (px, spx)
+    return out
+
+
 def run(args) -> int:
     from ...calibration import calfile, report
     from ...calibration.intrinsics import NAMES, fit, model_difference
@@ -211,7 +240,11 @@ def run(args) -> int:
              "fixed": sorted(fixed), "n_fields": int(stars.n_fields), "n_stars": int(len(stars.field)),
              "n_rejected": int((~res.inlier).sum()), "residual_rms_before_px": before.rms_px,
              "residual_rms_after_px": res.rms_px}
-    checks = None
+    wild = implausible(res.theta, res.sigma, free, f0, r_corner)
+    extra["implausible_terms"] = {n: {"corner_px": px, "sigma_px": spx} for n, (px, spx) in wild.items()}
+    checks = {"implausible_terms": report.check(len(wild), 0, "terms beyond their plausible corner displacement "
+                                                "(" + ", ".join(f"{n} {px:.3g}±{spx:.2g} px" for n, (px, spx)
+                                                                in wild.items()) + ")" if wild else "terms")}
     if tvec is not None:
         rms, mx = model_difference(params, tvec)
         table.add("distortion_residual_px", rms, "px (RMS over the sensor vs the true model)", 0.0)
@@ -219,9 +252,13 @@ def run(args) -> int:
         table.add("focal_length_rel_error", (res.theta[0] - tvec[0]) / tvec[0], "1", 0.0)
         extra["outliers_injected"] = int(bad.sum())
         extra["outliers_caught"] = int((bad & ~res.inlier).sum())
-        checks = {"focal_length_rel": report.check((res.theta[0] - tvec[0]) / tvec[0], 5e-4, "(0.05 %)"),
-                  "principal_point_px": report.check(np.hypot(*(res.theta[1:3] - tvec[1:3])), 0.5, "px"),
-                  "distortion_residual_px": report.check(rms, 0.05, "px")}
+        z = np.abs(res.theta - tvec[:8])[free] / np.maximum(res.sigma[free], 1e-300)
+        worst = np.asarray(NAMES)[free][int(np.argmax(z))] if free.any() else "-"
+        checks.update({"focal_length_rel": report.check((res.theta[0] - tvec[0]) / tvec[0], 5e-4, "(0.05 %)"),
+                       "principal_point_px": report.check(np.hypot(*(res.theta[1:3] - tvec[1:3])), 0.5, "px"),
+                       "distortion_residual_px": report.check(rms, 0.05, "px"),
+                       "parameters_from_truth_sigma": report.check(float(z.max(initial=0.0)), TRUTH_SIGMA,
+                                                                   f"σ (worst: {worst})")})
     cal = calfile.CameraCal(float(res.theta[0]), (float(res.theta[1]), float(res.theta[2])),
                             *[float(v) for v in res.theta[3:8]], image_size_px=(int(w), int(h)),
                             residual_rms_px=res.rms_px,
