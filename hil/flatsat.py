@@ -453,8 +453,9 @@ def emulated_gyro(cfg: hc.FlatsatConfig) -> bool:
 def preflight(cfg: hc.FlatsatConfig, scen: hc.Scenario, simulated_clock: bool = False, devices: bool = True) -> None:
     """Refuse, before anything is opened or compiled, a device mix that cannot work
     (:class:`ConfigError`, exit 2, with the reason) and a real device node that is not
-    there (:class:`DeviceError`, exit 3, naming it; ``devices=False`` skips the device nodes:
-    the runner checks them once the run's log holds its META, so a failed run says what it was).
+    there (:class:`DeviceError`, exit 3, naming it; ``devices=False`` skips the device nodes,
+    for a campaign whose runs are all emulated). ``gyrostar run`` checks them before its run
+    folder is made: a missing device leaves no folder and no log.
 
     Any mix of real and emulated devices is allowed: an emulated device takes its scenario
     from the simulator, a real one its physics from the bench. What cannot work: the gyro
@@ -500,8 +501,7 @@ def preflight(cfg: hc.FlatsatConfig, scen: hc.Scenario, simulated_clock: bool = 
     calib = load_calibration(cfg)           # a missing or invalid file: exit 2 naming it
     if not devices:
         return
-    # the device nodes next (the log already holds the run's META, so the failed run says what it
-    # was): a device that is not there is the first thing to fix, before its camera model
+    # the device nodes next: a device that is not there is the first thing to fix, before its camera model
     _check_device_nodes(cfg)
     if not emulated_head(cfg):
         calib.camera(None, real_head=True)  # a real head needs the calibrated camera model

@@ -79,7 +79,7 @@ def run(args) -> int:
     from .flatsat import emulated_head, preflight
 
     scen = hc.load_scenario(getattr(args, "scenario", None) or ("demo" if emulated_head(cfg) else "bench"))
-    preflight(cfg, scen, simulated_clock=bool(getattr(args, "fast", False)), devices=False)
+    preflight(cfg, scen, simulated_clock=bool(getattr(args, "fast", False)))   # devices too: before any run folder
     duration = scen.duration_s if getattr(args, "duration", None) is None else float(args.duration)
     if not (duration > 0 and np.isfinite(duration)):
         raise ConfigError(f"--duration must be a finite number of seconds > 0, got {duration}")

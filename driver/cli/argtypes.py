@@ -136,3 +136,11 @@ def existing_file(text: str):
     if not path.is_file():
         raise argparse.ArgumentTypeError(f"{text} is not a file")
     return path
+
+
+def non_blank(text: str) -> str:
+    """An argparse type: a name or path that is not empty or blank (``--scenario ""`` is a
+    mistake, not a request for the default)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("must not be empty (leave the flag out for the default)")
+    return text

@@ -6,7 +6,7 @@ The loop itself lives in :mod:`gyrostar.hil.runner`; this module only parses arg
 from __future__ import annotations
 
 from . import group
-from .argtypes import run_seconds, seed
+from .argtypes import non_blank, run_seconds, seed
 from .main import add_json
 
 
@@ -16,7 +16,7 @@ def configure(parser) -> None:
                         help="run length in seconds of flatsat time (default: the scenario's, ~30 s); every "
                              "output is kept in memory for the figures, about 1.9 GB an hour: a run longer than 80 %% "
                              "of the available memory allows is refused at the start")
-    parser.add_argument("--scenario", default=None,
+    parser.add_argument("--scenario", type=non_blank, default=None,
                         help="built-in scenario name, TOML path, or mc:SEED@DURATION (a random Monte Carlo "
                              "scenario; default: demo, bench when the head is real)")
     parser.add_argument("--calibration", metavar="TOML", default=None,

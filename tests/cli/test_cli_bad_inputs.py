@@ -109,6 +109,11 @@ CASES = [
      ["gyro.range_dps", "L3GD20H"]),
     ("run-unknown-key", ["run", "--config", ("loop", "frame_hz", "100\nframe_rate = 3")], USAGE, ["frame_rate"]),
     ("run-unknown-scenario", ["run", "--scenario", "nosuch"], USAGE, ["nosuch"]),
+    ("run-scenario-empty", ["run", "--scenario", ""], USAGE, ["--scenario", "must not be empty"]),
+    ("run-scenario-blank", ["run", "--fast", "--scenario", "  "], USAGE, ["--scenario", "must not be empty"]),
+    # a missing device: exit 3 naming it, and no run folder or log (the table checks the runs folder)
+    ("run-head-port-missing", ["run", "--duration", "2", "--config", ("head", "kind", '"serial"'),
+                               '+url="/dev/ttyACM0"'], DEVICE, ["/dev/ttyACM0", "does not exist"]),
     ("run-scenario-missing-file", ["run", "--scenario", "{d}/nosuch.toml"], USAGE, ["nosuch.toml"]),
     ("run-out-under-file", ["run", "--out", "/dev/null/x"], USAGE, ["--out", "/dev/null/x"]),
     # --- replay
