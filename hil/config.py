@@ -404,8 +404,13 @@ def default_config_path() -> Path:
 
 
 def load_flatsat(path: str | Path | None = None) -> FlatsatConfig:
-    """The flatsat config at ``path`` (default: the built-in simulated flatsat)."""
-    return gconfig.load(path or default_config_path(), FlatsatConfig)
+    """The flatsat config at ``path`` (default: the built-in simulated flatsat). A relative
+    ``calibration`` path is taken from the config file's folder, wherever the command runs."""
+    path = Path(path or default_config_path())
+    cfg = gconfig.load(path, FlatsatConfig)
+    if cfg.calibration and not Path(cfg.calibration).expanduser().is_absolute():
+        cfg.calibration = str(path.parent / Path(cfg.calibration).expanduser())
+    return cfg
 
 
 def scenario_names() -> list[str]:

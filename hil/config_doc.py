@@ -30,8 +30,9 @@ file of a few keys is the built-in flatsat with those keys changed.
 
 MEANING = {
     "name": "shown in the run summary and the log",
-    "calibration": "calibration TOML from gyrostar calibrate (camera, gyro, alignment, dark); "
-                   "required with a real head; --calibration overrides it",
+    "calibration": "calibration TOML from gyrostar calibrate (camera, gyro, alignment, dark), a relative path "
+                   "taken from this config file's folder; required with a real head; --calibration (relative to "
+                   "the current folder) overrides it",
     "head.kind": "emulator: Python head emulator; firmware-host: the C host build on a pty; serial: a real head",
     "min_track_fraction": "HIL acceptance: least fraction of the run in TRACK",
     "must_reacquire": "HIL acceptance: a full-frame re-acquisition must happen",

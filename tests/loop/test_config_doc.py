@@ -15,3 +15,19 @@ def test_config_reference_is_current_and_complete(repo):
             row = next((ln for ln in text.splitlines() if ln.startswith(f"| `{prefix}{f.name}`")), None)
             assert row is not None, f"{prefix}{f.name}"
             assert not row.endswith("|  |"), f"{prefix}{f.name} has no meaning"
+
+
+def test_relative_calibration_path_is_taken_from_the_config_folder(tmp_path, monkeypatch):
+    from gyrostar.hil.config import default_config_path, load_flatsat
+
+    bench = tmp_path / "bench"
+    bench.mkdir()
+    text = default_config_path().read_text().replace('calibration = ""', 'calibration = "cal/head.toml"')
+    (bench / "flatsat.toml").write_text(text)
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    assert load_flatsat(bench / "flatsat.toml").calibration == str(bench / "cal" / "head.toml")
+    (bench / "abs.toml").write_text(text.replace('"cal/head.toml"', '"/srv/cal.toml"'))
+    assert load_flatsat(bench / "abs.toml").calibration == "/srv/cal.toml"
+    assert load_flatsat().calibration == ""                          # none given: none resolved
