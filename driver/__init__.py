@@ -22,8 +22,9 @@ def _numba_cache_dir() -> None:
     ``@njit(cache=True)`` revalidates a cached function against its own source file only: a
     changed kernel or constant it uses from another module leaves its cached machine code
     stale (after a ``git pull``, the old code would run). The cache therefore lives in
-    ``$XDG_CACHE_HOME/gyrostar/numba/<hash of the modules that use numba and every package
-    module they import, transitively>`` (default ``~/.cache``; :mod:`gyrostar.kernel_sources`):
+    ``$GYROSTAR_CACHE/numba/<hash of the modules that use numba and every package module they
+    import, transitively>`` (default ``$XDG_CACHE_HOME/gyrostar``, ``~/.cache/gyrostar``;
+    :mod:`gyrostar.kernel_sources`): the cache root of :func:`gyrostar.paths.cache_dir`;
     a change there starts a fresh cache (one cold compile), a change elsewhere (the command
     line, plots, the runner) keeps it; the newest four are kept. An explicit
     ``NUMBA_CACHE_DIR`` wins.
@@ -43,7 +44,8 @@ def _numba_cache_dir() -> None:
             if cand.is_dir() and cand != here:
                 roots.append((f"gyrostar.{name}", cand))
                 break
-    base = Path(_os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "gyrostar" / "numba"
+    base = (Path(_os.environ["GYROSTAR_CACHE"]) if _os.environ.get("GYROSTAR_CACHE")
+            else Path(_os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "gyrostar") / "numba"
     target = base / kernel_sources_key(roots)[:16]
     try:
         target.mkdir(parents=True, exist_ok=True)

@@ -7,10 +7,14 @@ stderr) each record is one plain line, never wrapped at the console width.
 import logging
 import sys
 
+# what a user waits for (compiling the kernels, building the star index), shown by default, not with -q
+NOTICE = 25
+logging.addLevelName(NOTICE, "NOTE")
+
 
 def setup(verbosity: int) -> None:
-    """verbosity: -1 quiet (errors), 0 warnings, 1 info, 2+ debug. Logs go to stderr."""
-    level = {-1: logging.ERROR, 0: logging.WARNING, 1: logging.INFO}.get(verbosity, logging.DEBUG)
+    """verbosity: -1 quiet (errors), 0 notices and warnings, 1 info, 2+ debug. Logs go to stderr."""
+    level = {-1: logging.ERROR, 0: NOTICE, 1: logging.INFO}.get(verbosity, logging.DEBUG)
     if sys.stderr.isatty():
         from rich.console import Console
         from rich.logging import RichHandler

@@ -39,12 +39,31 @@ def configure(parser) -> None:
 def _preflight(args) -> None:
     """Refuse up front (exit 2) a flatsat config the campaign's fast runs cannot use: every
     run would fail for the same reason."""
+    from ..paths import check_cache_writable
     from . import config as hc
     from .flatsat import preflight
 
+    check_cache_writable()          # every worker compiles the kernels and loads the star index into it
     cfg = hc.load_flatsat(args.config)
     preflight(cfg, hc.load_scenario(f"mc:{run_seeds(args.seed, 1)[0]}@{args.duration:g}"), simulated_clock=True,
               devices=False)
+
+
+def local_workers(asked: int, runs: int) -> int:
+    """Worker processes of a local cluster: ``--workers`` capped at the runs (a worker more has
+    nothing to do) and at this process's CPUs (one more only shares a CPU, and each holds the
+    catalog, the star index and the numba kernels: ~0.3 GB); the cap is logged."""
+    import logging
+
+    from ..errors import ConfigError
+    from .host_cpus import cpus
+
+    if asked < 1:
+        raise ConfigError(f"--workers must be ≥ 1, got {asked}")
+    n = min(asked, runs, cpus())
+    if n < asked:
+        logging.getLogger("gyrostar").warning("--workers %d capped at %d (%d runs, %d CPUs)", asked, n, runs, cpus())
+    return n
 
 
 def run_seeds(campaign_seed: int, runs: int) -> list[int]:
@@ -89,10 +108,11 @@ def run(args) -> int:
     except OSError as exc:
         raise ConfigError(f"--out {folder}: {exc.strerror}") from None
     seeds = run_seeds(args.seed, args.runs)
+    workers = local_workers(args.workers, args.runs) if not args.scheduler else args.workers
     t0 = time.perf_counter()
     rows: list[dict] = []
     interrupted = False
-    with Cluster(args.workers, args.scheduler, tls, args.config) as cluster:
+    with Cluster(workers, args.scheduler, tls, args.config) as cluster:
         n_workers = cluster.n_workers
         try:
             _with_progress(args, cluster, seeds, rows)
@@ -105,7 +125,7 @@ def run(args) -> int:
     res = summarize(rows)
     res.update(wall_s=round(wall, 2), runs_per_minute=round(60.0 * len(rows) / wall, 2), workers=n_workers,
                duration_s=args.duration, seed=args.seed,
-               scheduler=args.scheduler or f"LocalCluster({args.workers} processes)")
+               scheduler=args.scheduler or f"LocalCluster({workers} processes)")
     res["results_table"] = str(folder / "results.parquet")
     (folder / "summary.json").write_text(json.dumps(json_safe(res), indent=2))   # first: nothing after can lose it
     write_table(rows, folder / "results.parquet")

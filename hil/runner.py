@@ -38,19 +38,25 @@ log = logging.getLogger(__name__)
 FAST_NOT_REALTIME = "--fast runs on a simulated clock: it cannot be combined with --realtime or a probe"
 
 
-def make_run_folder(out: str | None, scenario: str) -> Path:
-    """The run folder: ``--out`` (created), or a fresh ``runs/<UTC time>_<scenario>``.
+def make_run_folder(out: str | None, scenario: str):
+    """The run folder and its held run lock (:mod:`gyrostar.hil.run_folder`): ``--out``
+    (created), or a fresh ``runs/<UTC time>_<scenario>``.
 
-    An ``--out`` that holds a finished run (``summary.json``) is refused. One that holds only
-    an unfinished run's log (no summary: the run failed or was killed) is reused, the old log
-    moved aside to ``flatsat.failed-N.gslog`` (never deleted), and a warning says so."""
+    A folder another run is using (its lock held) is refused. An ``--out`` that holds a
+    finished run (``summary.json``) is refused. One that holds only an unfinished run's log
+    (no summary: the run failed or was killed) is reused, the old log moved aside to
+    ``flatsat.failed-N.gslog`` (never deleted), and a warning says so."""
+    from .run_folder import lock_run_folder
+
     if out:
         folder = Path(out)
         try:
             folder.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise ConfigError(f"--out {folder}: cannot create the run folder: {exc.strerror or exc}") from exc
+        lock = lock_run_folder(folder)      # before anything in it is looked at or moved
         if (folder / "summary.json").exists():
+            lock.release()
             raise ConfigError(f"--out {folder} already holds a finished run (summary.json); choose another --out")
         old = folder / "flatsat.gslog"
         if old.exists():
@@ -60,16 +66,19 @@ def make_run_folder(out: str | None, scenario: str) -> Path:
             kept = folder / f"flatsat.failed-{n}.gslog"
             old.rename(kept)
             log.warning("--out %s held an unfinished run's log (no summary.json): kept as %s", folder, kept.name)
-        return folder
+        return folder, lock
     stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%S")
     base = runs_dir() / f"{stamp}_{scenario}"
     folder = base
     i = 1
-    while folder.exists():
-        folder = Path(f"{base}_{i}")
-        i += 1
-    folder.mkdir(parents=True)
-    return folder
+    while True:
+        try:
+            folder.mkdir(parents=True)      # two runs started in the same second each get their own
+            break
+        except FileExistsError:
+            folder = Path(f"{base}_{i}")
+            i += 1
+    return folder, lock_run_folder(folder, "run folder")
 
 
 def run(args) -> int:
@@ -80,6 +89,11 @@ def run(args) -> int:
 
     scen = hc.load_scenario(getattr(args, "scenario", None) or ("demo" if emulated_head(cfg) else "bench"))
     preflight(cfg, scen, simulated_clock=bool(getattr(args, "fast", False)))   # devices too: before any run folder
+    from ..loop.warmup import note_cold_start
+    from ..paths import check_cache_writable
+
+    check_cache_writable()          # exit 2 naming it, before a minute of compiling
+    note_cold_start()
     duration = scen.duration_s if getattr(args, "duration", None) is None else float(args.duration)
     if not (duration > 0 and np.isfinite(duration)):
         raise ConfigError(f"--duration must be a finite number of seconds > 0, got {duration}")
@@ -88,12 +102,14 @@ def run(args) -> int:
     from .run_memory import check_kept_outputs_fit
 
     check_kept_outputs_fit(duration, cfg.gyro.odr_hz)     # before the run folder is made
-    folder = make_run_folder(getattr(args, "out", None), scen.name)
+    # the lock is held until this function returns (the run, its summary and figures written)
+    folder, lock = make_run_folder(getattr(args, "out", None), scen.name)     # noqa: F841 - held, not used
     result = run_flatsat(cfg, scen, duration=duration, seed=int(getattr(args, "seed", 1) or 0), folder=folder,
                          realtime=bool(getattr(args, "realtime", False)),
                          plots=not getattr(args, "no_plots", False),
                          status=getattr(args, "verbose", 0) >= 0,
                          config_path=getattr(args, "config", None), fast=bool(getattr(args, "fast", False)))
+    _warn_losses(result)
     if result.get("log_error"):
         result["exit_code"] = 3
         emit(args, result, human_summary(result))
@@ -118,6 +134,21 @@ def run(args) -> int:
         log.error("scenario acceptance failed: %s", "; ".join(failed))
         return 1
     return 0
+
+
+def _warn_losses(result: dict) -> None:
+    """A warning for what a run lost without stopping: gyro samples (the FIFO overflowed) and
+    network outputs every one of whose datagrams the kernel refused."""
+    lost = result.get("samples_lost") or 0
+    if lost:
+        log.warning("%d gyro samples lost: the gyro FIFO overflowed while the loop was held off (%d overruns); "
+                    "a fault to investigate (docs/HARDWARE.md, Troubleshooting: Overruns)", lost,
+                    result.get("overruns") or 0)
+    for key, what in (("udp", "UDP output"), ("space_packets", "space-packet output")):
+        sent = result.get(key) or {}
+        if sent and not sent.get("sent") and sent.get("dropped"):
+            log.warning("%s to %s: every datagram (%d) was refused by the network; nothing was sent", what,
+                        sent.get("to"), sent["dropped"])
 
 
 def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed: int, folder: Path,
@@ -151,7 +182,8 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
     folder = Path(folder)
     meta = {"format": "gyrostar flatsat log 1", "config": _cfg_dict(cfg), "scenario": _cfg_dict(scen),
             "duration_s": duration, "seed": seed, "realtime": realtime, "fast": fast, "output": describe(),
-            "started_utc": datetime.now(UTC).isoformat(), "calibration": calib.meta(), "time": timemap.meta()}
+            "started_utc": datetime.now(UTC).isoformat(), "calibration": calib.meta(), "time": timemap.meta(),
+            "camera_sigma_px": flatsat.camera_sigma(cfg, scen, calib)}     # the σ this run's loop uses
     # the log file and its META record come into being together: a Ctrl-C in between is held
     # until META is on disk, so a log never exists without saying what run it was
     held = interrupt.SignalHold()

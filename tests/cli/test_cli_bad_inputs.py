@@ -266,3 +266,39 @@ def test_runs_folder_that_is_a_file_names_the_variable(bad, tmp_path):
     assert res.returncode == USAGE and "Traceback" not in res.stderr, res.stderr
     lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and "GYROSTAR_RUNS=" in lines[0], res.stderr
+
+
+@pytest.mark.parametrize("argv", [["run", "--fast", "--duration", "2"],
+                                  ["eval", "loop", "--runs", "1", "--duration", "10", "--out", "{d}/mc-cache"]],
+                         ids=["run", "eval-loop"])
+def test_unwritable_cache_folder_is_exit_2_naming_it_before_compiling(argv, bad, tmp_path):
+    """A cache folder that cannot be written (here a path through a file; a read-only HOME alike)
+    is refused before a minute of compiling, naming the folder and GYROSTAR_CACHE (it compiled for
+    81 s, then exited 3, the device code, with no hint)."""
+    cache = bad / "afile" / "cache"
+    res = gyrostar(_argv(argv, bad), cwd=tmp_path, env={"GYROSTAR_RUNS": str(tmp_path / "runs"),
+                                                        "GYROSTAR_CACHE": str(cache)}, timeout=60)
+    lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
+    assert res.returncode == USAGE and "Traceback" not in res.stderr, res.stderr
+    assert len(lines) == 1 and str(cache) in lines[0] and "GYROSTAR_CACHE" in lines[0], res.stderr
+    assert not (tmp_path / "runs").exists() or not any((tmp_path / "runs").iterdir())
+
+
+def test_read_only_home_cache_names_gyrostar_cache(tmp_path):
+    """The default cache under a HOME mounted read-only: exit 2 with the hint to set GYROSTAR_CACHE."""
+    import subprocess
+
+    home = tmp_path / "home"
+    home.mkdir()
+    if subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=1m", "tmpfs", str(home)],
+                      capture_output=True).returncode != 0:
+        pytest.skip("a read-only HOME needs a tmpfs mount (root)")
+    try:
+        env = {"HOME": str(home), "XDG_CACHE_HOME": "", "GYROSTAR_CACHE": "", "GYROSTAR_RUNS": str(tmp_path / "runs")}
+        res = gyrostar(["run", "--fast", "--duration", "2"], cwd=tmp_path, env=env, timeout=60)
+    finally:
+        subprocess.run(["umount", str(home)], check=True)
+    lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
+    assert res.returncode == USAGE, res.stderr
+    assert len(lines) == 1 and str(home / ".cache" / "gyrostar") in lines[0], res.stderr
+    assert "set GYROSTAR_CACHE to a writable folder" in lines[0]

@@ -54,3 +54,17 @@ def test_cli_rejects_bad_arguments_in_one_line():
         assert p.returncode == 2, p.stderr
         assert text in p.stderr and "Traceback" not in p.stderr
         assert len(p.stderr.strip().splitlines()) == 1
+
+
+def test_local_workers_are_capped_at_the_runs_and_the_cpus(monkeypatch, caplog):
+    from gyrostar.hil import eval_loop
+
+    monkeypatch.setattr("gyrostar.hil.host_cpus.cpus", lambda: 2)
+    with caplog.at_level("WARNING", logger="gyrostar"):
+        assert eval_loop.local_workers(1000, 2) == 2          # 1000 processes for two runs: two
+        assert "--workers 1000 capped at 2 (2 runs, 2 CPUs)" in caplog.text
+        assert eval_loop.local_workers(1000, 50) == 2         # ... and never more than the CPUs
+        assert eval_loop.local_workers(3, 1) == 1
+    assert eval_loop.local_workers(2, 10) == 2
+    with pytest.raises(ConfigError, match="--workers"):
+        eval_loop.local_workers(0, 10)
