@@ -112,3 +112,32 @@ def compare(log_path, cal_path) -> dict:
         res["gyro"]["rotation_vs_mounting_only_arcsec"] = _angle(r_cal, r_mount) / ARCSEC
         res["gyro"]["full_map_rotation_error_arcsec"] = _angle(_polar_rotation(m_cal), _polar_rotation(m_true)) / ARCSEC
     return res
+
+
+def _f(v, spec: str) -> str:
+    return "—" if v is None else format(v, spec)
+
+
+def text(res: dict) -> str:
+    """The comparison for a reader (``--json`` gives the same figures as one object)."""
+    lines = [f"calibration {res['calibration']} against the simulator truth of {res['log']} "
+             f"(scenario {res['scenario']})"]
+    c = res.get("camera")
+    if c is not None:
+        (cx, cy), (tx, ty) = c["principal_point_px"], c["principal_point_true_px"]
+        lines += [f"  camera  focal length {c['focal_length_px']:.2f} px (true {c['focal_length_true_px']:.2f}, "
+                  f"{c['focal_length_rel_error_percent']:+.4f} %)",
+                  f"          principal point ({cx:.2f}, {cy:.2f}) px (true ({tx:.2f}, {ty:.2f}), "
+                  f"{c['principal_point_error_px']:.2f} px off)   k1 {c['k1']:.4g} (true {c['k1_true']:.4g})"]
+    else:
+        lines.append("  camera  no [camera] table")
+    g = res["gyro"]
+    lines += [f"  gyro    map to camera: worst element {g['map_max_error_ppm']:.0f} ppm from the truth",
+              f"          time offset {g['time_offset_ms']:.3f} ms (true {g['time_offset_true_ms']:.3f} ms: "
+              f"{g['time_offset_error_ms']:+.3f} ms off; measured from the raw samples "
+              f"{_f(g['time_offset_measured_ms'], '.3f')} ms; gyro filter delay {g['filter_delay_ms']:.3f} ms)"]
+    if "rotation_error_arcsec" in g:
+        lines.append(f"          rotation {g['rotation_error_arcsec']:.1f}″ from the truth's rotation factor "
+                     f"({g['rotation_vs_mounting_only_arcsec']:.1f}″ from the mounting alone; whole map "
+                     f"{g['full_map_rotation_error_arcsec']:.1f}″)")
+    return "\n".join(lines)

@@ -21,6 +21,7 @@ mode, flags, stars), HDF5 (h5py) with the full structured arrays and the run's M
 from __future__ import annotations
 
 import json
+import os
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -195,23 +196,40 @@ def export(path: str | Path, fmt: str, out: str | Path, force: bool = False) -> 
     res = {"log": str(path), "export": fmt, "out": str(out), "outputs": int(len(recs)),
            "truth": log["truth"] is not None} | log_state(log)
     try:
-        if fmt == "aem":
-            from ..telemetry import aem, timescale
+        with whole_or_nothing(out) as part:
+            if fmt == "aem":
+                from ..telemetry import aem, timescale
 
-            counts = aem.write(out, recs, timescale.from_meta(log["meta"].get("time")))
-            return res | counts | {"outputs": counts["lines"]}
-        if fmt == "csv":
-            _export_csv(recs, log["truth"], log["meta"], out)
-        else:
-            _export_hdf5(recs, log["truth"], log["meta"], out)
+                counts = aem.write(part, recs, timescale.from_meta(log["meta"].get("time")))
+                res |= counts | {"outputs": counts["lines"]}
+            elif fmt == "csv":
+                _export_csv(recs, log["truth"], log["meta"], out, part)
+            else:
+                _export_hdf5(recs, log["truth"], log["meta"], part)
     except OSError as exc:
         raise ConfigError(f"--out {out}: cannot write the export: {exc.strerror or exc}") from exc
     return res
 
 
-def _export_csv(recs: np.ndarray, truth, meta: dict, out: Path) -> None:
-    """CSV of the schema's columns (+ UTC, star ids, truth), and a W3C CSVW metadata file
-    ``<out>-metadata.json`` giving every column's unit and meaning."""
+@contextmanager
+def whole_or_nothing(out: Path):
+    """A temporary path beside ``out`` (``.<name>.partial-<pid><suffix>``) to write a file to,
+    renamed to ``out`` once it is whole: an interrupted export (Ctrl-C, a full disk, an
+    error) leaves no file at ``out`` that looks complete, removes its partial file, and does
+    not make the next export to ``out`` ask for --force."""
+    out = Path(out)
+    part = out.with_name(f".{out.name}.partial-{os.getpid()}{out.suffix}")
+    try:
+        yield part
+        os.replace(part, out)
+    finally:
+        part.unlink(missing_ok=True)
+
+
+def _export_csv(recs: np.ndarray, truth, meta: dict, out: Path, part: Path | None = None) -> None:
+    """CSV of the schema's columns (+ UTC, star ids, truth) written to ``part`` (default
+    ``out``), and a W3C CSVW metadata file ``<out>-metadata.json`` giving every column's unit
+    and meaning (written whole, before the CSV is renamed into place)."""
     from ..telemetry import schema, timescale
 
     tmap = timescale.from_meta(meta.get("time"))
@@ -219,7 +237,7 @@ def _export_csv(recs: np.ndarray, truth, meta: dict, out: Path) -> None:
     utc = tmap.utc_iso(recs["t"]) if tmap is not None and len(recs) else [""] * len(recs)
     has_truth = truth is not None and len(truth) == len(recs)
     names = list(cols) + ["utc", "star_ids"] + (["true_q_x", "true_q_y", "true_q_z", "true_q_w"] if has_truth else [])
-    with open(out, "w") as fh:
+    with open(part or out, "w") as fh:
         fh.write(",".join(names) + "\n")
         for i, r in enumerate(recs):
             row = [repr(v.item()) if v.dtype.kind == "f" else str(v.item()) for v in (c[i] for c in cols.values())]
@@ -235,10 +253,11 @@ def _export_csv(recs: np.ndarray, truth, meta: dict, out: Path) -> None:
     if has_truth:
         desc += [{"name": f"true_q_{a}", "datatype": "double", "unit": "1",
                   "dc:description": f"simulator truth attitude ICRS → body, {a} component"} for a in "xyzw"]
-    Path(f"{out}-metadata.json").write_text(json.dumps(
-        {"@context": "http://www.w3.org/ns/csvw", "url": Path(out).name, "tableSchema": {"columns": desc},
-         "dc:description": "gyrostar loop outputs at the gyro rate; time mapping in 'time'",
-         "time": meta.get("time")}, indent=1))
+    with whole_or_nothing(Path(f"{out}-metadata.json")) as meta_part:
+        meta_part.write_text(json.dumps(
+            {"@context": "http://www.w3.org/ns/csvw", "url": Path(out).name, "tableSchema": {"columns": desc},
+             "dc:description": "gyrostar loop outputs at the gyro rate; time mapping in 'time'",
+             "time": meta.get("time")}, indent=1))
 
 
 def _export_hdf5(recs: np.ndarray, truth, meta: dict, out: Path) -> None:
@@ -287,10 +306,10 @@ def verdict_text(res: dict) -> str:
 
 def run(args) -> int:
     if getattr(args, "compare_calibration", None):
-        from .calib_truth import compare
+        from .calib_truth import compare, text
 
         res = compare(args.log, args.compare_calibration)
-        emit(args, res, json.dumps(res, indent=2))
+        emit(args, res, text(res))
         return 0
     from ..cli.output import progress
 
