@@ -26,6 +26,7 @@ import numpy as np
 
 HELP = "gyro scale factors and misalignment from rate-table runs or star-tracker slews"
 DEG = np.pi / 180.0
+OFF_DIAGONAL = tuple((i, j) for i in range(3) for j in range(3) if i != j)
 
 
 MAX_RATE_DPS = 2000.0     # --rates: the BMI088's largest range
@@ -184,8 +185,10 @@ def run(args) -> int:
     ts = None if truth is None else truth["sensitivity"]
     table_out.add("scale_factor_ppm", fit.scale_factor_ppm, "ppm",
                   None if ts is None else (np.diag(ts) - 1.0) * 1e6)
-    table_out.add("misalignment_urad", fit.misalignment_rad * 1e6, "µrad (off-diagonal of S)",
-                  None if ts is None else (ts - np.diag(np.diag(ts))) * 1e6)
+    for i, j in OFF_DIAGONAL:         # the cross-axis terms only: the diagonal is the scale-factor row above
+        table_out.add(f"misalignment_{'xyz'[i]}{'xyz'[j]}_urad", fit.misalignment_rad[i, j] * 1e6,
+                      f"µrad (S_{'xyz'[i]}{'xyz'[j]}: axis {'xyz'[i]} senses rate about {'xyz'[j]})",
+                      None if ts is None else ts[i, j] * 1e6)
     table_out.add("bias_dps", fit.bias / DEG, "deg/s", None if truth is None else truth["bias"] / DEG)
     table_out.rows["scale_factor_ppm"]["sigma"] = (np.diag(fit.sensitivity_sigma) * 1e6).tolist()
     extra = {"method": args.method, "residual_rms": fit.residual_rms, "sensitivity": fit.sensitivity,
@@ -202,7 +205,7 @@ def run(args) -> int:
     calfile.write_section(toml, "gyro_scale", cal, source=str(args.input) if args.input else source)
     extra["toml"] = str(toml)
     if not args.no_plots:
-        _plot(folder, fit, ts)
+        _plot(folder, fit, ts, args.method)
     return report.finish(args, "gyro-scale", table_out, extra, folder, checks)
 
 
@@ -210,7 +213,15 @@ def _mat(m):
     return tuple(tuple(float(v) for v in row) for row in m)
 
 
-def _plot(folder, fit, truth) -> None:
+def residual_text(residual_rms: float, method: str) -> str:
+    """The fit's residual RMS with its unit: a rate (rad/s) for a rate table, an angle (rad)
+    over each camera interval for slews."""
+    if method == "rate-table":
+        return f"{residual_rms / DEG:.3g} °/s"
+    return f"{residual_rms / DEG * 3600.0:.3g}″"
+
+
+def _plot(folder, fit, truth, method: str) -> None:
     from ...calibration.report import new_figure, save_figure
 
     fig, ax = new_figure(figsize=(7, 4.5))
@@ -222,5 +233,7 @@ def _plot(folder, fit, truth) -> None:
     ax.set_xticks(x, [f"S{i}{j}" for i in "xyz" for j in "xyz"])
     ax.set_ylabel("S − I (ppm / µrad)")
     ax.legend()
-    ax.set_title(f"gyro sensitivity matrix, residual RMS {fit.residual_rms:.3g}")
+    what = "rate per rest" if method == "rate-table" else "angle per camera interval"
+    ax.set_title(f"gyro sensitivity matrix, residual RMS {residual_text(fit.residual_rms, method)} ({what})",
+                 fontsize=10)
     save_figure(fig, folder / "gyro_scale.png")

@@ -148,3 +148,24 @@ def test_slew_windows_across_two_slews_are_left_out():
     except (ConfigError, NotDetermined):
         return                                        # refused as undetermined: also not the truth
     assert np.abs(bad - s).max() > 1e-3, bad
+
+
+def test_gyro_scale_report_names_each_cross_axis_term_and_the_residual_unit(tmp_path, capsys):
+    """The table's misalignment rows are the six off-diagonal elements, each named (it listed
+    nine under 'off-diagonal of S', three of them the diagonal's zeros); the figure's residual
+    carries its unit."""
+    from gyrostar.hil.calibrate.gyro_scale import residual_text
+
+    code = main(["calibrate", "gyro-scale", "--simulate", "--seed", "3", "--run-seconds", "10", "--json",
+                 "--report", str(tmp_path)])
+    out = json.loads(capsys.readouterr().out)
+    names = [n for n in out["parameters"] if n.startswith("misalignment")]
+    assert names == [f"misalignment_{a}{b}_urad" for a in "xyz" for b in "xyz" if a != b]
+    sens = np.asarray(out["sensitivity"])
+    for n in names:
+        i, j = "xyz".index(n[13]), "xyz".index(n[14])
+        assert out["parameters"][n]["value"] == pytest.approx(sens[i][j] * 1e6)
+        assert abs(out["parameters"][n]["error"]) < 200.0
+    assert (tmp_path / "gyro_scale.png").exists() and code == 0
+    assert residual_text(np.radians(0.01), "rate-table") == "0.01 °/s"
+    assert residual_text(np.radians(1.0 / 3600.0), "slew") == "1″"
