@@ -45,13 +45,12 @@ def read_text(path: str | Path, what: str = "config file") -> str:
 
 
 def read_bytes(path: str | Path, what: str = "config file") -> bytes:
-    """The bytes of ``path``; ``ConfigError`` naming it when missing or unreadable."""
-    try:
-        return Path(path).read_bytes()
-    except FileNotFoundError as exc:
-        raise ConfigError(f"{what} {path} does not exist") from exc
-    except OSError as exc:
-        raise ConfigError(f"{what} {path} cannot be read: {exc.strerror or exc}") from exc
+    """The bytes of ``path``; ``ConfigError`` naming it when missing, unreadable, not a
+    regular file (a folder, a FIFO, ``/dev/zero``) or larger than a TOML file can be
+    (:func:`gyrostar.files.read_regular`)."""
+    from .files import TOML_MAX_BYTES, read_regular
+
+    return read_regular(path, what, TOML_MAX_BYTES)
 
 
 def decode(data: bytes, path: str | Path, what: str = "config file") -> str:

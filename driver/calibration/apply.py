@@ -92,7 +92,7 @@ def load_for_run(path: str | Path | None) -> RunCalibration:
     if p.is_dir():
         raise ConfigError(f"calibration file {p} is a folder: give the .toml file (config key 'calibration' or "
                           "--calibration)")
-    if not p.is_file():
+    if not p.exists():
         raise ConfigError(f"calibration file {p} does not exist (config key 'calibration' or --calibration)")
     data = config.read_bytes(p, "calibration file")
     return from_text(config.decode(data, p, "calibration file"), str(p), hashlib.sha256(data).hexdigest())

@@ -133,6 +133,9 @@ def read_hot_pixels(path: Path) -> np.ndarray:
     """Hot-pixel list (K, 2) [column, row] from a dark FITS written by :func:`write_fits`."""
     from astropy.io import fits
 
+    from ..files import check_regular
+
+    check_regular(path, "dark FITS")
     try:
         with fits.open(path) as hdul:
             tab = hdul["HOTPIX"].data
@@ -154,7 +157,10 @@ def load_frames(path: Path) -> list[DarkStack]:
             raise ConfigError(f"no FITS frames in {path}")
         import warnings
 
+        from ..files import check_regular
+
         for f in files:
+            check_regular(f, f"INPUT {path}: frame")     # a FIFO named *.fits: refused, never opened
             try:
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")     # a corrupt file is reported below, in one line

@@ -76,7 +76,10 @@ def read_npz(path, needed: set[str] | tuple[str, ...], what: str = "INPUT") -> d
     path = Path(path)
     if path.is_dir():
         raise ConfigError(f"{what} {path} is a folder, not an .npz file")
-    if path.is_file() and not zipfile.is_zipfile(path) and not _is_npy(path):
+    from ..files import check_regular
+
+    check_regular(path, what)       # a FIFO or /dev/zero: refused, never opened
+    if not zipfile.is_zipfile(path) and not _is_npy(path):
         raise ConfigError(f"{what} {path} is not an .npz archive (no zip header)")
     try:
         loaded = np.load(path, allow_pickle=False)

@@ -302,15 +302,13 @@ def read_records(path: str | Path, report: ReadReport | None = None, on_progress
 
     Raises :class:`ConfigError` if the file cannot be read or is not a gyrostar log at all.
     """
+    from ..files import read_regular
+
     path = Path(path)
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError as exc:
-        raise ConfigError(f"log {path} does not exist") from exc
-    except IsADirectoryError as exc:
-        raise ConfigError(f"log {path} is a folder, not a log file (the run folder's log is flatsat.gslog)") from exc
-    except OSError as exc:
-        raise ConfigError(f"log {path} cannot be read: {exc.strerror or exc}") from exc
+    if path.is_dir():
+        raise ConfigError(f"log {path} is a folder, not a log file (the run folder's log is flatsat.gslog)")
+    # a regular file only (a FIFO or /dev/zero never ends), read up to its size when opened
+    data = read_regular(path, "log", max_bytes=None)
     if data[: len(MAGIC)] != MAGIC:
         raise ConfigError(f"{path} is not a gyrostar log (bad magic {data[:8]!r})")
     report = report if report is not None else ReadReport()
