@@ -2,10 +2,11 @@
 
 :class:`HotPixelRepair` wraps the loop's head port: each windows readout (pixels in span
 order, spans as submitted; on the streaming head each pushed frame before the loop's
-``post`` measures it) and each full frame (before the job's ``post``, i.e. before
-lost-in-space detection) has its hot pixels replaced by the mean of their non-hot
-neighbours on the same row (one numba call per readout). A hot pixel inside a star's window
-would otherwise pull its centroid by up to its excess signal / the star's flux.
+``post`` measures it) and each lost-in-space image (before the job's ``post`` detects its
+spots: a full frame, or the windows of the head's FIND_SPOTS spots) has its hot pixels
+replaced by the mean of their non-hot neighbours on the same row (one numba call per
+readout). A hot pixel inside a star's window would otherwise pull its centroid by up to its
+excess signal / the star's flux.
 """
 
 from __future__ import annotations
@@ -57,6 +58,28 @@ def repair_frame(image: np.ndarray, cols: np.ndarray, rows: np.ndarray) -> np.nd
     return out
 
 
+def repair_spot_capture(sc, keys: np.ndarray, width: int):
+    """A copy of the FIND_SPOTS result ``sc`` whose spot windows (pixels in span order, window
+    ids 1..n) have the hot pixels ``keys`` (sorted row·width + column) repaired; ``sc``
+    itself when none of them falls in a window."""
+    import dataclasses
+
+    windows = sc.capture.windows or []
+    if not windows or not len(keys):
+        return sc
+    values = np.concatenate([np.asarray(w.pixels, np.float64) for w in windows])
+    if not repair_spans(np.ascontiguousarray(sc.spans, np.int32), values, keys, int(width)):
+        return sc
+    fixed = []
+    k = 0
+    for w in windows:
+        n = len(w.pixels)
+        px = np.rint(values[k:k + n]).astype(np.asarray(w.pixels).dtype)
+        fixed.append(dataclasses.replace(w, pixels=px, sum=int(px.sum(dtype=np.int64))))
+        k += n
+    return dataclasses.replace(sc, capture=dataclasses.replace(sc.capture, windows=fixed))
+
+
 class HotPixelRepair:
     """The loop's head port with the hot pixels ``hot`` ((n, 2) [column, row]) repaired."""
 
@@ -95,7 +118,16 @@ class HotPixelRepair:
     def submit_frame(self, post=None):
         if post is None:
             return self.head.submit_frame(None)
-        return self.head.submit_frame(lambda image: post(repair_frame(image, self.cols, self.rows)))
+        return self.head.submit_frame(lambda image: post(self._repaired_image(image)))
+
+    def _repaired_image(self, image):
+        """A lost-in-space image with its hot pixels repaired: a full frame ((H, W) array), or
+        a head's FIND_SPOTS result (:class:`gyrostar.head.SpotCapture`), whose spot windows
+        are repaired like any windows readout (a spot the head found on a hot pixel then has
+        no signal left, and the spot finder leaves its window out)."""
+        if isinstance(image, np.ndarray):
+            return repair_frame(image, self.cols, self.rows)
+        return repair_spot_capture(image, self.keys, self.width)
 
     def poll(self):
         res = self.head.poll()

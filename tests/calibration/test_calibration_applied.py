@@ -160,3 +160,77 @@ def test_hot_pixels_repaired_in_streamed_frames_before_measuring():
     assert port.sent == [7]
     assert list(seen) == [10, 11, 12, 13, 14] and head.repaired == 1
     assert head.submit_windows(spans, 8) == 8 and port.sent == [7, 8]     # no post: passed through
+
+
+def test_hot_pixels_repaired_in_the_heads_spot_windows():
+    """The default lost-in-space image is the head's FIND_SPOTS result, not a frame: its spot
+    windows are repaired like any readout, so a spot the head found on a hot pixel has no
+    signal left (the spot finder leaves it out) and a star's centroid is not pulled by one."""
+    from types import SimpleNamespace
+
+    from gyrostar.calibration.hot_pixels import HotPixelRepair
+    from gyrostar.head import Capture, SpotCapture
+    from gyrostar.head.client import spot_spans
+    from gyrostar.loop.acquire import spots_from_windows
+    from gyrostar.protocol.payloads import WindowPixels
+
+    bg, box = 100.0, 7
+    star = (200, 300)                    # (row, column) of a star at a pixel centre
+    spots = np.array([[200, 300, 5000], [40, 700, 3000]])      # the star, then a hot pixel the head took
+    spans = spot_spans(spots, box, 1024, 1024)
+    rows, cols = np.mgrid[0:1024, 0:1024][:, :, :]
+    image = np.full((1024, 1024), bg)
+    image += 4000.0 * np.exp(-((rows - star[0]) ** 2 + (cols - star[1]) ** 2) / (2 * 1.2 ** 2))
+    image[40, 700] += 3000.0             # hot, alone in its window
+    image[201, 302] += 2500.0            # hot, in the star's window (one off the centre)
+    windows = []
+    for wid in (1, 2):
+        px = np.concatenate([image[r, c0:c1] for _, r, c0, c1 in spans[spans[:, 0] == wid]])
+        px = np.rint(px).astype(np.uint16)
+        windows.append(WindowPixels(wid, int(px.sum()), px))
+    cap = Capture(1, 1, 0, 10_000, 10_000, 16, 2, int(sum(len(w.pixels) for w in windows)), 1, 0.005, windows)
+    sc = SpotCapture(cap, spots, box, spans, bg, 3.0, bg + 18.0, 2)
+
+    def lost_in_space(s):                # what the loop's lost-in-space post does with a spot list
+        values = np.concatenate([w.pixels for w in s.capture.windows])
+        return spots_from_windows(s.spans, values, s.background_dn, s.sigma_dn, 40)
+
+    class Port:
+        def submit_frame(self, post=None):
+            self.res = SimpleNamespace(kind="frame", measured=post(sc))
+
+        def poll(self):
+            return self.res
+
+    raw = lost_in_space(sc)
+    assert len(raw) == 2 and abs(raw[0, 0] - star[1]) > 0.1      # unrepaired: the hot pixel is a "star"
+    head = HotPixelRepair(Port(), np.array([[700, 40], [302, 201], [5, 5]]), 1024)
+    head.submit_frame(lost_in_space)
+    found = head.poll().measured
+    assert len(found) == 1                                         # the hot pixel's spot is gone
+    assert abs(found[0, 0] - star[1]) < 0.02 and abs(found[0, 1] - star[0]) < 0.02
+
+
+def test_camera_sigma_is_the_largest_and_never_zero_with_a_camera_table(tmp_path):
+    """The loop's camera-model σ: the largest of the [camera] fit residual, loop.camera_sigma_px
+    and the scenario's (HARDWARE.md step 5's ``camera_sigma_px = 2.0`` was ignored for a table's
+    residual_rms_px of 0.0: a star σ of 0.27″ instead of 17.9″)."""
+    from gyrostar.hil.flatsat import camera_sigma
+
+    def cal(residual):
+        path = tmp_path / f"cal_{residual}.toml"
+        calfile.write_section(path, "camera", calfile.CameraCal(6666.7, (511.5, 511.5), residual_rms_px=residual),
+                              "test")
+        return apply.load_for_run(path)
+
+    cfg, scen = hc.load_flatsat(None), hc.load_scenario("demo")
+    assert camera_sigma(cfg, scen, apply.load_for_run(None)) == 0.0       # the simulator's exact model
+    with pytest.raises(ConfigError, match=r"camera\.residual_rms_px = 0.*loop\.camera_sigma_px"):
+        camera_sigma(cfg, scen, cal(0.0))                                  # nominal table, no σ: refused
+    cfg.loop.camera_sigma_px = 2.0
+    assert camera_sigma(cfg, scen, cal(0.0)) == 2.0                        # step 5 takes effect
+    assert camera_sigma(cfg, scen, cal(0.02)) == 2.0                       # raising it always does
+    assert camera_sigma(cfg, scen, cal(3.5)) == 3.5                        # never below the fit's residual
+    scen.camera_sigma_px = 2.5
+    assert camera_sigma(cfg, scen, cal(0.02)) == 2.5
+    assert camera_sigma(cfg, scen, apply.load_for_run(None)) == 2.5
