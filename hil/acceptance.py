@@ -3,25 +3,44 @@
 Keys (:class:`gyrostar.hil.config.Scenario`): ``max_error_arcsec_1sigma`` (cross-boresight
 1σ over TRACK samples against truth; 0 = not checked), ``min_track_fraction`` (share of
 outputs in TRACK with a valid attitude; 0 = not checked), ``must_reacquire`` (TRACK lost
-and regained at least once). They describe the whole scenario: a run shorter than it, an
-interrupted one, or one without simulator truth (a real flatsat, for the error) is not
+and regained at least once). They describe the whole scenario: a run shorter than it, or
+one without simulator truth (a real flatsat, for the error and the TRACK share) is not
 judged on them, and the result says why.
+
+Two checks hold for every run however long, truth or not: ``max_samples_lost`` (gyro
+samples lost to a FIFO overflow, from the loop's counters; 0 unless the scenario injects a
+stall; -1 = not checked), and ``reached_track`` (some time in TRACK, from the output modes)
+for a scenario that expects tracking (any of the three keys above set): a run that loses
+samples, or never tracks, never passes. An interrupted run is not judged.
 """
 
 from __future__ import annotations
 
 
+def expects_tracking(scen) -> bool:
+    """The scenario judges the tracking (any of its tracking keys is set)."""
+    return scen.max_error_arcsec_1sigma > 0 or scen.min_track_fraction > 0 or scen.must_reacquire
+
+
 def evaluate(scen, summary: dict, duration_s: float) -> dict:
-    """``{"applied": bool, "note": str, "checks": {key: {value, limit, pass}}}``."""
-    wanted = scen.max_error_arcsec_1sigma > 0 or scen.min_track_fraction > 0 or scen.must_reacquire
-    if not wanted:
-        return {"applied": False, "note": f"scenario {scen.name} sets no acceptance keys", "checks": {}}
+    """``{"applied": bool, "note": str, "checks": {key: {value, limit, unit, pass}}}``."""
     if summary.get("interrupted"):
         return {"applied": False, "note": "run interrupted", "checks": {}}
-    if duration_s + 1e-9 < scen.duration_s:
-        return {"applied": False, "checks": {},
-                "note": f"run of {duration_s:g} s is shorter than the scenario's {scen.duration_s:g} s"}
     checks: dict = {}
+    if scen.max_samples_lost >= 0:
+        lost = int(summary.get("samples_lost") or 0)
+        checks["max_samples_lost"] = {"value": lost, "limit": scen.max_samples_lost, "unit": "gyro samples",
+                                      "pass": lost <= scen.max_samples_lost}
+    if expects_tracking(scen):
+        tracked = float((summary.get("mode_seconds") or {}).get("TRACK", 0.0))
+        checks["reached_track"] = {"value": tracked, "limit": 0, "unit": "s in TRACK", "pass": tracked > 0,
+                                   "failed": "never reached TRACK"}
+    if not checks:
+        return {"applied": False, "note": f"scenario {scen.name} sets no acceptance keys", "checks": {}}
+    if duration_s + 1e-9 < scen.duration_s:
+        note = (f"run of {duration_s:g} s is shorter than the scenario's {scen.duration_s:g} s: "
+                "only lost samples and reaching TRACK checked") if expects_tracking(scen) else ""
+        return {"applied": True, "checks": checks, "note": note}
     has_truth = "track_fraction" in summary
     if scen.max_error_arcsec_1sigma > 0 and has_truth:
         err = summary.get("attitude_error_arcsec_1sigma")
@@ -34,7 +53,8 @@ def evaluate(scen, summary: dict, duration_s: float) -> dict:
     if scen.must_reacquire:
         n = summary.get("track_regained", 0)
         checks["must_reacquire"] = {"value": n, "limit": 1, "unit": "returns to TRACK", "pass": n >= 1}
-    note = "" if has_truth else "no simulator truth: error and track fraction not checked"
+    judged_on_truth = scen.max_error_arcsec_1sigma > 0 or scen.min_track_fraction > 0
+    note = "" if has_truth or not judged_on_truth else "no simulator truth: error and track fraction not checked"
     return {"applied": True, "note": note, "checks": checks}
 
 
@@ -52,6 +72,9 @@ def failures(result: dict) -> list[str]:
     out = []
     for key, c in result.get("checks", {}).items():
         if c["pass"]:
+            continue
+        if c.get("failed"):
+            out.append(f"{key}: {c['failed']}")
             continue
         value = "never tracked" if c["value"] is None else f"{c['value']:.4g}"
         rel = "<" if key.startswith("min") or key == "must_reacquire" else ">"

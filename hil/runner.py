@@ -756,7 +756,7 @@ def human_summary(r: dict) -> str:
             bad = failures(acc)
             ok = [k for k, c in acc["checks"].items() if c["pass"]]
             lines.append("  scenario acceptance: " + ("[red]FAIL " + "; ".join(bad) + "[/]" if bad else "PASS")
-                         + (f" (passed: {', '.join(ok)})" if ok and bad else "")
+                         + (f" (passed: {', '.join(ok)})" if ok and bad else f" ({', '.join(ok)})" if ok else "")
                          + (f" ({acc['note']})" if acc["note"] else ""))
     lines.append(f"  run folder: {r['run_folder']}")
     return "\n".join(lines)
