@@ -146,9 +146,10 @@ class LoopConfig:
     coast_timeout_s: float = 5.0       # COAST longer than this → ACQUIRE (full frame)
     acquire_every_s: float = 0.5       # full-frame attempt period while ACQUIRE
     mag_limit: float = 6.5             # stars predicted into the field brighter than this are tracked
-    camera_sigma_px: float = 0.0       # camera-model uncertainty per centroid, px, without a [camera]
-                                       # calibration (0: the model is exact, e.g. the simulator's preset);
-                                       # with one, its residual_rms_px is used
+    camera_sigma_px: float = 0.0       # camera-model uncertainty per centroid, px: the loop uses the largest of
+                                       # this, the scenario's and a [camera] calibration's residual_rms_px (0
+                                       # without a table: the model is exact, e.g. the simulator's preset; a
+                                       # table with residual_rms_px = 0 needs this > 0)
     confirm_images: int = 20           # ACQUIRE: images that may fail to confirm an identification
     wrong_id_rejects: int = 5          # filter-gate rejections in a row that drop a star
     neighbour_sep_px: float = 12.0     # skip a catalog star closer than this (px, per axis) to a tracked one
@@ -273,6 +274,14 @@ class FlatsatConfig:
         return self.head.kind in ("emulator", "firmware-host") and self.gyro.kind == "emulator"
 
 
+# bounds of a scenario, checked when it is read (a TOML file or mc:SEED@DURATION), before
+# anything is drawn, built or run: a day of flatsat time, the gyros' widest range (BMI088 and
+# L3GD20H: ±2000 °/s), and as many segments, faults, eclipses or glints as a day could use
+MAX_SCENARIO_S = 86400.0
+MAX_RATE_DPS = 2000.0
+MAX_SCENARIO_ITEMS = 10000
+
+
 @dataclass
 class Segment:
     """Body rate ramps linearly from ``rate_dps`` to ``rate_end_dps`` over ``seconds``."""
@@ -282,8 +291,12 @@ class Segment:
     rate_end_dps: tuple[float, float, float] | None = None
 
     def validate(self):
-        if self.seconds <= 0:
-            raise ValueError(f"segment length {self.seconds} s must be positive")
+        if not 0 < self.seconds <= MAX_SCENARIO_S:
+            raise ValueError(f"segment length {self.seconds} s must be in (0, {MAX_SCENARIO_S:g}] s")
+        for key, rate in (("rate_dps", self.rate_dps), ("rate_end_dps", self.rate_end_dps or (0.0, 0.0, 0.0))):
+            if not all(math.isfinite(v) and abs(v) <= MAX_RATE_DPS for v in rate):
+                raise ValueError(f"segment {key} = {list(rate)} must be finite and within ±{MAX_RATE_DPS:g} °/s "
+                                 "per axis (the gyro's widest range)")
 
 
 @dataclass
@@ -313,8 +326,10 @@ class Fault:
         kinds = typing.get_args(typing.get_type_hints(Fault)["kind"])
         if self.kind not in kinds:
             raise ValueError(f"kind = {self.kind!r} must be one of {', '.join(kinds)}")
-        if self.at_s < 0:
-            raise ValueError(f"at_s = {self.at_s} must be ≥ 0 (s from the start of the run)")
+        if not 0 <= self.at_s <= MAX_SCENARIO_S:
+            raise ValueError(f"at_s = {self.at_s} must be in [0, {MAX_SCENARIO_S:g}] (s from the start of the run)")
+        if not 0 <= self.seconds <= MAX_SCENARIO_S:
+            raise ValueError(f"seconds = {self.seconds} must be in [0, {MAX_SCENARIO_S:g}]")
         if self.kind == "head-clock-step":
             if not (math.isfinite(self.step_s) and abs(self.step_s) >= 0.001):
                 raise ValueError(f"step_s = {self.step_s} must be a finite jump of at least 0.001 s either way "
@@ -367,7 +382,8 @@ class Scenario:
     preset: str = ""                   # overrides sim.preset when set
     gyro_errors: str = ""              # overrides sim.gyro_errors when set
     mag_limit: float = 0.0             # overrides sim.mag_limit when > 0
-    camera_sigma_px: float = 0.0       # overrides loop.camera_sigma_px when > 0 and no [camera] calibration is loaded
+    camera_sigma_px: float = 0.0       # camera-model σ, px: the loop uses the largest of this, loop.camera_sigma_px
+                                       # and a [camera] calibration's residual_rms_px
     coast_timeout_s: float = 0.0       # overrides loop.coast_timeout_s when > 0 (s): fast slews, re-acquire after each
     acquire_every_s: float = 0.0       # overrides loop.acquire_every_s when > 0 (s): re-acquire soon after a fast slew
     max_stars: int = 0                 # overrides loop.max_stars when > 0: a calibration run takes every star it can
@@ -378,10 +394,17 @@ class Scenario:
     max_error_arcsec_1sigma: float = 0.0   # 0 = not checked
     min_track_fraction: float = 0.0
     must_reacquire: bool = False
+    max_samples_lost: int = 0          # gyro samples the run may lose (FIFO overflow), checked on every run
+                                       # however long; -1 = not checked (a scenario that stalls the loop sets its own)
 
     def validate(self):
-        if not self.duration_s > 0:
-            raise ValueError(f"duration_s = {self.duration_s} must be positive")
+        if not 0 < self.duration_s <= MAX_SCENARIO_S:
+            raise ValueError(f"duration_s = {self.duration_s} must be in (0, {MAX_SCENARIO_S:g}] s")
+        for key in ("segments", "eclipse", "faults", "false_spots"):
+            if len(getattr(self, key)) > MAX_SCENARIO_ITEMS:
+                raise ValueError(f"{key} has {len(getattr(self, key))} entries: at most {MAX_SCENARIO_ITEMS}")
+        if self.max_samples_lost < -1:
+            raise ValueError(f"max_samples_lost = {self.max_samples_lost} must be ≥ 0 (-1: not checked)")
         if not 0.0 <= self.coast_timeout_s <= 60.0:
             raise ValueError(f"coast_timeout_s = {self.coast_timeout_s} must be in [0, 60] s (0: the config's)")
         if not 0.0 <= self.acquire_every_s <= 60.0:
@@ -428,8 +451,8 @@ def load_scenario(name_or_path: str | None) -> Scenario:
         try:
             seed_s, dur_s = name_or_path[3:].split("@")
             seed, dur = int(seed_s), float(dur_s)
-            if not math.isfinite(dur):
-                raise ValueError(f"DURATION must be a finite number of seconds, got {dur_s!r}")
+            if not (math.isfinite(dur) and 0 < dur <= MAX_SCENARIO_S):     # before the case is drawn
+                raise ValueError(f"DURATION must be a number of seconds in (0, {MAX_SCENARIO_S:g}], got {dur_s!r}")
             return case_scenario(draw_case(seed, dur), dur)
         except ValueError as exc:
             raise ConfigError(f"--scenario {name_or_path}: a Monte Carlo case is mc:SEED@DURATION, "
