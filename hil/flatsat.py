@@ -491,13 +491,15 @@ def preflight(cfg: hc.FlatsatConfig, scen: hc.Scenario, simulated_clock: bool = 
     if cfg.head.kind == "firmware-host" and cfg.head.program and not os.path.isfile(cfg.head.program):
         raise ConfigError(f"head.program = '{cfg.head.program}' does not exist (the firmware's host program; "
                           "empty: the one `make -C firmware host` builds)")
-    from ..telemetry.udp import check_destination
+    from ..telemetry.udp import check_destination, resolve
 
     out = cfg.outputs                       # network outputs the config cannot send: before any run folder
     if out.udp:
         check_destination(out.udp_host, out.udp_port, out.allow_remote, "UDP output")
+        resolve(out.udp_host, out.udp_port, "outputs.udp_host", "UDP output")
     if out.space_packets:
         check_destination(out.tm_host, out.tm_port, out.allow_remote, "space-packet output")
+        resolve(out.tm_host, out.tm_port, "outputs.tm_host", "space-packet output")
     calib = load_calibration(cfg)           # a missing or invalid file: exit 2 naming it
     if not devices:
         return

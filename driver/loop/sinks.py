@@ -131,8 +131,9 @@ class UdpSink:
     (little-endian OUTPUT_DTYPE). Decode with :func:`decode_datagram`.
     """
 
-    def __init__(self, host: str = "127.0.0.1", port: int = 47800, allow_remote: bool = False):
-        self.sock, self.addr = open_udp(host, port, allow_remote, "UDP output")
+    def __init__(self, host: str = "127.0.0.1", port: int = 47800, allow_remote: bool = False,
+                 host_key: str = "outputs.udp_host"):
+        self.sock, self.addr = open_udp(host, port, allow_remote, "UDP output", host_key)
         self.sent = 0
         self.dropped = 0
 

@@ -128,10 +128,10 @@ class SpacePacketSink:
     Datagrams the kernel refuses are counted (``dropped``), never waited for."""
 
     def __init__(self, host: str, port: int, timemap, apid: int = APID_ATTITUDE, allow_remote: bool = False,
-                 frame_apid: int = APID_FRAME, pointing_bias_rad=(0.0, 0.0)):
+                 frame_apid: int = APID_FRAME, pointing_bias_rad=(0.0, 0.0), host_key: str = "outputs.tm_host"):
         from .udp import open_udp
 
-        self.sock, self.addr = open_udp(host, port, allow_remote, "space-packet output")
+        self.sock, self.addr = open_udp(host, port, allow_remote, "space-packet output", host_key)
         self.timemap = timemap
         self.apid = apid
         self.frame_apid = frame_apid
