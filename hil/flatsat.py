@@ -264,11 +264,23 @@ def star_index(cfg: hc.FlatsatConfig, camera):
 
 
 def camera_sigma(cfg: hc.FlatsatConfig, scen: hc.Scenario, calib) -> float:
-    """The loop's camera-model σ (px): the [camera] calibration's residual, else the
-    scenario's or the config's value for an uncalibrated camera."""
-    if calib is not None and calib.cal is not None and calib.cal.camera is not None:
-        return float(calib.cal.camera.residual_rms_px)
-    return scen.camera_sigma_px if scen.camera_sigma_px > 0 else cfg.loop.camera_sigma_px
+    """The loop's camera-model σ (px, added to every star's centroid σ): the largest of the
+    [camera] calibration's fit residual (``camera.residual_rms_px``), ``loop.camera_sigma_px``
+    and the scenario's ``camera_sigma_px``. Each is a floor on how far the model may put a
+    star: raising ``loop.camera_sigma_px`` always takes effect, and no config lowers what a
+    fit measured. With a [camera] table the σ is never 0: a table without a fit residual (a
+    lens's nominal values) and no configured σ is a :class:`ConfigError` naming both keys.
+    Without a table, 0 means an exact model (the simulator's preset)."""
+    configured = max(float(scen.camera_sigma_px), float(cfg.loop.camera_sigma_px))
+    if calib is None or calib.cal is None or calib.cal.camera is None:
+        return configured
+    sigma = max(float(calib.cal.camera.residual_rms_px), configured)
+    if not sigma > 0:
+        raise ConfigError(f"calibration {calib.path}: its [camera] table has no fit residual "
+                          "(camera.residual_rms_px = 0, nominal values) and loop.camera_sigma_px is 0: set "
+                          "loop.camera_sigma_px to that model's uncertainty (px; 2.0 for a lens's nominal values, "
+                          "docs/HARDWARE.md step 5)")
+    return sigma
 
 
 def camera_bias(calib) -> tuple[float, float]:
@@ -501,6 +513,7 @@ def preflight(cfg: hc.FlatsatConfig, scen: hc.Scenario, simulated_clock: bool = 
         check_destination(out.tm_host, out.tm_port, out.allow_remote, "space-packet output")
         resolve(out.tm_host, out.tm_port, "outputs.tm_host", "space-packet output")
     calib = load_calibration(cfg)           # a missing or invalid file: exit 2 naming it
+    camera_sigma(cfg, scen, calib)          # a [camera] table that would give the loop a σ of 0
     if not devices:
         return
     # the device nodes next: a device that is not there is the first thing to fix, before its camera model
@@ -980,8 +993,10 @@ def replay_loop(meta: dict, records, sinks):
     head = make_head(cfg, link, clock, reconnect=None, head_clock=head_clock, replay_polls=polls,
                      replay_reconnects=reconnects, fast=bool(meta.get("fast")), replay_records=records)
     head = with_hot_pixels(head, calib, camera, {})
+    # the σ the run used (its META says it; older logs: the rule of today)
+    sigma = meta["camera_sigma_px"] if "camera_sigma_px" in meta else camera_sigma(cfg, scen, calib)
     loop = make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock, e_per_dn, irq, scen,
-                     camera_sigma(cfg, scen, calib), gyro_scale_calibrated(calib), camera_bias(calib))
+                     sigma, gyro_scale_calibrated(calib), camera_bias(calib))
 
     def run_all():
         steps = 0

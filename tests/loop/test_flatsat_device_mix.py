@@ -135,7 +135,8 @@ def _camera_cal(tmp_path):
     nom = camera_preset("xing2012")
     path = tmp_path / "cal.toml"
     calfile.write_section(path, "camera", calfile.CameraCal(nom.focal_length_px, (nom.cx_px, nom.cy_px),
-                                                            image_size_px=(nom.width_px, nom.height_px)), "test")
+                                                            image_size_px=(nom.width_px, nom.height_px),
+                                                            residual_rms_px=0.05), "test")
     return path
 
 
