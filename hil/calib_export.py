@@ -219,11 +219,16 @@ def export_calib(path: str | Path, out: str | Path) -> dict:
     t_cam = np.array(t_cam, float)
     uv_sigma = np.array(sigmas, float)
     ok, q_cam = field_attitudes(field, uv, ref, loop.camera, len(t_cam), uv_sigma=uv_sigma)
-    np.savez_compressed(out, t=t_g, rate=rate, field=field, uv=uv, ref=ref, star_id=np.array(sids, np.int64),
-                        uv_sigma=uv_sigma,
-                        t_cam=t_cam, q_cam=q_cam, camera=loop.camera.as_array(),
-                        meta=np.array(json.dumps({"log": str(path), "scenario": meta.get("scenario", {}).get("name"),
-                                                  "calibration": (meta.get("calibration") or {}).get("sha256")})))
+    from .replay import whole_or_nothing
+
+    # written whole to a temporary name, then renamed to exactly ``out``
+    with whole_or_nothing(Path(out)) as part, open(part, "wb") as fh:
+        np.savez_compressed(fh, t=t_g, rate=rate, field=field, uv=uv, ref=ref, star_id=np.array(sids, np.int64),
+                            uv_sigma=uv_sigma,
+                            t_cam=t_cam, q_cam=q_cam, camera=loop.camera.as_array(),
+                            meta=np.array(json.dumps({"log": str(path),
+                                                      "scenario": meta.get("scenario", {}).get("name"),
+                                                      "calibration": (meta.get("calibration") or {}).get("sha256")})))
     return {"log": str(path), "export": "calib", "out": str(out), "gyro_samples": int(len(t_g)),
             "window_frames": len(htap.frames), "fields": int(len(t_cam)), "fields_with_attitude": int(ok.sum()),
             "star_observations": int(len(field)), "blended_observations_left_out": n_blended,
