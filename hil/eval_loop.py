@@ -151,9 +151,12 @@ def _with_progress(args, cluster, seeds, rows):
     from .montecarlo.campaign import run_campaign
 
     quiet = getattr(args, "verbose", 0) < 0
+    console = Console(stderr=True)
     bar = Progress(TextColumn("[bold]loop Monte Carlo"), BarColumn(), MofNCompleteColumn(),
                    TextColumn("failed {task.fields[failed]}"), TimeRemainingColumn(),
-                   console=Console(stderr=True), transient=True, disable=quiet)
+                   console=console, transient=True, disable=quiet)
+    # off a terminal (a pipe, a log file, a batch job) the bar draws nothing until the end: a line instead
+    lines = None if quiet or console.is_terminal else ProgressLines(len(seeds))
     with bar:
         task = bar.add_task("runs", total=len(seeds), failed=0)
         failed = [0]
@@ -161,8 +164,37 @@ def _with_progress(args, cluster, seeds, rows):
         def on_row(row):
             failed[0] += bool(row["failed"])
             bar.update(task, advance=1, failed=failed[0])
+            if lines is not None:
+                lines.done(failed[0])
 
         return run_campaign(cluster, seeds, args.duration, on_row, rows)
+
+
+class ProgressLines:
+    """Plain progress lines for a campaign off a terminal: runs done of the total, failures,
+    time so far and left, at most one every ``every_s`` (and the last run's)."""
+
+    def __init__(self, total: int, every_s: float = 10.0, clock=time.monotonic):
+        import logging
+
+        self.total, self.every_s, self.clock = total, every_s, clock
+        self.t0 = clock()
+        self.last = None
+        self.n = 0
+        self.log = logging.getLogger("gyrostar")
+
+    def done(self, failed: int) -> None:
+        from ..logs import NOTICE
+
+        self.n += 1
+        now = self.clock()
+        if self.n < self.total and self.last is not None and now - self.last < self.every_s:
+            return
+        self.last = now
+        spent = now - self.t0
+        left = spent / self.n * (self.total - self.n)
+        self.log.log(NOTICE, "loop Monte Carlo: %d of %d runs done, %d failed, %.0f s so far, about %.0f s left",
+                     self.n, self.total, failed, spent, left)
 
 
 def _fmt(v, spec=".2f") -> str:

@@ -66,9 +66,9 @@ def run(args) -> int:
                 table.add_row(name, case, _f(fig.get("us")), _f(fig.get("baseline_us")),
                               _f(fig.get("ratio")), str(fig.get("note", "")))
             result[name]["_suite_seconds"] = round(time.perf_counter() - t0, 2)
-    from rich.console import Console
+    from .output import table_console
 
-    Console(stderr=args.json).print(table)
+    table_console(args.json).print(table)
     emit(args, result)
     return 0
 

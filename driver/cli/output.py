@@ -15,10 +15,20 @@ from typing import Any
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
+OFF_TERMINAL_WIDTH = 400     # columns a table may take in a pipe or a file (rich's default there is 80)
+
 
 def human_console(args) -> Console:
     """Console for human-readable text: stderr in --json mode, stdout otherwise."""
-    return Console(stderr=bool(getattr(args, "json", False)), highlight=False, soft_wrap=True)
+    return table_console(bool(getattr(args, "json", False)))
+
+
+def table_console(stderr: bool) -> Console:
+    """Console whose tables keep their natural width off a terminal (a pipe, a file, a CI log)
+    instead of being squeezed into 80 columns; a terminal's own width otherwise."""
+    probe = Console(stderr=stderr)
+    width = None if probe.is_terminal else OFF_TERMINAL_WIDTH
+    return Console(stderr=stderr, highlight=False, soft_wrap=True, width=width)
 
 
 def json_safe(obj: Any) -> Any:

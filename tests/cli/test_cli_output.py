@@ -56,3 +56,20 @@ def test_run_summary_says_what_the_head_stream_and_acquisition_did():
     assert "stars cut for the link in 2492 frames" in text and "the head's spot list (FIND_SPOTS)" in text
     r["acquisition_image"] = "full_frame"
     assert "lost-in-space image: full frames" in human_summary(r)
+
+
+def test_tables_keep_their_width_off_a_terminal(capsys):
+    """A rich table printed to a pipe is not squeezed into 80 columns (bench tables were)."""
+    from gyrostar.cli.output import table_console
+    from rich.table import Table
+
+    table = Table(title="wide")
+    for col in ("suite", "case", "µs", "baseline µs", "ratio", "note"):
+        table.add_column(col)
+    table.add_row("loop_step", "predict_batch_with_twelve_tracked_stars", "12.3", "45.6", "3.7",
+                  "numba vs numpy, one FIFO batch of ten samples")
+    table_console(False).print(table)
+    out = capsys.readouterr().out
+    row = next(ln for ln in out.splitlines() if "predict_batch" in ln)
+    assert "predict_batch_with_twelve_tracked_stars" in row and "one FIFO batch of ten samples" in row
+    assert len(row) > 80

@@ -68,3 +68,20 @@ def test_local_workers_are_capped_at_the_runs_and_the_cpus(monkeypatch, caplog):
     assert eval_loop.local_workers(2, 10) == 2
     with pytest.raises(ConfigError, match="--workers"):
         eval_loop.local_workers(0, 10)
+
+
+def test_progress_lines_off_a_terminal(caplog):
+    """Off a terminal the campaign prints a line as runs finish (at most one per interval, and
+    the last), not nothing until the end."""
+    from gyrostar.hil.eval_loop import ProgressLines
+
+    now = [0.0]
+    lines = ProgressLines(4, every_s=10.0, clock=lambda: now[0])
+    with caplog.at_level(25, logger="gyrostar"):     # NOTICE
+        for t, failed in ((5.0, 0), (8.0, 1), (20.0, 1), (21.0, 1)):
+            now[0] = t
+            lines.done(failed)
+    msgs = [r.getMessage() for r in caplog.records]
+    assert msgs == ["loop Monte Carlo: 1 of 4 runs done, 0 failed, 5 s so far, about 15 s left",
+                    "loop Monte Carlo: 3 of 4 runs done, 1 failed, 20 s so far, about 7 s left",
+                    "loop Monte Carlo: 4 of 4 runs done, 1 failed, 21 s so far, about 0 s left"]
