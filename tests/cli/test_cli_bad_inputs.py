@@ -5,6 +5,7 @@ Inputs are chosen to fail at load (parse, config, file checks), so the table sta
 """
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +37,12 @@ def _files(d):
     (d / "camp").mkdir()
     (d / "camp" / "summary.json").write_text("{}")
     (d / "afile").write_text("x")
+    for name in ("fifo.toml", "fifo.gslog", "fifo.npz"):
+        os.mkfifo(d / name)              # whoever opens one to read waits for a writer: never here
+    (d / "zero.npz").symlink_to("/dev/zero")
+    (d / "fast_rate.toml").write_text('name = "fast"\nsegments = [{ seconds = 3.0, rate_dps = [1e6, 0.0, 0.0] }]\n')
+    (d / "long.toml").write_text('name = "long"\nduration_s = 1e9\n')
+    (d / "nominal_camera.toml").write_text("[camera]\nfocal_length_px = 6666.7\nprincipal_point_px = [511.5, 511.5]\n")
     return d
 
 
@@ -179,6 +186,35 @@ CASES = [
      ["--sensor", "does not exist"]),
     ("fw-host-width-0", ["fw", "host", "--sensor", "{d}/x.gspx", "--width", "0"], USAGE, ["--width"]),
     ("run-calibration-folder", ["run", "--fast", "--calibration", "{d}"], USAGE, ["is a folder"]),
+    # --- special files: refused as what they are, never read (replay /dev/zero grew to 24 GB, a FIFO hung)
+    ("run-config-dev-zero", ["run", "--config", "/dev/zero"], USAGE,
+     ["config file /dev/zero", "character device", "not a regular file"]),
+    ("run-config-fifo", ["run", "--config", "{d}/fifo.toml"], USAGE, ["fifo.toml", "FIFO"]),
+    ("run-scenario-fifo", ["run", "--fast", "--scenario", "{d}/fifo.toml"], USAGE, ["fifo.toml", "FIFO"]),
+    ("run-calibration-dev-zero", ["run", "--fast", "--calibration", "/dev/zero"], USAGE,
+     ["calibration file /dev/zero", "character device"]),
+    ("run-calibration-fifo", ["run", "--fast", "--calibration", "{d}/fifo.toml"], USAGE, ["fifo.toml", "FIFO"]),
+    ("replay-dev-zero", ["replay", "/dev/zero", "--check"], USAGE, ["log /dev/zero", "character device"]),
+    ("replay-dev-urandom", ["replay", "/dev/urandom", "--check"], USAGE, ["log /dev/urandom", "character device"]),
+    ("replay-fifo", ["replay", "{d}/fifo.gslog"], USAGE, ["fifo.gslog", "FIFO"]),
+    ("replay-export-dev-zero", ["replay", "/dev/zero", "--export", "csv", "--out", "{d}/zero.csv"], USAGE,
+     ["/dev/zero", "character device"]),
+    ("cal-static-dev-zero", ["calibrate", "gyro-static", "{d}/zero.npz"], USAGE, ["INPUT", "zero.npz",
+                                                                                  "character device"]),
+    ("cal-static-fifo", ["calibrate", "gyro-static", "{d}/fifo.npz"], USAGE, ["INPUT", "fifo.npz", "FIFO"]),
+    # --- scenario bounds, checked when it is read (mc:1@1e9 drew for 78 s; 1e6 °/s ran 118 s for 3 s)
+    ("run-scenario-mc-too-long", ["run", "--fast", "--scenario", "mc:1@1e9", "--duration", "1"], USAGE,
+     ["mc:1@1e9", "86400"]),
+    ("run-scenario-rate", ["run", "--fast", "--scenario", "{d}/fast_rate.toml"], USAGE, ["rate_dps", "2000"]),
+    ("run-scenario-too-long", ["run", "--fast", "--scenario", "{d}/long.toml", "--duration", "1"], USAGE,
+     ["duration_s", "86400"]),
+    # --- a UDP host that does not resolve: exit 2 naming the key (it stalled the loop in every sendto)
+    ("run-udp-host-unresolvable", ["run", "--fast", "--config", ("outputs", "udp", "true"),
+                                   '+udp_host="no.such.host.invalid"', "+allow_remote=true"], USAGE,
+     ["outputs.udp_host", "no.such.host.invalid", "does not resolve"]),
+    # --- a [camera] table of nominal values and no loop.camera_sigma_px: never a σ of 0
+    ("run-camera-table-sigma-0", ["run", "--fast", "--calibration", "{d}/nominal_camera.toml"], USAGE,
+     ["camera.residual_rms_px", "loop.camera_sigma_px"]),
     ("fw-arm-run-no-sensor", ["fw", "arm", "--run"], USAGE, ["--sensor"]),
     ("fw-build-unknown-flag", ["fw", "build", "--bogus"], USAGE, ["--bogus"]),
     ("sim-frame-rate-dps", ["sim", "frame", "--out", "{d}/x.fits", "--rate-dps", "1,2"], USAGE, ["--rate-dps"]),
