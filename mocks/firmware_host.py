@@ -56,6 +56,28 @@ class PixelFile:
         self.map = mmap.mmap(self._f.fileno(), size)
         self.frame = 0
 
+    @classmethod
+    def attach(cls, path: Path) -> PixelFile:
+        """An existing pixel file (one a running host program may have mapped), mapped as it is:
+        never truncated or replaced. :class:`ValueError` for a file that is not a GSPX v1 file."""
+        self = cls.__new__(cls)
+        self.path = Path(path)
+        with open(self.path, "rb") as f:
+            head = f.read(HEADER)
+            size = os.fstat(f.fileno()).st_size
+        if len(head) < HEADER or head[:4] != b"GSPX":
+            raise ValueError(f"{path} is not a GSPX pixel file (magic {head[:4]!r})")
+        version, header, self.width, self.height, self.planes, bits = struct.unpack_from("<HHHHHH", head, 4)
+        if version != 1 or header != HEADER or self.planes not in (1, 2) or bits != 10:
+            raise ValueError(f"{path}: GSPX version {version}, header {header}, planes {self.planes}, bits {bits}: "
+                             "not the layout this program writes (version 1, 64, 1 or 2, 10)")
+        if size != HEADER + 2 * self.width * self.height * self.planes:
+            raise ValueError(f"{path}: {size} bytes, not the {self.width}×{self.height}×{self.planes} its header says")
+        self._f = open(self.path, "r+b")
+        self.map = mmap.mmap(self._f.fileno(), size)
+        self.frame = struct.unpack_from("<I", self.map, OFF_FRAME)[0]
+        return self
+
     def write_frame(self, light: np.ndarray, dark: np.ndarray | None = None,
                     exposure: tuple[int, int] | None = None) -> int:
         """Publish one frame (uint16 (H, W)); returns its frame counter. ``exposure`` =
