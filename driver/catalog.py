@@ -240,7 +240,10 @@ def load_catalog(name: str = "hip2", mag_limit: float = 7.5, epoch: float = 2025
                 return StarCatalog(name, z["ids"], z["vectors"], z["vmag"], float(z["epoch"]), z["b_v"])
         except (OSError, KeyError, ValueError):
             path.unlink(missing_ok=True)  # corrupt cache: rebuild below
-    cat = build_catalog(name, float(mag_limit), float(epoch))
+    from .logs import stage
+
+    with stage(f"building the {name} catalog to V {mag_limit:g} at epoch {epoch:g} (once; cached in {path.parent})"):
+        cat = build_catalog(name, float(mag_limit), float(epoch))
     fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".npz")
     os.close(fd)
     np.savez(tmp, ids=cat.ids, vectors=cat.vectors, vmag=cat.vmag, epoch=np.float64(cat.epoch), b_v=cat.b_v)

@@ -6,10 +6,25 @@ stderr) each record is one plain line, never wrapped at the console width.
 
 import logging
 import sys
+import time
+from contextlib import contextmanager
 
 # what a user waits for (compiling the kernels, building the star index), shown by default, not with -q
 NOTICE = 25
 logging.addLevelName(NOTICE, "NOTE")
+
+
+@contextmanager
+def stage(what: str, told: bool = True):
+    """A NOTICE line before a stage a user waits for (``what``: "building the star index …") when
+    ``told``, and its time after it."""
+    log = logging.getLogger("gyrostar")
+    if told:
+        log.log(NOTICE, "%s", what)
+    t0 = time.perf_counter()
+    yield
+    if told:
+        log.log(NOTICE, "done in %.0f s: %s", time.perf_counter() - t0, what.split(":")[0].split(" (")[0])
 
 
 def setup(verbosity: int) -> None:

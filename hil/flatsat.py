@@ -765,7 +765,11 @@ def _sim_head(cfg, scen, sim, truth, seed, faults, lockstep):
     emu = HeadEmulator(sky, ScenarioScene(truth, sim.detector.exposure_s), noise=True,
                        clock=dev_clock)
     # its kernels compiled (cold cache) or loaded now, not at its first frame inside the run
-    emu.warm_up(truth.q0)
+    from ..logs import stage
+    from ..loop import warmup
+
+    with stage("compiling the head emulator's kernels (rendering, spot finder; once)", told=warmup.cold_start):
+        emu.warm_up(truth.q0)
     from . import render_ahead
 
     closers = []

@@ -82,6 +82,7 @@ def make_run_folder(out: str | None, scenario: str):
 
 
 def run(args) -> int:
+    t_command = time.perf_counter()      # the start-up (compiling, star index) counts in command_wall_s
     cfg = hc.load_flatsat(getattr(args, "config", None))
     if getattr(args, "calibration", None):
         cfg.calibration = str(args.calibration)
@@ -109,6 +110,7 @@ def run(args) -> int:
                          plots=not getattr(args, "no_plots", False),
                          status=getattr(args, "verbose", 0) >= 0,
                          config_path=getattr(args, "config", None), fast=bool(getattr(args, "fast", False)))
+    result["command_wall_s"] = round(time.perf_counter() - t_command, 2)
     _warn_losses(result)
     if result.get("log_error"):
         result["exit_code"] = 3
@@ -694,7 +696,8 @@ def human_summary(r: dict) -> str:
         f"[bold]gyrostar run[/] — {r['scenario']} on {r['flatsat']}, "
         + (f"{r['ran_s']:.1f} s (interrupted) of {r['duration_s']:.1f} s" if r.get("interrupted")
            else f"{r['duration_s']:.1f} s") + " of flatsat time "
-        f"({r['wall_s']:.1f} s wall{', real time' if r['realtime'] else ''})",
+        f"({r['wall_s']:.1f} s wall{', real time' if r['realtime'] else ''}"
+        + (f"; {r['command_wall_s']:.1f} s with start-up" if r.get("command_wall_s") else "") + ")",
         "  attitude error (cross-boresight, 1σ, TRACK): " + (
             f"{r['attitude_error_arcsec_1sigma']:.2f}″" if r.get("attitude_error_arcsec_1sigma") is not None
             else "never in TRACK" if "track_fraction" in r else "n/a (no simulator truth)")

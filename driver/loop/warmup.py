@@ -49,7 +49,7 @@ def warm(calls) -> dict:
         if noted is None and now - t_fn > COMPILE_SEEN_S:       # a real compile, not a kernel already in memory
             noted = now
             log.log(NOTICE, "compiling the numba kernels (an empty or outdated cache: once after installing or "
-                    "updating gyrostar): about %.0f s on a 2-core host; cached in %s", COLD_COMPILE_S,
+                    "updating gyrostar): about %.0f s on an idle 2-core host; cached in %s", COLD_COMPILE_S,
                     os.environ.get("NUMBA_CACHE_DIR", "numba's default folder"))
         elif noted is not None and now - noted >= NOTE_EVERY_S:
             noted = now
@@ -89,6 +89,9 @@ def measure_startup() -> dict:
     return out
 
 
+cold_start = False         # this process started on a cold cache (note_cold_start): later stages say they compile
+
+
 def cache_is_cold() -> bool:
     """numba's cache folder holds no compiled kernel yet (``*.nbi`` index files): the first run
     after an install or update compiles every kernel."""
@@ -105,8 +108,10 @@ def note_cold_start() -> None:
 
     from ..logs import NOTICE
 
-    if cache_is_cold():
+    global cold_start
+    cold_start = cache_is_cold()
+    if cold_start:
         logging.getLogger("gyrostar").log(
             NOTICE, "first start with this gyrostar: compiling its numba kernels and, for a new catalog or camera, "
-            "building the star index take about %.0f s on a 2-core host (once: later starts take about a second)",
+            "building the star index take about %.0f s on an idle 2-core host (once: later starts take about a second)",
             COLD_START_S)

@@ -274,11 +274,6 @@ def build_index(catalog, max_sep_deg: float, per_field: int = 0, thin_radius_deg
                      np.ascontiguousarray(vec[vstars]), nav_v)
 
 
-# s: building the default flatsat's index (hip2 to V 8, pairs within 12.4°) with an empty cache on
-# a 2-core host, catalog included (docs/HARDWARE.md "The first run")
-INDEX_BUILD_S = 45.0
-
-
 def index_path(catalog: str, mag_limit: float, epoch: float, max_sep_deg: float, per_field: int,
                label_depth_mag: float = 0.0) -> Path:
     """Cache file of an index."""
@@ -308,19 +303,14 @@ def load_index(catalog: str = "hip2", mag_limit: float = 6.5, max_sep_deg: float
                              f["vox_start"], f["vox_stars"], f["vox_vec"], float(f["nav_mag_limit"]))
         except (OSError, KeyError, ValueError):
             path.unlink(missing_ok=True)  # corrupt cache: rebuild below
-    import logging
-    import time
+    from ..logs import stage
 
-    from ..logs import NOTICE
-
-    log = logging.getLogger("gyrostar")
-    log.log(NOTICE, "building the star index (%s to V %.1f, pairs within %.1f°): once per catalog and camera, "
-            "about %.0f s on a 2-core host; cached in %s", catalog, mag_limit, max_sep_deg, INDEX_BUILD_S, path.parent)
-    t0 = time.perf_counter()
-    depth = deepest_limit(catalog, float(mag_limit) + label_depth_mag) if label_depth_mag > 0.0 else float(mag_limit)
-    cat = load_catalog(catalog, depth, float(epoch))
-    idx = build_index(cat, float(max_sep_deg), int(per_field), nav_mag_limit=float(mag_limit))
-    log.log(NOTICE, "star index built in %.0f s", time.perf_counter() - t0)
+    with stage(f"building the star index ({catalog} to V {mag_limit:.1f}, pairs within {max_sep_deg:.1f}°): once per "
+               f"catalog and camera; cached in {path.parent}"):
+        depth = (deepest_limit(catalog, float(mag_limit) + label_depth_mag) if label_depth_mag > 0.0
+                 else float(mag_limit))
+        cat = load_catalog(catalog, depth, float(epoch))
+        idx = build_index(cat, float(max_sep_deg), int(per_field), nav_mag_limit=float(mag_limit))
     fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".npz")
     os.close(fd)
     arrays = {f.name: getattr(idx, f.name) for f in dataclasses.fields(idx) if f.name != "catalog"}

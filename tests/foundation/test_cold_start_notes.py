@@ -20,7 +20,7 @@ def test_compiling_kernels_prints_progress_with_time_left(monkeypatch, caplog):
     notes = [r.getMessage() for r in caplog.records if r.levelno == logs.NOTICE]
     assert res["compiled"] == 4 and res["cache_hits"] == 0
     assert notes[0].startswith("compiling the numba kernels (an empty or outdated cache")
-    assert "about 80 s on a 2-core host" in notes[0]
+    assert "about 80 s on an idle 2-core host" in notes[0]
     assert any("2 of 4" in n and "s left" in n for n in notes[1:-1]), notes
     assert notes[-1].startswith("numba kernels compiled in") and "4 compiled, 0 from the cache" in notes[-1]
 
@@ -39,7 +39,7 @@ def test_cold_cache_is_told_before_the_start(tmp_path, monkeypatch, caplog):
         (tmp_path / "sub" / "kernels.predict_batch-30.py312.nbi").write_bytes(b"")
         warmup.note_cold_start()
     notes = [r.getMessage() for r in caplog.records if r.levelno == logs.NOTICE]
-    assert len(notes) == 1 and "first start with this gyrostar" in notes[0] and "s on a 2-core host" in notes[0]
+    assert len(notes) == 1 and "first start with this gyrostar" in notes[0] and "s on an idle 2-core host" in notes[0]
 
 
 def test_notes_are_shown_by_default_and_hidden_by_quiet():
@@ -51,3 +51,14 @@ def test_notes_are_shown_by_default_and_hidden_by_quiet():
         assert not logging.getLogger("gyrostar").isEnabledFor(logs.NOTICE)
     finally:
         logging.basicConfig(level=logging.WARNING, force=True)
+
+
+def test_a_stage_says_what_it_does_and_how_long_it_took(caplog):
+    with caplog.at_level(logs.NOTICE, logger="gyrostar"):
+        with logs.stage("building the star index (hip2 to V 6.5): once per catalog and camera"):
+            time.sleep(0.01)
+        with logs.stage("compiling the head emulator's kernels", told=False):
+            pass
+    notes = [r.getMessage() for r in caplog.records]
+    assert notes == ["building the star index (hip2 to V 6.5): once per catalog and camera",
+                     "done in 0 s: building the star index"]
