@@ -111,6 +111,9 @@ def load_table(path):
         except ConfigError as exc:
             raise ConfigError(f"INPUT {path}: {exc}") from None
     if path.suffix == ".csv":
+        from ...files import check_regular
+
+        check_regular(path, "INPUT")        # a FIFO or a device named *.csv: refused, never read
         try:
             tab = np.genfromtxt(path, delimiter=",", names=True)
         except ValueError as exc:

@@ -40,6 +40,7 @@ def _files(d):
     for name in ("fifo.toml", "fifo.gslog", "fifo.npz"):
         os.mkfifo(d / name)              # whoever opens one to read waits for a writer: never here
     (d / "zero.npz").symlink_to("/dev/zero")
+    (d / "urandom.csv").symlink_to("/dev/urandom")
     (d / "fast_rate.toml").write_text('name = "fast"\nsegments = [{ seconds = 3.0, rate_dps = [1e6, 0.0, 0.0] }]\n')
     (d / "long.toml").write_text('name = "long"\nduration_s = 1e9\n')
     (d / "nominal_camera.toml").write_text("[camera]\nfocal_length_px = 6666.7\nprincipal_point_px = [511.5, 511.5]\n")
@@ -202,6 +203,8 @@ CASES = [
     ("cal-static-dev-zero", ["calibrate", "gyro-static", "{d}/zero.npz"], USAGE, ["INPUT", "zero.npz",
                                                                                   "character device"]),
     ("cal-static-fifo", ["calibrate", "gyro-static", "{d}/fifo.npz"], USAGE, ["INPUT", "fifo.npz", "FIFO"]),
+    ("cal-camera-urandom-csv", ["calibrate", "camera", "{d}/urandom.csv"], USAGE,
+     ["INPUT", "urandom.csv", "character device"]),
     # --- scenario bounds, checked when it is read (mc:1@1e9 drew for 78 s; 1e6 °/s ran 118 s for 3 s)
     ("run-scenario-mc-too-long", ["run", "--fast", "--scenario", "mc:1@1e9", "--duration", "1"], USAGE,
      ["mc:1@1e9", "86400"]),
