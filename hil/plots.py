@@ -172,22 +172,43 @@ def _rel_t(out: np.ndarray) -> np.ndarray:
     return out["t"] - (out["t"][0] if len(out) else 0.0)
 
 
+def _symmetric_limit(err: np.ndarray, least: float) -> float:
+    """± limit of an error panel: 3× the 99th percentile of |err|, at least ``least``."""
+    return max(float(np.percentile(np.abs(err), 99)) * 3 if err.size else least, least)
+
+
+def _clip_note(err: np.ndarray, lim: float) -> str:
+    """Legend note for points beyond ±lim ('' when none is)."""
+    n = int(np.count_nonzero(np.abs(err) > lim))
+    return f" ({n} beyond ±{lim:.3g}, max {np.abs(err).max():.3g})" if n else ""
+
+
 def _attitude_error(folder: Path, out, truth, cerr) -> Path | None:
     if truth is None or len(truth) != len(out):
         return None
     t = _rel_t(out)
     err = attitude_errors(out, truth) * ARCSEC
-    fig, ax = new_figure(figsize=(9, 4))
-    shade_modes(ax, t, out["mode"])
-    for i, lab in enumerate(("x (cross-boresight)", "y (cross-boresight)", "roll")):
-        ax.plot(*envelope(t, err[:, i]), lw=0.7, label=lab)
-    lim = np.percentile(np.abs(err[:, :2]), 99) * 3 if len(err) else 10
-    ax.set_ylim(-max(lim, 5), max(lim, 5))
-    ax.set_xlabel("time (s)")
-    ax.set_ylabel("attitude error (arcsec)")
+    # roll about the boresight is ~f/r_star worse than the cross-boresight axes: its own panel and scale
+    fig, (ax, ax_roll) = new_figure(2, 1, figsize=(9, 6), sharex=True)
+    lim = _symmetric_limit(err[:, :2], 5.0)
+    for a in (ax, ax_roll):
+        shade_modes(a, t, out["mode"])
+    for i, lab in enumerate(("x (cross-boresight)", "y (cross-boresight)")):
+        ax.plot(*envelope(t, err[:, i]), lw=0.7, label=lab + _clip_note(err[:, i], lim))
+    ax.set_ylim(-lim, lim)
+    ax.set_ylabel("cross-boresight (arcsec)")
     ax.set_title("attitude error vs truth (green: TRACK, orange: COAST)")
     ax.legend(loc="upper right", fontsize=8)
-    return _save(fig, folder / "attitude_error.png")
+    lim_r = _symmetric_limit(err[:, 2], 5.0)
+    ax_roll.plot(*envelope(t, err[:, 2]), lw=0.7, color="C2", label="roll (about the boresight)"
+                 + _clip_note(err[:, 2], lim_r))
+    ax_roll.set_ylim(-lim_r, lim_r)
+    ax_roll.set_xlabel("time (s)")
+    ax_roll.set_ylabel("roll (arcsec)")
+    ax_roll.legend(loc="upper right", fontsize=8)
+    fixed_margins(fig, hspace=0.15)
+    fig.savefig(folder / "attitude_error.png", dpi=110)
+    return folder / "attitude_error.png"
 
 
 def _bias_estimate(folder: Path, out, truth, cerr) -> Path | None:
@@ -214,9 +235,10 @@ def _centroid_error(folder: Path, out, truth, centroid_err) -> Path | None:
     rms = np.sqrt(np.mean(centroid_err[:, 1:] ** 2))
     shown, every = scatter_sample(centroid_err[:, 1:], rms)
     ct = centroid_err[shown, 0] - (out["t"][0] if len(out) else 0)
-    ax.plot(ct, centroid_err[shown, 1], ".", ms=1, label="column")
-    ax.plot(ct, centroid_err[shown, 2], ".", ms=1, label="row")
-    ax.set_ylim(-1, 1)
+    lim = _symmetric_limit(centroid_err[:, 1:], 0.05)          # px: the errors' own scale, not ±1 px
+    ax.plot(ct, centroid_err[shown, 1], ".", ms=1, label="column" + _clip_note(centroid_err[:, 1], lim))
+    ax.plot(ct, centroid_err[shown, 2], ".", ms=1, label="row" + _clip_note(centroid_err[:, 2], lim))
+    ax.set_ylim(-lim, lim)
     ax.set_xlabel("time (s)")
     ax.set_ylabel("centroid error (px)")
     note = f"; every {every}th of {len(centroid_err)} shown, and all beyond 3×RMS" if every > 1 else ""
@@ -234,9 +256,11 @@ def _latency_histogram(folder: Path, out, truth, cerr) -> Path | None:
     plain_log_labels(ax.yaxis)
     p99 = np.percentile(lat, 99)
     ax.axvline(p99, color="r", lw=0.8, label=f"p99 {p99:.0f} µs")
-    ax.set_xlabel("gyro sample → output latency (µs)")
+    # latency_us: host time from the FIFO read to the output (TELEMETRY.md); in a --fast run the
+    # simulated clock stands still meanwhile, so it is the host's compute time alone
+    ax.set_xlabel("host time, gyro FIFO read → output (µs)")
     ax.set_ylabel("outputs")
-    ax.set_title("loop latency")
+    ax.set_title("loop latency (host time; in a --fast run the compute time alone)", fontsize=10)
     ax.legend()
     return _save(fig, folder / "latency_histogram.png")
 

@@ -18,6 +18,18 @@ from .metrics import ERR_EDGES_ARCSEC, RATE_BINS
 N_BOOT = 200
 
 
+def cdf_span(hist: np.ndarray) -> tuple[float, float]:
+    """``(lo, hi)`` arcsec of the error CDF's axis: from half the 0.1th percentile's bin edge to
+    twice the largest error's bin edge (the histogram spans 10⁻² … 10⁵″ whatever the errors)."""
+    c = np.cumsum(hist)
+    if not c.size or c[-1] <= 0:
+        return float(ERR_EDGES_ARCSEC[1]), float(ERR_EDGES_ARCSEC[-1])
+    first = int(np.searchsorted(c, 1e-3 * c[-1]))                  # bin of the 0.1th percentile
+    last = int(np.flatnonzero(hist)[-1])
+    lo = max(float(ERR_EDGES_ARCSEC[max(first, 1)]) / 2.0, float(ERR_EDGES_ARCSEC[1]))
+    return lo, min(float(ERR_EDGES_ARCSEC[last + 1]) * 2.0, float(ERR_EDGES_ARCSEC[-1]))
+
+
 def write_plots(rows: list[dict], folder: Path, seed: int = 0) -> list[Path]:
     import matplotlib
 
@@ -45,6 +57,7 @@ def write_plots(rows: list[dict], folder: Path, seed: int = 0) -> list[Path]:
     ax.fill_between(x, lo, hi, alpha=0.3, step="post", label="90 % bootstrap band")
     ax.step(x, cdf(hists.sum(0)), where="post", label="pooled")
     ax.set_xscale("log")
+    ax.set_xlim(*cdf_span(hists.sum(0)))          # the errors' own span, not the histogram's 1e-2 … 1e5″
     ax.set_xlabel("cross-boresight attitude error in TRACK (arcsec)")
     ax.set_ylabel("fraction of outputs")
     ax.set_title(f"attitude error CDF, {n} runs")
