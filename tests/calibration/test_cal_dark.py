@@ -95,3 +95,23 @@ def test_dark_live_path_through_the_head_client_and_emulator(tmp_path, capsys):
     assert sorted(map(tuple, found.tolist())) == sorted(map(tuple, hot.tolist()))
     with np.load(tmp_path / "dark_frames.npz") as z:
         assert z["frames"].shape == (6, 512, 512)
+
+
+def test_dark_figure_labels_its_axes(monkeypatch, tmp_path):
+    """dark_current.png: the image has column/row labels and a labelled colour bar (it had none)."""
+    from types import SimpleNamespace
+
+    from gyrostar.calibration import report
+    from gyrostar.hil.calibrate import dark
+
+    figs = []
+    monkeypatch.setattr(report, "save_figure", lambda fig, path: figs.append(fig) or path)
+    rng = np.random.default_rng(0)
+    res = SimpleNamespace(rate=rng.normal(100.0, 10.0, (64, 64)), hot=np.array([[3, 4], [10, 20]]),
+                          hot_threshold=300.0)
+    dark._plots(tmp_path, res)
+    image_ax, hist_ax, bar_ax = figs[0].axes
+    assert (image_ax.get_xlabel(), image_ax.get_ylabel()) == ("column (px)", "row (px)")
+    assert "2 hot pixels" in image_ax.get_title()
+    assert bar_ax.get_ylabel() == "dark current (DN/s)"
+    assert hist_ax.get_xlabel() == "dark current (DN/s)" and hist_ax.get_ylabel() == "pixels"
