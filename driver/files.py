@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import os
 import stat
+from contextlib import contextmanager
 from pathlib import Path
 
 from .errors import ConfigError
@@ -81,3 +82,18 @@ def read_regular(path: str | Path, what: str, max_bytes: int | None = TOML_MAX_B
         raise ConfigError(f"{what} {path} cannot be read: {exc.strerror or exc}") from None
     finally:
         os.close(fd)
+
+
+@contextmanager
+def whole_or_nothing(out: str | Path):
+    """A temporary path beside ``out`` (``.<name>.partial-<pid><suffix>``) to write a file to,
+    renamed to ``out`` once it is whole: an interrupted or failed write (Ctrl-C, a full disk,
+    an error) leaves no file at ``out`` that looks complete (no 0-byte summary or PNG), removes
+    its partial file, and does not make the next write to ``out`` ask for --force."""
+    out = Path(out)
+    part = out.with_name(f".{out.name}.partial-{os.getpid()}{out.suffix}")
+    try:
+        yield part
+        os.replace(part, out)
+    finally:
+        part.unlink(missing_ok=True)

@@ -127,13 +127,13 @@ def run(args) -> int:
                duration_s=args.duration, seed=args.seed,
                scheduler=args.scheduler or f"LocalCluster({workers} processes)")
     res["results_table"] = str(folder / "results.parquet")
-    (folder / "summary.json").write_text(json.dumps(json_safe(res), indent=2))   # first: nothing after can lose it
+    _write_json(folder / "summary.json", json.dumps(json_safe(res), indent=2))   # first: nothing after can lose it
     write_table(rows, folder / "results.parquet")
     res["plots"] = [str(p) for p in write_plots(rows, Path(args.plot) if args.plot else folder)]
-    (folder / "summary.json").write_text(json.dumps(json_safe(res), indent=2))
+    _write_json(folder / "summary.json", json.dumps(json_safe(res), indent=2))
     if interrupted:
         res["interrupted"] = True
-        (folder / "summary.json").write_text(json.dumps(json_safe(res), indent=2))
+        _write_json(folder / "summary.json", json.dumps(json_safe(res), indent=2))
         import logging
 
         logging.getLogger("gyrostar").error("interrupted after %d of %d runs: their results are in %s",
@@ -142,6 +142,14 @@ def run(args) -> int:
         return 130
     emit(args, res, _text(res))
     return 1 if res["wrong_attitude_runs"] or res["wrong_id_runs"] else 0
+
+
+def _write_json(path: Path, text: str) -> None:
+    """``text`` as ``path``, whole or not at all (a full disk leaves no 0-byte summary)."""
+    from ..files import whole_or_nothing
+
+    with whole_or_nothing(path) as part:
+        part.write_text(text)
 
 
 def _with_progress(args, cluster, seeds, rows):

@@ -98,7 +98,10 @@ def plot_overview(folder: Path, out: np.ndarray) -> Path | None:
     ax[3].set_ylabel("attitude 3σ (″)")
     ax[3].set_xlabel("time (s)")
     ax[3].legend(fontsize=7, loc="upper right")
+    from ..files import whole_or_nothing
+
     path = folder / "overview.png"
     fixed_margins(fig, hspace=0.12)
-    fig.savefig(path, dpi=100)
+    with whole_or_nothing(path) as part:          # a full disk leaves no 0-byte PNG
+        fig.savefig(part, dpi=100, format="png")
     return path

@@ -206,9 +206,7 @@ def _attitude_error(folder: Path, out, truth, cerr) -> Path | None:
     ax_roll.set_xlabel("time (s)")
     ax_roll.set_ylabel("roll (arcsec)")
     ax_roll.legend(loc="upper right", fontsize=8)
-    fixed_margins(fig, hspace=0.15)
-    fig.savefig(folder / "attitude_error.png", dpi=110)
-    return folder / "attitude_error.png"
+    return _save(fig, folder / "attitude_error.png", hspace=0.15)
 
 
 def _bias_estimate(folder: Path, out, truth, cerr) -> Path | None:
@@ -265,7 +263,11 @@ def _latency_histogram(folder: Path, out, truth, cerr) -> Path | None:
     return _save(fig, folder / "latency_histogram.png")
 
 
-def _save(fig, path: Path) -> Path:
-    fixed_margins(fig)
-    fig.savefig(path, dpi=110)
+def _save(fig, path: Path, hspace: float | None = None) -> Path:
+    """``fig`` as the PNG ``path``, whole or not at all (a full disk leaves no 0-byte PNG)."""
+    from ..files import whole_or_nothing
+
+    fixed_margins(fig, hspace=hspace)
+    with whole_or_nothing(path) as part:
+        fig.savefig(part, dpi=110, format="png")
     return path

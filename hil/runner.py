@@ -665,8 +665,11 @@ def _bias_seen_by_loop(truth, calib):
 def _write_summary(folder: Path, res: dict) -> None:
     """summary.json of a run; a disk that takes no more is logged, not raised (the figures
     are printed all the same)."""
+    from ..files import whole_or_nothing
+
     try:
-        (folder / "summary.json").write_text(json.dumps(_jsonable(res), indent=2))
+        with whole_or_nothing(folder / "summary.json") as part:     # a full disk leaves none, not 0 bytes
+            part.write_text(json.dumps(_jsonable(res), indent=2))
     except OSError as exc:
         log.error("%s/summary.json not written: %s", folder, exc.strerror or exc)
 

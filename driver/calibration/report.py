@@ -216,7 +216,12 @@ def new_figure(*args, **kwargs):
 def save_figure(fig, path: Path) -> Path:
     import matplotlib.pyplot as plt
 
+    from ..files import whole_or_nothing
+
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    try:
+        with whole_or_nothing(path) as part:      # a full disk leaves no 0-byte PNG
+            fig.savefig(part, dpi=110, format="png")
+    finally:
+        plt.close(fig)
     return path

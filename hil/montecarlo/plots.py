@@ -101,9 +101,6 @@ def write_plots(rows: list[dict], folder: Path, seed: int = 0) -> list[Path]:
 
 
 def _save(fig, path: Path) -> Path:
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    import matplotlib.pyplot as plt
+    from ...calibration.report import save_figure  # whole or not at all, figure closed
 
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)

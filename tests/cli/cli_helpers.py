@@ -1,5 +1,6 @@
 """Shared helpers of the CLI tests: run the real console script as a subprocess."""
 
+import contextlib
 import os
 import subprocess
 import sys
@@ -24,3 +25,16 @@ def runs(tmp_path, monkeypatch) -> Path:
     path = tmp_path / "runs"
     monkeypatch.setenv("GYROSTAR_RUNS", str(path))
     return path
+
+
+@contextlib.contextmanager
+def tmpfs(path: Path, options: str, why: str):
+    """A tmpfs mounted at ``path`` (made) with ``options`` ("size=1m", "ro,size=1m") while the
+    block runs; the test is skipped (``why``) where it cannot be mounted (not root)."""
+    path.mkdir(parents=True, exist_ok=True)
+    if subprocess.run(["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(path)], capture_output=True).returncode:
+        pytest.skip(why)
+    try:
+        yield path
+    finally:
+        subprocess.run(["umount", str(path)], check=True)

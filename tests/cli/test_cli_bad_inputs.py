@@ -325,18 +325,12 @@ def test_unwritable_cache_folder_is_exit_2_naming_it_before_compiling(argv, bad,
 
 def test_read_only_home_cache_names_gyrostar_cache(tmp_path):
     """The default cache under a HOME mounted read-only: exit 2 with the hint to set GYROSTAR_CACHE."""
-    import subprocess
+    from cli_helpers import tmpfs
 
     home = tmp_path / "home"
-    home.mkdir()
-    if subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=1m", "tmpfs", str(home)],
-                      capture_output=True).returncode != 0:
-        pytest.skip("a read-only HOME needs a tmpfs mount (root)")
-    try:
+    with tmpfs(home, "ro,size=1m", "a read-only HOME needs a tmpfs mount (root)"):
         env = {"HOME": str(home), "XDG_CACHE_HOME": "", "GYROSTAR_CACHE": "", "GYROSTAR_RUNS": str(tmp_path / "runs")}
         res = gyrostar(["run", "--fast", "--duration", "2"], cwd=tmp_path, env=env, timeout=60)
-    finally:
-        subprocess.run(["umount", str(home)], check=True)
     lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
     assert res.returncode == USAGE, res.stderr
     assert len(lines) == 1 and str(home / ".cache" / "gyrostar") in lines[0], res.stderr
