@@ -98,3 +98,45 @@ def test_lost_samples_and_outputs_that_all_dropped_are_warnings(caplog):
     with caplog.at_level(logging.WARNING, logger="gyrostar.hil.runner"):
         _warn_losses(_summary(udp={"sent": 1990, "dropped": 3, "to": "127.0.0.1:47800"}))
     assert not caplog.records
+
+
+def _gyrostar(*args, timeout=600):
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    exe = str(Path(sys.executable).parent / "gyrostar")
+    return subprocess.run([exe, *map(str, args)], capture_output=True, text=True, timeout=timeout,
+                          stdin=subprocess.DEVNULL)
+
+
+def test_dark_only_calibration_run_tracks(tmp_path):
+    """The issue's run: a calibration file with only a [dark] table, ``run --fast --duration 3``.
+    Hot-pixel repair on the head's spot list let it acquire; 3 s in ACQUIRE, 1,190 link errors
+    and exit 0 before."""
+    import json
+
+    cal = tmp_path / "only_dark.toml"
+    cal.write_text('[dark]\nfits = "dark.fits"\nread_noise_dn = 3.0\ndark_current_median_dn_per_s = 97.0\n'
+                   "offset_median_dn = 20.0\nhot_pixels = [[599, 185], [439, 45], [154, 544], [510, 593]]\n")
+    res = _gyrostar("run", "--fast", "--duration", "3", "--calibration", cal, "--out", tmp_path / "r", "--no-plots",
+                    "--json")
+    assert res.returncode == 0, res.stderr
+    r = json.loads(res.stdout)
+    assert r["mode_seconds"]["TRACK"] > 2.0 and r["health"]["link_error_outputs"] == 0, r["health"]
+    assert r["acceptance"]["checks"]["reached_track"]["pass"]
+    assert "hot pixels" in r["wiring"]["hot_pixels"]
+
+
+def test_run_that_loses_samples_fails_with_a_warning(tmp_path):
+    """Lost gyro samples under a scenario that expects none: a warning, the acceptance key
+    failed, exit 1, no PASS (a loaded host's 57 lost samples printed PASS, exit 0)."""
+    scen = tmp_path / "stall.toml"
+    scen.write_text('name = "stall"\nduration_s = 2.0\nsegments = [{ seconds = 2.0 }]\nmin_track_fraction = 0.1\n'
+                    'faults = [{ kind = "gyro-fifo-overrun", at_s = 0.8, seconds = 0.5 }]\n')
+    res = _gyrostar("run", "--fast", "--scenario", scen, "--out", tmp_path / "r", "--no-plots")
+    assert res.returncode == 1, res.stderr
+    assert "PASS" not in res.stdout and "max_samples_lost" in res.stdout
+    warn = [ln for ln in res.stderr.splitlines() if "gyro samples lost" in ln]
+    err = [ln for ln in res.stderr.splitlines() if "acceptance failed" in ln]
+    assert len(warn) == 1 and len(err) == 1 and "max_samples_lost" in err[0], res.stderr
