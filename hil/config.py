@@ -326,8 +326,10 @@ class Fault:
         kinds = typing.get_args(typing.get_type_hints(Fault)["kind"])
         if self.kind not in kinds:
             raise ValueError(f"kind = {self.kind!r} must be one of {', '.join(kinds)}")
-        if not 0 <= self.at_s <= MAX_SCENARIO_S:
-            raise ValueError(f"at_s = {self.at_s} must be in [0, {MAX_SCENARIO_S:g}] (s from the start of the run)")
+        if self.at_s < 0:
+            raise ValueError(f"at_s = {self.at_s} must be ≥ 0 (s from the start of the run)")
+        if not self.at_s <= MAX_SCENARIO_S:
+            raise ValueError(f"at_s = {self.at_s} must be at most {MAX_SCENARIO_S:g} s (a day)")
         if not 0 <= self.seconds <= MAX_SCENARIO_S:
             raise ValueError(f"seconds = {self.seconds} must be in [0, {MAX_SCENARIO_S:g}]")
         if self.kind == "head-clock-step":
