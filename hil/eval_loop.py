@@ -89,8 +89,10 @@ def run(args) -> int:
         from ..errors import NotAvailableError
 
         raise NotAvailableError(f"pyarrow is needed for the per-run table (pip install 'pyarrow>=14'): {exc}") from None
-    if not (args.duration >= 10.0 and args.duration < 1e6):
-        raise ConfigError(f"--duration must be a number of seconds ≥ 10, got {args.duration}")
+    from .config import MAX_SCENARIO_S
+
+    if not (args.duration >= 10.0 and args.duration <= MAX_SCENARIO_S):     # a scenario's own bound
+        raise ConfigError(f"--duration must be a number of seconds in [10, {MAX_SCENARIO_S:g}], got {args.duration}")
     tls_given = [args.tls_ca, args.tls_cert, args.tls_key]
     if any(tls_given) and not all(tls_given):
         raise ConfigError("--tls-ca, --tls-cert and --tls-key go together")
