@@ -143,10 +143,11 @@ def _warn_losses(result: dict) -> None:
     network outputs every one of whose datagrams the kernel refused."""
     lost = result.get("samples_lost") or 0
     if lost:
-        log.warning("%d gyro samples lost: the gyro FIFO overflowed while the loop was held off (%d overruns: a "
-                    "loaded host, swapping or a blocked disk%s); a fault to investigate (docs/HARDWARE.md, "
-                    "Troubleshooting: Overruns)", lost, result.get("overruns") or 0,
-                    "" if result.get("fast") else "; a simulated flatsat on a busy host keeps up with --fast")
+        why = ("on a simulated clock only a stall the scenario injects does that" if result.get("fast") else
+               f"{result.get('overruns') or 0} overruns: a loaded host, swapping or a blocked disk; a simulated "
+               "flatsat on a busy host keeps up with --fast")
+        log.warning("%d gyro samples lost: the gyro FIFO overflowed while the loop was held off (%s); a fault to "
+                    "investigate (docs/HARDWARE.md, Troubleshooting: Overruns)", lost, why)
     for key, what in (("udp", "UDP output"), ("space_packets", "space-packet output")):
         sent = result.get(key) or {}
         if sent and not sent.get("sent") and sent.get("dropped"):
