@@ -11,10 +11,33 @@ LOGGERS = ("distributed", "distributed.scheduler", "distributed.nanny", "distrib
            "distributed.http.proxy", "distributed.comm")
 
 
+class ClosedCommFilter(logging.Filter):
+    """Drops asyncio's "exception was never retrieved" records of a Dask connection that closed
+    (``CommClosedError``, ``StreamClosedError``): what a cluster shut down by Ctrl-C or SIGTERM
+    leaves behind, a traceback per closed stream, not an error of the command."""
+
+    CLOSED = ("CommClosedError", "StreamClosedError")
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        exc = record.exc_info[1] if record.exc_info else None
+        while exc is not None:
+            if type(exc).__name__ in self.CLOSED:
+                return False
+            exc = exc.__cause__ or exc.__context__
+        return True
+
+
+_CLOSED_FILTER = ClosedCommFilter()
+
+
 def silence_logs() -> None:
-    """Dask's loggers in this process to CRITICAL."""
+    """Dask's loggers in this process to CRITICAL, and asyncio's reports of its closed
+    connections dropped (:class:`ClosedCommFilter`)."""
     for name in LOGGERS:
         logging.getLogger(name).setLevel(logging.CRITICAL)
+    asyncio_log = logging.getLogger("asyncio")
+    if _CLOSED_FILTER not in asyncio_log.filters:
+        asyncio_log.addFilter(_CLOSED_FILTER)
 
 
 def ignore_sigint() -> None:

@@ -85,3 +85,26 @@ def test_progress_lines_off_a_terminal(caplog):
     assert msgs == ["loop Monte Carlo: 1 of 4 runs done, 0 failed, 5 s so far, about 15 s left",
                     "loop Monte Carlo: 3 of 4 runs done, 1 failed, 20 s so far, about 7 s left",
                     "loop Monte Carlo: 4 of 4 runs done, 1 failed, 21 s so far, about 0 s left"]
+
+
+def test_closed_dask_connections_leave_no_traceback_on_stop(caplog):
+    """SIGTERM to eval loop printed asyncio's 'Future exception was never retrieved' with a
+    CommClosedError traceback per closed stream: dropped; other asyncio errors still show."""
+    import logging
+
+    from distributed.comm.core import CommClosedError
+    from gyrostar.hil.dask_quiet import silence_logs
+    from tornado.iostream import StreamClosedError
+
+    silence_logs()
+    log = logging.getLogger("asyncio")
+    for exc in (CommClosedError("in <TCP (closed) Scheduler Broadcast>: Stream is closed"), ValueError("real")):
+        try:
+            try:
+                raise StreamClosedError() if isinstance(exc, CommClosedError) else KeyError("x")
+            except Exception as inner:
+                raise exc from inner
+        except Exception as caught:
+            log.error("Future exception was never retrieved", exc_info=(type(caught), caught, caught.__traceback__))
+    shown = [r for r in caplog.records if r.name == "asyncio"]
+    assert len(shown) == 1 and shown[0].exc_info[1].args == ("real",)
