@@ -139,7 +139,7 @@ def smear_offsets(u: float, v: float, omega: np.ndarray, camera, exposure_s: flo
 
 def identify(uv: np.ndarray, rec) -> np.ndarray:
     """Catalog id of each measured spot from one output record's predicted centroids (−1: none)."""
-    n = int(rec["n_stars"])
+    n = int(np.count_nonzero(rec["star_id"] >= 0))      # the tracked stars' rows (n_stars: seen, in COAST)
     ids = np.full(len(uv), -1, np.int64)
     if n == 0 or not len(uv):
         return ids
@@ -219,7 +219,7 @@ def export_calib(path: str | Path, out: str | Path) -> dict:
     t_cam = np.array(t_cam, float)
     uv_sigma = np.array(sigmas, float)
     ok, q_cam = field_attitudes(field, uv, ref, loop.camera, len(t_cam), uv_sigma=uv_sigma)
-    from .replay import whole_or_nothing
+    from ..files import whole_or_nothing
 
     # written whole to a temporary name, then renamed to exactly ``out``
     with whole_or_nothing(Path(out)) as part, open(part, "wb") as fh:

@@ -21,7 +21,6 @@ mode, flags, stars), HDF5 (h5py) with the full structured arrays and the run's M
 from __future__ import annotations
 
 import json
-import os
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -29,6 +28,7 @@ import numpy as np
 
 from ..cli.output import emit
 from ..errors import ConfigError
+from ..files import whole_or_nothing
 from ..loop.record import OUTPUT_DTYPE, TRUTH_DTYPE
 from ..recording import logfile as lf
 
@@ -211,21 +211,6 @@ def export(path: str | Path, fmt: str, out: str | Path, force: bool = False) -> 
     return res
 
 
-@contextmanager
-def whole_or_nothing(out: Path):
-    """A temporary path beside ``out`` (``.<name>.partial-<pid><suffix>``) to write a file to,
-    renamed to ``out`` once it is whole: an interrupted export (Ctrl-C, a full disk, an
-    error) leaves no file at ``out`` that looks complete, removes its partial file, and does
-    not make the next export to ``out`` ask for --force."""
-    out = Path(out)
-    part = out.with_name(f".{out.name}.partial-{os.getpid()}{out.suffix}")
-    try:
-        yield part
-        os.replace(part, out)
-    finally:
-        part.unlink(missing_ok=True)
-
-
 def _export_csv(recs: np.ndarray, truth, meta: dict, out: Path, part: Path | None = None) -> None:
     """CSV of the schema's columns (+ UTC, star ids, truth) written to ``part`` (default
     ``out``), and a W3C CSVW metadata file ``<out>-metadata.json`` giving every column's unit
@@ -241,7 +226,7 @@ def _export_csv(recs: np.ndarray, truth, meta: dict, out: Path, part: Path | Non
         fh.write(",".join(names) + "\n")
         for i, r in enumerate(recs):
             row = [repr(v.item()) if v.dtype.kind == "f" else str(v.item()) for v in (c[i] for c in cols.values())]
-            row += [utc[i], " ".join(str(v) for v in r["star_id"][: r["n_stars"]])]
+            row += [utc[i], " ".join(str(v) for v in r["star_id"][r["star_id"] >= 0])]
             if has_truth:
                 row += [repr(float(v)) for v in truth[i]["q"]]
             fh.write(",".join(row) + "\n")

@@ -182,6 +182,7 @@ class CoupledLoop:
         self.outputs = OutputStage(sinks, self.lat_clock)
         self.flags_pending = 0
         self.id_verified = False
+        self.stars_seen = 0          # stars the newest image updated (0: it saw none, or frames stopped)
         self.next_frame_t = -np.inf
         self.next_acquire_t = -np.inf
         self.pending = None            # the windows in flight: plan + time commanded
@@ -404,6 +405,10 @@ class CoupledLoop:
         # the tracked stars' predicted centroids go straight into the tracks' table (uv)
         self.c.gyro_stuck += f.predict(smp, self.flags_pending, base, self.mode, refs, ids, self.cam, slots,
                                        self.tracks.uv, self._out[lo:hi], lo, hi)
+        if self.mode == R.MODE_COAST:
+            # the tracked stars are only predicted: n_stars is how many the newest image still saw
+            n_stars = self._out["n_stars"][lo:hi]
+            np.minimum(n_stars, self.stars_seen, out=n_stars)
         self.flags_pending = 0
 
     def _emit(self, lo: int, hi: int) -> int:
@@ -680,10 +685,12 @@ class CoupledLoop:
         """Streaming: frames that stopped coming count as starless images, one per period
         (:meth:`ModeKeeper.frame_missing`)."""
         period = 1.0 / (self.budget.frame_hz if self.budget is not None else self.p.frame_hz)
+        self.stars_seen = 0
         self._heard(self.mode_keeper.frame_missing(now, period, self.link.up), now)
 
     def _after_image(self, now: float, updated: int) -> None:
         """An image at ``now`` updated ``updated`` stars (0: it failed): to the mode keeper."""
+        self.stars_seen = updated
         self._heard(self.mode_keeper.image(now, updated), now)
 
     def _heard(self, heard: Heard | None, now: float) -> None:

@@ -9,7 +9,9 @@ field              type        meaning (frames: gyrostar.attitude; body = camera
 ``t``              f8          host time of the gyro sample, s (monotonic or simulated clock)
 ``seq``            u4          output counter (gaps mean lost outputs)
 ``mode``           u1          MODE_ACQUIRE 0, MODE_TRACK 1, MODE_COAST 2
-``n_stars``        u1          stars tracked (valid rows of ``star_id``/``centroid_px``)
+``n_stars``        u1          stars tracked; in COAST the stars the newest image still measured (0 in
+                               a star-less COAST). The tracked stars' rows of ``star_id``/``centroid_px``
+                               are those with ``star_id`` ≥ 0 (in COAST more than ``n_stars``)
 ``flags``          u2          quality flags, ``FLAG_*`` below
 ``q``              f8[4]       attitude estimate [x, y, z, w], ICRS → body
 ``omega``          f8[3]       body rate, bias-corrected, rad/s

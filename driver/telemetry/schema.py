@@ -33,7 +33,7 @@ COLUMNS: tuple[Column, ...] = tuple([
     Column("seq", "u4", "", "output counter (a gap means lost outputs)"),
     Column("mode", "u1", "", "0 ACQUIRE, 1 TRACK, 2 COAST"),
     Column("flags", "u2", "", "quality flags (gyrostar.loop.record FLAG_*)"),
-    Column("n_stars", "u1", "", "stars tracked"),
+    Column("n_stars", "u1", "", "stars tracked; in COAST those the newest image still measured (0: none)"),
     *_vec("q", "xyzw", "f8", "1", "attitude quaternion ICRS → body, scalar last"),
     *_vec("omega", "xyz", "f8", "rad/s", "body rate, bias-corrected, body axes"),
     *_vec("bias", "xyz", "f8", "rad/s", "gyro bias estimate, body axes"),
