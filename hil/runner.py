@@ -115,8 +115,9 @@ def run(args) -> int:
     if result.get("log_error"):
         result["exit_code"] = 3
         emit(args, result, human_summary(result))
-        log.error("%s (%.1f s of %.1f s ran; summary in %s)", result["log_error"], result.get("ran_s") or 0.0,
-                  duration, folder)
+        where = (f"summary in {folder}" if not result.get("summary_error")
+                 else f"summary.json not written either: {result['summary_error']}")
+        log.error("%s (%.1f s of %.1f s ran; %s)", result["log_error"], result.get("ran_s") or 0.0, duration, where)
         return 3
     if result.get("interrupted"):
         result["exit_code"] = 130
@@ -378,6 +379,7 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
         wall = time.perf_counter() - t_wall0
         cpu_proc = time.process_time() - cpu0
         out = kept.records
+        plots = plots and log_failed is None           # a full disk: no figures (the log's line says why)
         if figures is not None and plots and len(out):
             figures.send_outputs_only(folder, out)     # those drawing from the outputs alone start now
         truth = fs.truth_rows(out["t"]) if len(out) else None
@@ -509,7 +511,10 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
                 writer.event({"summary": _jsonable(res_top)})
             writer.close()
             res_top["log"] = str(folder / "flatsat.gslog")
-        _write_summary(folder, res_top)
+        # a disk that took no more of the log takes no summary either: said once, in the log's line
+        summary_error = _write_summary(folder, res_top, quiet=log_failed is not None)
+        if summary_error:
+            res_top["summary_error"] = summary_error
     finally:
         late = bool(hold.held)     # a Ctrl-C while the run wound up: its summary is on disk now
         hold.held.clear()
@@ -517,7 +522,9 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
     try:
         if late:
             raise KeyboardInterrupt
-        if plots and len(out):
+        if log_failed is not None:
+            res_top["plots"] = "skipped: the log's disk took no more"
+        elif plots and len(out):
             from .plots import write_plots
 
             if cerr is not None and len(cerr):
@@ -663,16 +670,20 @@ def _bias_seen_by_loop(truth, calib):
     return seen
 
 
-def _write_summary(folder: Path, res: dict) -> None:
-    """summary.json of a run; a disk that takes no more is logged, not raised (the figures
-    are printed all the same)."""
+def _write_summary(folder: Path, res: dict, quiet: bool = False) -> str | None:
+    """summary.json of a run; a disk that takes no more is logged (unless ``quiet``: the
+    caller says it), not raised (the figures are printed all the same). Returns the reason it
+    was not written, or None."""
     from ..files import whole_or_nothing
 
     try:
         with whole_or_nothing(folder / "summary.json") as part:     # a full disk leaves none, not 0 bytes
             part.write_text(json.dumps(_jsonable(res), indent=2))
     except OSError as exc:
-        log.error("%s/summary.json not written: %s", folder, exc.strerror or exc)
+        if not quiet:
+            log.error("%s/summary.json not written: %s", folder, exc.strerror or exc)
+        return str(exc.strerror or exc)
+    return None
 
 
 def t_start_of(fs) -> float:
