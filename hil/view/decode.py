@@ -19,13 +19,13 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from ..headport import POLL
-from ..streamport import CH_STREAM_POLL, unpack_result
 from ...loop.record import FLAG_GYRO_GAP, FLAG_OVERRUN, MODE_NAMES, OUTPUT_DTYPE, TRUTH_DTYPE, flag_names
 from ...protocol import MsgType, decode_frame
 from ...protocol.defs import REPLY_FLAG
 from ...protocol.payloads import decode_reply, decode_request
 from ...recording import logfile as lf
+from ..headport import POLL
+from ..streamport import CH_STREAM_POLL, unpack_result
 
 _LINK_STATUS_OK = 0          # first byte of a TX/RX record: the frame went / a packet came
 _LINK_PREFIX = 9             # u8 status + f8 host time (recording.taps)

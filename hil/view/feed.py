@@ -18,6 +18,7 @@ import logging
 import os
 import queue
 import shutil
+import signal
 import socket
 import subprocess
 import sys
@@ -105,7 +106,7 @@ def _last_line(f) -> str:
     return lines[-1][-300:] if lines else "no message"
 
 
-def _free_port() -> int:
+def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
@@ -116,7 +117,7 @@ class ViewServer:
 
     def __init__(self, web_port: int):
         self.web_port = web_port
-        self.grpc_port = _free_port()
+        self.grpc_port = free_port()
         self.proc: subprocess.Popen | None = None
         self._err = None
 
@@ -160,14 +161,30 @@ class ViewServer:
             time.sleep(0.2)
 
     def close(self) -> None:
-        if self.proc is not None and self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(5.0)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
+        """Stop the server: its whole process group (the ``rerun`` launcher runs the server binary
+        as its child, which a signal to the launcher alone would leave running)."""
+        if self.proc is not None:
+            for sig in (signal.SIGTERM, signal.SIGKILL):
+                try:
+                    os.killpg(self.proc.pid, sig)
+                except ProcessLookupError:
+                    break
+                if self._group_gone(5.0):
+                    break
+            self.proc.wait()
         self.proc = None
+
+    def _group_gone(self, timeout: float) -> bool:
+        """Whether every process of the server's group has ended within ``timeout`` (s)."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            self.proc.poll()         # reap the launcher when it ends
+            try:
+                os.killpg(self.proc.pid, 0)
+            except ProcessLookupError:
+                return True
+            time.sleep(0.05)
+        return False
 
 
 class ViewFeed:

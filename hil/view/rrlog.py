@@ -57,7 +57,10 @@ def _series(rec, path: str, t: np.ndarray, values: np.ndarray) -> None:
 
 
 class RerunView(ViewSink):
-    def __init__(self, rec: rr.RecordingStream, link_bytes_per_s: float | None = None, tile_every_s: float = TILE_EVERY_S):
+    """Draws what :class:`.decode.ViewDecoder` hands it into the recording stream ``rec``."""
+
+    def __init__(self, rec: rr.RecordingStream, link_bytes_per_s: float | None = None,
+                 tile_every_s: float = TILE_EVERY_S):
         self.rec = rec
         self.link_bytes_per_s = link_bytes_per_s
         self.width = self.height = 0

@@ -11,7 +11,6 @@ import time
 
 import numpy as np
 import pytest
-
 from cli_helpers import GYROSTAR, gyrostar
 
 rerun = pytest.importorskip("rerun", reason="the live view needs rerun-sdk (the 'view' extra; 'dev' has it)")
@@ -220,3 +219,24 @@ def test_records_cross_the_pipe_as_the_log_holds_them(tmp_path):
     chunk = b"".join(record_bytes(r.kind, r.payload, r.channel, r.t_ns) for r in recs)
     assert (tmp_path / "a.gslog").read_bytes() == lf.MAGIC + chunk
     assert list(records_in(chunk)) == recs == list(lf.read_records(tmp_path / "a.gslog"))
+
+
+def test_web_viewer_server_listens_on_loopback_only_and_stops_whole():
+    """--view-serve's server: both ports on 127.0.0.1 (not on the wildcard address), and after
+    close() nothing listens any more (the launcher's server child stopped with it)."""
+    import socket
+
+    from gyrostar.hil.view.feed import ViewServer, free_port
+
+    srv = ViewServer(free_port()).start()
+    try:
+        listening = subprocess.run(["ss", "-Hltn"], capture_output=True, text=True).stdout
+        for port in (srv.web_port, srv.grpc_port):
+            where = [ln.split()[3] for ln in listening.splitlines() if ln.split()[3].endswith(f":{port}")]
+            assert where == [f"127.0.0.1:{port}"], (port, where)
+        assert srv.viewer_url.startswith(f"http://127.0.0.1:{srv.web_port}/?url=rerun%2Bhttp")
+    finally:
+        srv.close()
+    for port in (srv.web_port, srv.grpc_port):
+        with pytest.raises(OSError):
+            socket.create_connection(("127.0.0.1", port), timeout=1.0).close()
