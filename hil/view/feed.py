@@ -4,7 +4,8 @@ The view rides on the log: the run's :class:`~gyrostar.recording.logfile.LogWrit
 run of whole records it drains (every ``flush_s`` = 50 ms, on its writer thread, off the 400 Hz
 path) to :meth:`ViewFeed.tee`, which only queues the bytes (a bounded queue of
 :data:`QUEUE_CHUNKS` runs). A feeder thread writes them into a pipe to the view process
-(``python -m gyrostar.hil.view.worker``, niced), where they are decoded and drawn with rerun.
+(``python -m gyrostar.hil.view.worker``, niced; in real time on SCHED_IDLE), where they are
+decoded and drawn with rerun.
 In real time a full queue drops the run of records for the view (counted, the log has them
 all); a fast run (simulated clock) waits for the view instead, so its recording is complete.
 ``--view-serve`` starts rerun's own server (``rerun --serve-web --bind 127.0.0.1``): the web
@@ -221,6 +222,8 @@ class ViewFeed:
             cmd += ["--spawn"]
         if self.recording_id:
             cmd += ["--recording-id", self.recording_id]
+        if not self.lossless:
+            cmd += ["--idle"]        # real time: the view takes only CPU time the loop leaves
         self._err = tempfile.TemporaryFile()     # a view that says much can never block on a pipe
         env = dict(os.environ, RERUN_ANALYTICS="0")
         with signals_held():

@@ -72,6 +72,7 @@ class RerunView(ViewSink):
         self._kept_n = 0
         self._pending_update: np.ndarray | None = None   # outputs since the last frame (trajectories)
         self._batch: list[np.ndarray] = []
+        self._spots_shown = False
         self._tiles_t = -np.inf
         self.tile_every_s = tile_every_s
         self._static()
@@ -111,11 +112,15 @@ class RerunView(ViewSink):
         self._at(t)
         s = np.asarray(spots, np.float64).reshape(-1, 3)
         self.rec.log("camera/spots", rr.Points2D(s[:, :2], radii=3.0, labels=[f"{int(v)}" for v in s[:, 2]]))
+        self._spots_shown = True
 
     def frame(self, t_mid: float, frame: int, spans: np.ndarray, values: np.ndarray) -> None:
         self._at(t_mid)
         ids = np.unique(spans[:, 0])
         show_tiles = t_mid - self._tiles_t >= self.tile_every_s
+        if self._spots_shown:          # the lost-in-space spot list is over once frames come
+            self.rec.log("camera/spots", rr.Clear(recursive=False))
+            self._spots_shown = False
         mins, sizes, cents, halfs = [], [], [], []
         vals = values.astype(np.float64)
         bounds = np.concatenate([[0], np.cumsum(spans[:, 3] - spans[:, 2])])

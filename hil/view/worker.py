@@ -3,7 +3,8 @@
 Reads runs of whole log records from stdin, each as ``u32 length`` + bytes (length 0: the end),
 decodes them (:class:`.decode.ViewDecoder`) and draws them with rerun (:class:`.rrlog.RerunView`)
 into a file, a rerun server or a spawned native viewer. At the end it prints one JSON line of
-counts on stdout. It runs niced, in its own session (a Ctrl-C at the terminal is the run's).
+counts on stdout. It runs niced (a real-time run's view on SCHED_IDLE: ``--idle``), in its own
+session (a Ctrl-C at the terminal is the run's).
 """
 
 from __future__ import annotations
@@ -41,6 +42,26 @@ def chunks(f):
             return
 
 
+def blueprint():
+    """The viewer's layout: the sensor with windows and stars beside the attitude's 3σ, the error
+    against the truth, the rate and the mode log."""
+    import rerun.blueprint as rrb
+
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Spatial2DView(origin="/camera", name="camera: windows, centroids, identified stars"),
+            rrb.Vertical(
+                rrb.TimeSeriesView(origin="/attitude/sigma3_arcsec", name="attitude 3σ (″)"),
+                rrb.TimeSeriesView(origin="/truth/error_arcsec", name="error against the truth (″)"),
+                rrb.TimeSeriesView(origin="/gyro/rate_dps", name="rate (°/s)"),
+                rrb.TextLogView(origin="/loop/mode", name="modes and events"),
+            ),
+            column_shares=[3, 2],
+        ),
+        collapse_panels=True,
+    )
+
+
 def open_recording(save: str | None, connect: str | None, spawn: bool, recording_id: str | None = None):
     """The rerun recording stream with the sinks asked for."""
     import rerun as rr
@@ -55,8 +76,23 @@ def open_recording(save: str | None, connect: str | None, spawn: bool, recording
         # the native viewer (rerun's own binary; one already listening on the port is reused)
         rr.spawn(port=SPAWN_PORT, connect=False, recording=rec)
         sinks.append(rr.GrpcSink(f"rerun+http://127.0.0.1:{SPAWN_PORT}/proxy"))
-    rec.set_sinks(*sinks)
+    rec.set_sinks(*sinks, default_blueprint=blueprint())
     return rec
+
+
+def _step_back(idle: bool) -> None:
+    """Give the loop's process the CPU first: niced, and with ``idle`` on SCHED_IDLE (a real-time
+    run: the view then falls behind on a busy host and the feed drops records for it, rather
+    than the view taking CPU time from the loop)."""
+    try:
+        os.nice(10)
+    except OSError:
+        pass
+    if idle and hasattr(os, "SCHED_IDLE"):
+        try:
+            os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+        except OSError:
+            pass
 
 
 def main(argv=None) -> int:
@@ -66,11 +102,10 @@ def main(argv=None) -> int:
     p.add_argument("--spawn", action="store_true")
     p.add_argument("--recording-id", default=None)
     p.add_argument("--tile-every-s", type=float, default=None)
+    p.add_argument("--idle", action="store_true",
+                   help="run only on CPU time nothing else wants (SCHED_IDLE): a real-time run's view")
     args = p.parse_args(argv)
-    try:
-        os.nice(10)          # the loop's process comes first on a busy host
-    except OSError:
-        pass
+    _step_back(args.idle)
     from .decode import ViewDecoder, records_in
     from .rrlog import TILE_EVERY_S, RerunView
 
