@@ -79,7 +79,23 @@ def log_state_text(res: dict) -> str:
     return "".join("; " + n for n in notes)
 
 
-def replay(path: str | Path, progress=None) -> dict:
+def replayed_records(records, replayed: np.ndarray):
+    """The log's records with each OUTPUT record's rows replaced by the replay's rows in its
+    place (the run's time line, what the replayed driver computed); OUTPUT records past the
+    replay's end are left out."""
+    pos = 0
+    for r in records:
+        if r.kind != lf.OUTPUT:
+            yield r
+            continue
+        n = len(r.payload) // OUTPUT_DTYPE.itemsize
+        if pos >= len(replayed):
+            continue
+        yield lf.Record(r.kind, r.channel, r.t_ns, replayed[pos:pos + n].tobytes())
+        pos += n
+
+
+def replay(path: str | Path, progress=None, view=None) -> dict:
     """Replay a log through the driver and loop; compare outputs. Returns the figures.
 
     ``verdict``: ``bit-exact`` (every recorded output replayed identically), ``prefix``
@@ -96,6 +112,8 @@ def replay(path: str | Path, progress=None) -> dict:
         log = load_log(path, lambda pos, size: advance_read(pos, size))
     recorded = log["outputs"]
     report = log["report"]
+    if view is not None:
+        view.start()
     if not len(recorded):
         why = next((e["aborted"] for e in log["events"] if "aborted" in e), None)
         raise ConfigError(f"log {path} holds no loop outputs: nothing to replay (the run "
@@ -119,6 +137,11 @@ def replay(path: str | Path, progress=None) -> dict:
         b = recorded[:n].view(np.uint8).reshape(n, -1)
         first_diff = int(np.flatnonzero(np.any(a != b, axis=1))[0])
     bit_exact = bool(same_prefix and len(replayed) == len(recorded) and log["complete"])
+    shown = None
+    if view is not None:     # the recorded run on its own time line, with the replay's outputs
+        with progress("view", None) as _:
+            view.send_records(replayed_records(log["records"], replayed))
+            shown = view.close()
     if report.skipped:
         verdict = "corrupt"
     elif not same_prefix:
@@ -147,7 +170,7 @@ def replay(path: str | Path, progress=None) -> dict:
         "log_skipped": [{"offset": off, "bytes": nb, "reason": why} for off, nb, why in report.skipped],
         "log_tail_ignored_bytes": report.ignored_tail_bytes,
         "log_tail_reason": report.tail_reason,
-    }
+    } | ({"view": shown} if shown is not None else {})
 
 
 @contextmanager
@@ -290,6 +313,12 @@ def verdict_text(res: dict) -> str:
 
 
 def run(args) -> int:
+    from .view.feed import ViewFeed, check, options_from
+
+    view_opts = options_from(args)
+    if view_opts is not None and (args.export or getattr(args, "compare_calibration", None)):
+        raise ConfigError("--view, --view-save and --view-serve show a replay: not with --export or "
+                          "--compare-calibration")
     if getattr(args, "compare_calibration", None):
         from .calib_truth import compare, text
 
@@ -314,10 +343,24 @@ def run(args) -> int:
                 "samples" if args.export == "calib" else f"{res['outputs']} outputs")
         emit(args, res, f"exported {what} to {res['out']} ({res['export']}){log_state_text(res)}")
         return 0
-    res = replay(args.log, lambda d, total: _bytes_or_items(args, d, total, progress))
+    view = None
+    if view_opts is not None:
+        check(view_opts)
+        view = ViewFeed(view_opts, lossless=True)
+    try:
+        res = replay(args.log, lambda d, total: _bytes_or_items(args, d, total, progress), view=view)
+    except BaseException:
+        if view is not None:
+            view.abort()
+        raise
     human = (f"replayed {res['replayed_outputs']} outputs of {res['recorded_outputs']} recorded "
              f"in {res['steps']} loop steps: {verdict_text(res)}")
+    if res.get("view"):
+        v = res["view"]
+        human += f"\n  view: {v['frames']} frames drawn ({v['shown']})" + (f"; {v['error']}" if v.get("error") else "")
     emit(args, res, human)
+    if view is not None:
+        view.serve_until_interrupted()
     if args.check and res["verdict"] in ("corrupt", "different"):
         return 1
     return 0

@@ -103,15 +103,49 @@ def run(args) -> int:
     from .run_memory import check_kept_outputs_fit
 
     check_kept_outputs_fit(duration, cfg.gyro.odr_hz)     # before the run folder is made
+    from .view.feed import ViewFeed, check, options_from
+
+    view_opts = options_from(args)
+    view = None
+    if view_opts is not None:
+        if not cfg.outputs.record:
+            raise ConfigError("--view, --view-save and --view-serve ride on the run's log: the config sets "
+                              "outputs.record = false")
+        check(view_opts)      # rerun-sdk, a display, the recording's path: before the run folder is made
+        view = ViewFeed(view_opts, lossless=bool(getattr(args, "fast", False)))
     # the lock is held until this function returns (the run, its summary and figures written)
     folder, lock = make_run_folder(getattr(args, "out", None), scen.name)     # noqa: F841 - held, not used
-    result = run_flatsat(cfg, scen, duration=duration, seed=int(getattr(args, "seed", 1) or 0), folder=folder,
-                         realtime=bool(getattr(args, "realtime", False)),
-                         plots=not getattr(args, "no_plots", False),
-                         status=getattr(args, "verbose", 0) >= 0,
-                         config_path=getattr(args, "config", None), fast=bool(getattr(args, "fast", False)))
+    try:
+        result = run_flatsat(cfg, scen, duration=duration, seed=int(getattr(args, "seed", 1) or 0), folder=folder,
+                             realtime=bool(getattr(args, "realtime", False)),
+                             plots=not getattr(args, "no_plots", False),
+                             status=getattr(args, "verbose", 0) >= 0,
+                             config_path=getattr(args, "config", None), fast=bool(getattr(args, "fast", False)),
+                             view=view, panel=_panel_wanted(args))
+    except BaseException:
+        if view is not None:
+            view.abort()
+        raise
     result["command_wall_s"] = round(time.perf_counter() - t_command, 2)
     _warn_losses(result)
+    code = _report(args, cfg, scen, duration, folder, result)
+    if view is not None:
+        if result.get("interrupted"):
+            view.abort()
+        else:
+            view.serve_until_interrupted()     # --view-serve: the web viewer stays up until Ctrl-C
+    return code
+
+
+def _panel_wanted(args) -> bool:
+    """The live panel: on a terminal (stderr), not with --json or --quiet."""
+    import sys
+
+    return getattr(args, "verbose", 0) >= 0 and not getattr(args, "json", False) and sys.stderr.isatty()
+
+
+def _report(args, cfg, scen, duration: float, folder: Path, result: dict) -> int:
+    """Print a finished run's summary and say its exit code."""
     if result.get("log_error"):
         result["exit_code"] = 3
         emit(args, result, human_summary(result))
@@ -159,7 +193,7 @@ def _warn_losses(result: dict) -> None:
 def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed: int, folder: Path,
                 realtime: bool = False, plots: bool = True, status: bool = True, config_path=None,
                 record: bool | None = None, on_output=None, probe=None, fast: bool = False,
-                keep_arrays: bool = False) -> dict:
+                keep_arrays: bool = False, view=None, panel: bool = False) -> dict:
     """Run one flatsat session and return its summary (also written to summary.json).
 
     ``fast``: the emulated devices on a simulated clock in lock-step with the loop
@@ -167,7 +201,10 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
 
     ``probe``: a :class:`gyrostar.loop.wakeup_probe.WakeupProbe` to run beside the loop; the
     summary's ``host_wakeups`` then says how often the host itself woke a real-time task
-    late and how many overruns coincided with that."""
+    late and how many overruns coincided with that.
+
+    ``view``: a :class:`gyrostar.hil.view.feed.ViewFeed` fed from the log writer (its figures in
+    the summary's ``view``); ``panel``: the terminal panel instead of the status line."""
     from ..loop.record import describe
     from ..recording import logfile as lf
 
@@ -209,9 +246,15 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
         held.release()
         raise
     figures = None
+    shown = None
     try:
         # a Ctrl-C held while the log came into being is delivered here, where the log records it
         held.release()
+        if view is not None and writer is not None:
+            # the view rides on the log: its META first, then every run of records the writer drains
+            view.start()
+            view.send_records([lf.Record(lf.META, 0, 0, json.dumps(meta, sort_keys=True).encode())])
+            writer.tee = view.tee
         if plots and fast:
             # helpers that import matplotlib while the run starts up, then draw the figures side
             # by side (started with the loop instead, they slow it by more than they save; real
@@ -219,8 +262,8 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
             from .figure_workers import FigureWorkers
 
             figures = FigureWorkers().start()
-        return _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer, on_output, probe,
-                        fast, keep_arrays, calib=calib, timemap=timemap, figures=figures)
+        res = _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer, on_output, probe,
+                       fast, keep_arrays, calib=calib, timemap=timemap, figures=figures, panel=panel)
     except BaseException as exc:
         if writer:
             # a Ctrl-C inside native code (numba compiling, a C extension) can surface as another
@@ -242,10 +285,16 @@ def run_flatsat(cfg: hc.FlatsatConfig, scen: hc.Scenario, duration: float, seed:
             figures.close()
         if writer:
             writer.close()
+        if view is not None:
+            shown = view.close()       # the view draws the log's last records (truth, summary) first
+    if shown is not None:
+        res["view"] = shown
+        _write_summary(folder, res)
+    return res
 
 
 def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer, on_output, probe, fast,
-             keep_arrays=False, calib=None, timemap=None, figures=None) -> dict:
+             keep_arrays=False, calib=None, timemap=None, figures=None, panel=False) -> dict:
     """The body of :func:`run_flatsat` once its log holds the META record."""
     import sys
 
@@ -256,7 +305,7 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
     from ..recording import logfile as lf
     from . import flatsat
     from .analysis import summarize
-    from .status import StatusLine
+    from .status import StatusLine, StatusPanel
 
     flatsat.preflight(cfg, scen, simulated_clock=fast)    # device nodes: exit 3 naming one that is not there
     # the loop shares the interpreter with the link reader and head worker threads (and
@@ -313,7 +362,7 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
         # no step waits for a pause here: collect the young generation ten times less often
         gc.set_threshold(10 * gc_thresholds[0], *gc_thresholds[1:])
     wiring = fs.wiring
-    line = StatusLine(enabled=status)
+    line = StatusPanel(loop) if panel and status else StatusLine(enabled=status)
     step_wall: list[float] = []
     # the loop's CPU seconds in its steps, and (real time) the loop thread's with its idle ticks,
     # written by the runner as it goes (a run stopped early too)
@@ -742,6 +791,11 @@ def human_summary(r: dict) -> str:
                      f"{f(r.get('sample_age_at_step_ms_p50'), '.1f')}/{f(r.get('sample_age_at_step_ms_p99'), '.1f')} "
                      f"ms; stars cut for the link in "
                      f"{lb.get('frames_stars_cut', 0)} frames, rate changes {len(lb.get('rate_changes', []))}")
+    v = r.get("view")
+    if v:
+        lines.append(f"  view: {v['shown']}; {v.get('frames')} frames drawn, {v['dropped_chunks']} runs of records "
+                     f"({v['dropped_bytes'] / 1e3:.0f} kB) dropped for the view"
+                     + (f"; [red]{v['error']}[/]" if v.get("error") else ""))
     if r.get("acquisition_image"):
         spots = r["acquisition_image"] == "spots"
         lines.append("  lost-in-space image: " + ("the head's spot list (FIND_SPOTS)" if spots else "full frames"))

@@ -82,7 +82,9 @@ def _pack_result(res: ImageResult) -> bytes:
     return b"\x01" + struct.pack("<I", len(blob)) + blob + values
 
 
-def _unpack_result(payload: bytes) -> ImageResult:
+def unpack_result(payload: bytes) -> ImageResult:
+    """The :class:`ImageResult` of a logged poll answer (kind POLL, channel ``CH_STREAM_POLL``,
+    payload starting with 0x01)."""
     (n,) = struct.unpack_from("<I", payload, 1)
     meta = pickle.loads(payload[5:5 + n])
     kind, t0, t1, tm, frame, set_frame, error, measured = meta[:8]
@@ -278,7 +280,7 @@ class StreamPort(HeadPort):
             payload = self.replay.take(self.replay.polls, "head polls")
             if payload[:1] != b"\x01":
                 return None
-            res = _unpack_result(payload)
+            res = unpack_result(payload)
             if res.kind != "windows":
                 self._job = None
             elif res.error is None:

@@ -132,6 +132,19 @@ def add_json(parser: argparse.ArgumentParser) -> None:
                         help="print one JSON object on stdout (human text goes to stderr)")
 
 
+def add_view(parser: argparse.ArgumentParser) -> None:
+    """The live view's flags of ``run`` and ``replay`` (rerun; the optional extra ``view``)."""
+    from .argtypes import int_in
+
+    parser.add_argument("--view", action="store_true",
+                        help="show the run live in rerun's native viewer (needs a display and the 'view' extra)")
+    parser.add_argument("--view-save", metavar="FILE.rrd", default=None,
+                        help="write the live view to a rerun recording (an existing file is refused)")
+    parser.add_argument("--view-serve", metavar="PORT", nargs="?", type=int_in(1024, 65535), const=9090,
+                        default=None, help="serve rerun's web viewer on 127.0.0.1:PORT (default 9090); "
+                                           "after the run it serves until Ctrl-C")
+
+
 run_target = group.run_target
 
 if __name__ == "__main__":

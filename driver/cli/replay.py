@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from . import group
-from .main import add_json
+from .main import add_json, add_view
 
 
 def configure(parser) -> None:
@@ -19,6 +19,7 @@ def configure(parser) -> None:
                              "corrupt (without it the verdict is printed and the exit is 0)")
     parser.add_argument("--compare-calibration", metavar="TOML", default=None,
                         help="simulated runs: compare a calibration file with the simulator's true devices")
+    add_view(parser)
     add_json(parser)
 
 

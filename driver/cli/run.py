@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from . import group
 from .argtypes import non_blank, run_seconds, seed
-from .main import add_json
+from .main import add_json, add_view
 
 
 def configure(parser) -> None:
@@ -30,6 +30,7 @@ def configure(parser) -> None:
     parser.add_argument("--fast", action="store_true",
                         help="run the emulated devices on a simulated clock in lock-step with the loop, as fast as "
                              "the host computes (same loop, log and figures; not with --realtime)")
+    add_view(parser)
     add_json(parser)
 
 

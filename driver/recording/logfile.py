@@ -96,6 +96,9 @@ class LogWriter:
         self.records = 0
         self.bytes_written = 0
         self.error: OSError | None = None
+        # tee(chunk): called with each run of whole records as it goes to the kernel (on the
+        # thread that drains: the writer thread with ``background``); it must not block
+        self.tee = None
         self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_APPEND, 0o644)
         self._write_all(MAGIC)
 
@@ -184,6 +187,8 @@ class LogWriter:
                 except OSError as exc:
                     self.error = exc
                     return False
+                if self.tee is not None:
+                    self.tee(data)
         return True
 
     def _start_writer(self) -> None:

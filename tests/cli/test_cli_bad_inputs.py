@@ -138,6 +138,13 @@ CASES = [
      USAGE, ["--check"]),
     ("replay-export-onto-existing", ["replay", "{d}/notalog.gslog", "--export", "csv", "--out", "{d}/bad.toml"],
      USAGE, ["exists", "--force"]),
+    # --- the live view (rerun-sdk is in the dev extra)
+    ("run-view-save-existing", ["run", "--fast", "--view-save", "{d}/bad.toml"], USAGE, ["--view-save", "exists"]),
+    ("run-view-save-no-folder", ["run", "--fast", "--view-save", "{d}/no/R.rrd"], USAGE,
+     ["--view-save", "does not exist"]),
+    ("run-view-serve-port", ["run", "--fast", "--view-serve", "80"], USAGE, ["--view-serve", "at least 1024"]),
+    ("replay-view-with-export", ["replay", "{d}/notalog.gslog", "--export", "csv", "--out", "{d}/v.csv",
+                                 "--view-save", "{d}/v.rrd"], USAGE, ["--view", "--export"]),
     # --- calibrate: bad inputs name the argument
     ("cal-static-text-npz", ["calibrate", "gyro-static", "{d}/text.npz"], USAGE,
      ["INPUT", "text.npz", "npz"]),
