@@ -36,6 +36,9 @@ def _files(d):
     (d / "camp").mkdir()
     (d / "camp" / "summary.json").write_text("{}")
     (d / "afile").write_text("x")
+    (d / "stray_no_orbit.toml").write_text('name = "s"\n[stray_light]\nenabled = true\n')
+    (d / "orbit_epoch.toml").write_text('name = "s"\n[orbit]\nenabled = true\nepoch_utc = "yesterday"\n')
+    (d / "saa_box.toml").write_text('name = "s"\n[radiation]\nenabled = true\nsaa_lat_deg = [10.0, -10.0]\n')
     return d
 
 
@@ -87,6 +90,8 @@ CASES = [
                              "--config", ("head", "kind", '"serial"'), '+url="/dev/ttyUSB9"'], USAGE, ["emulated"]),
     ("eval-loop-out-holds-campaign", ["eval", "loop", "--runs", "1", "--duration", "10", "--out", "{d}/camp"],
      USAGE, ["already holds"]),
+    ("eval-loop-orbit-short", ["eval", "loop", "--orbit", "--runs", "1", "--duration", "5", "--out", "{d}/mco"],
+     USAGE, ["--duration", "≥ 10"]),
     ("sim-frame-missing-folder", ["sim", "frame", "--out", "{d}/no/x.fits"], USAGE, ["does not exist"]),
     ("sim-frame-dec-200", ["sim", "frame", "--out", "{d}/x.fits", "--ra-deg", "10", "--dec-deg", "200"], USAGE,
      ["--dec-deg"]),
@@ -110,6 +115,12 @@ CASES = [
     ("run-unknown-key", ["run", "--config", ("loop", "frame_hz", "100\nframe_rate = 3")], USAGE, ["frame_rate"]),
     ("run-unknown-scenario", ["run", "--scenario", "nosuch"], USAGE, ["nosuch"]),
     ("run-scenario-missing-file", ["run", "--scenario", "{d}/nosuch.toml"], USAGE, ["nosuch.toml"]),
+    ("run-stray-light-no-orbit", ["run", "--scenario", "{d}/stray_no_orbit.toml"], USAGE,
+     ["stray_light", "orbit", "stray_no_orbit.toml"]),
+    ("run-orbit-bad-epoch", ["run", "--scenario", "{d}/orbit_epoch.toml"], USAGE, ["orbit.epoch_utc", "yesterday"]),
+    ("run-saa-box-inverted", ["run", "--scenario", "{d}/saa_box.toml"], USAGE, ["radiation.saa_lat_deg"]),
+    ("run-hazards-fwhost", ["run", "--config", FWHOST, "--scenario", "saa-pass"], USAGE,
+     ["orbit environment", "firmware-host"]),
     ("run-out-under-file", ["run", "--out", "/dev/null/x"], USAGE, ["--out", "/dev/null/x"]),
     # --- replay
     ("replay-missing", ["replay", "{d}/nope.gslog"], USAGE, ["nope.gslog"]),
