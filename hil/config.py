@@ -366,17 +366,17 @@ class OrbitConfig:
     """The spacecraft's circular orbit and the run's epoch: the Sun, the Moon, the Earth's limb and
     the Earth's shadow follow from it (:mod:`gyrostar.mocks.orbit`). Off: no Sun, Moon or Earth."""
 
-    enabled: bool = False
-    altitude_km: float = 500.0
+    enabled: bool = False              # the Sun, the Moon and the Earth around the spacecraft
+    altitude_km: float = 500.0         # altitude of the circular orbit, km
     inclination_deg: float = 97.4      # sun-synchronous at 500 km
-    ltan_h: float = 10.5               # local time of the ascending node, h (sets the node's right ascension
-                                       # from the Sun's at the epoch)
+    ltan_h: float = 10.5               # local time of the ascending node, h: the node's right ascension is
+                                       # the Sun's at the epoch + 15°/h · (ltan_h − 12)
     raan_deg: float | None = None      # right ascension of the ascending node, deg: replaces ltan_h when set
     phase_deg: float = 0.0             # argument of latitude at scenario time 0, deg (0: the ascending node)
     epoch_utc: str = "2026-03-20T12:00:00"   # UTC at scenario time 0 (ISO 8601)
 
     def validate(self):
-        _in_range("orbit", self, 160.0, 2000.0, "altitude_km")      # a low Earth orbit
+        _in_range("orbit", self, 160.0, 2000.0, "altitude_km")
         _in_range("orbit", self, 0.0, 180.0, "inclination_deg")
         _in_range("orbit", self, 0.0, 24.0, "ltan_h")
         _in_range("orbit", self, -360.0, 360.0, "phase_deg", *(["raan_deg"] if self.raan_deg is not None else []))
@@ -396,7 +396,7 @@ class StrayLightConfig:
     """Background from the Sun, the sunlit Earth and the Moon outside the field, through the baffle's
     point-source transmittance (PST) curve (docs/SIMULATOR.md, "Stray light"); needs [orbit]."""
 
-    enabled: bool = False
+    enabled: bool = False              # background from the Sun, the Moon and the sunlit Earth
     exclusion_deg: float = 30.0        # the baffle's cut-off angle from the boresight: closer, the first lens
                                        # is lit and the sensor is blinded
     pst_edge: float = 1.0e-3           # PST of a source just outside the field (lit first lens)
@@ -419,7 +419,7 @@ class MoonConfig:
     """The Moon rendered as a resolved disk (phase-lit, saturating) when it is in the field, and
     the stars behind it hidden; needs [orbit]."""
 
-    enabled: bool = False
+    enabled: bool = False              # the Moon's disk and its hidden stars
 
 
 @dataclass
@@ -427,7 +427,7 @@ class RadiationConfig:
     """Particle hits per frame (Poisson; short tracks, a Landau-like charge) with a higher flux
     inside the South Atlantic Anomaly, and hot pixels that appear during the run."""
 
-    enabled: bool = False
+    enabled: bool = False              # particle hits and new hot pixels
     flux_cm2_s: float = 2.0            # particles per cm² per s outside the SAA (galactic cosmic rays, LEO)
     saa_flux_cm2_s: float = 300.0      # inside the SAA box (trapped protons through the head's shielding)
     saa_lat_deg: tuple[float, float] = (-50.0, 0.0)      # the SAA box: latitude range of the sub-satellite point
@@ -455,7 +455,7 @@ class ThermalConfig:
     """Sensor temperature over the run: dark current doubling every ``dark_doubling_c`` and the
     focal length drifting by ``focal_ppm_per_c`` from the preset's values at ``reference_c``."""
 
-    enabled: bool = False
+    enabled: bool = False              # dark current and focal length follow the temperature
     temperature_c: float = 20.0        # mean sensor temperature, °C
     swing_c: float = 0.0               # amplitude of a sinusoid over one orbit period, °C
     rate_c_per_s: float = 0.0          # steady drift, °C/s (e.g. a warm-up)
@@ -554,20 +554,25 @@ def scenario_names() -> list[str]:
 
 def load_scenario(name_or_path: str | None) -> Scenario:
     """A built-in scenario by name (default ``demo``), a scenario TOML file by path, or a
-    Monte Carlo case ``mc:SEED@DURATION`` (``gyrostar eval loop``; run it with ``--seed SEED``)."""
+    Monte Carlo case ``mc:SEED@DURATION`` (``gyrostar eval loop``; run it with ``--seed SEED``) or
+    ``mco:SEED@DURATION`` (an orbit case, ``gyrostar eval loop --orbit``)."""
     name_or_path = name_or_path or "demo"
-    if name_or_path.startswith("mc:"):
+    if name_or_path.startswith(("mc:", "mco:")):
         from .montecarlo.cases import case_scenario, draw_case
+        from .montecarlo.orbit_cases import draw_orbit_case, orbit_case_scenario
 
+        prefix = name_or_path.split(":", 1)[0]
         try:
-            seed_s, dur_s = name_or_path[3:].split("@")
+            seed_s, dur_s = name_or_path[len(prefix) + 1:].split("@")
             seed, dur = int(seed_s), float(dur_s)
             if not math.isfinite(dur):
                 raise ValueError(f"DURATION must be a finite number of seconds, got {dur_s!r}")
+            if prefix == "mco":
+                return orbit_case_scenario(draw_orbit_case(seed, dur), dur)
             return case_scenario(draw_case(seed, dur), dur)
         except ValueError as exc:
-            raise ConfigError(f"--scenario {name_or_path}: a Monte Carlo case is mc:SEED@DURATION, "
-                              f"e.g. mc:100007@30 ({exc})") from None
+            raise ConfigError(f"--scenario {name_or_path}: a Monte Carlo case is {prefix}:SEED@DURATION, "
+                              f"e.g. {prefix}:100007@30 ({exc})") from None
     path = Path(name_or_path)
     if not path.suffix == ".toml":
         path = Path(str(resources.files("gyrostar.hil") / "scenarios" / f"{name_or_path}.toml"))

@@ -93,8 +93,7 @@ class CircularOrbit:
             self.raan = math.radians(cfg.raan_deg)
         else:
             s = self.sun_km(0.0)
-            ra_sun = math.atan2(s[1], s[0])
-            self.raan = ra_sun + math.radians(15.0 * (cfg.ltan_h - 12.0))
+            self.raan = math.atan2(s[1], s[0]) + math.radians(15.0 * (cfg.ltan_h - 12.0))
         self.u0 = math.radians(cfg.phase_deg)
         cO, sO, ci, si = math.cos(self.raan), math.sin(self.raan), math.cos(self.inc), math.sin(self.inc)
         self._p = np.array([cO, sO, 0.0])               # towards the ascending node
