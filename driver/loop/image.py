@@ -11,13 +11,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from .image_kernels import measure_windows
+from .image_kernels import BRIGHT_FRACTION, measure_windows
 
 LIS_SIGMA = 6.0        # lost-in-space spot threshold: background + 6σ (full frame or the head's FIND_SPOTS)
 LIS_MAX_SPOTS = 40     # spots handed to the identifier, brightest first
 LIS_HEAD_SPOTS = 64    # spot windows a head's FIND_SPOTS sends (its neighbour score ranks a little
                        # differently from the full box flux: the host re-ranks and keeps 40)
 LIS_BOX = 7            # px: centroid box and suppression distance
+BLIND_PIXEL_FRACTION = 0.01   # a full frame with more of its pixels near full scale is blinded (not searched)
 FIT_MAX_ITER = 10      # Gauss–Newton iterations of the smeared-PSF fit, at most
 FIT_TOL_PX = 1e-2      # px (|Δu| + |Δv|): the fit stops after a step this small. It converges
                        # linearly here, each step about 0.1× the one before: on the demo the
@@ -67,9 +68,12 @@ class ImagePipeline:
     def _measure(self, plan: dict, values) -> tuple:
         p = self.p
         vals = np.ascontiguousarray(values, dtype=np.float64)
+        vmag = plan.get("vmag")
+        if vmag is None:
+            vmag = np.full(len(plan["wins"]), np.nan)
         return measure_windows(plan["spans"], vals, plan["wins"], plan["off"], plan["off_start"], plan["off_len"],
                                self.cam, p.psf_sigma_px, p.thresh_sigma, p.min_signal, p.e_per_dn, FIT_MAX_ITER,
-                               FIT_TOL_PX)
+                               FIT_TOL_PX, vmag, BRIGHT_FRACTION * p.adc_max_dn)
 
     def _measure_pool(self):
         if self._pool is None:
@@ -81,21 +85,29 @@ class ImagePipeline:
         return self._pool
 
     def lost_in_space(self, image):
-        """Spots of a lost-in-space image and their identification: ``(spots, ident or None)``.
-        ``image``: a full frame ((H, W) array), or a head's FIND_SPOTS result
-        (:class:`gyrostar.head.SpotCapture`: its windows are centroided here). Runs on the head
-        port's worker, off the loop's steps; reads no loop state."""
+        """Spots of a lost-in-space image and their identification: ``(spots, ident or None,
+        blinded)``. ``image``: a full frame ((H, W) array), or a head's FIND_SPOTS result
+        (:class:`gyrostar.head.SpotCapture`: its windows are centroided here). A blinded
+        image — more than ``BLIND_PIXEL_FRACTION`` of a full frame's pixels, or the head's
+        background, above ``BRIGHT_FRACTION`` of full scale — is not searched (its glare
+        would make spots no catalog holds). Runs on the head port's worker, off the loop's
+        steps; reads no loop state."""
         from .acquire import detect_spots, spots_from_windows
 
+        bright = BRIGHT_FRACTION * self.p.adc_max_dn
         if isinstance(image, np.ndarray):
+            if np.count_nonzero(image > bright) > BLIND_PIXEL_FRACTION * image.size:
+                return np.zeros((0, 3)), None, True
             spots = detect_spots(image.astype(np.float64), LIS_SIGMA, LIS_MAX_SPOTS, LIS_BOX)
         else:
+            if image.background_dn > bright:
+                return np.zeros((0, 3)), None, True
             values = np.concatenate([w.pixels for w in image.capture.windows]) if image.capture.windows \
                 else np.zeros(0)
             spots = spots_from_windows(image.spans, values, image.background_dn, image.sigma_dn, LIS_MAX_SPOTS)
         if len(spots) < 3:
-            return spots, None
-        return spots, self.identifier.identify(np.ascontiguousarray(spots[:, :2]))
+            return spots, None, False
+        return spots, self.identifier.identify(np.ascontiguousarray(spots[:, :2])), False
 
     def close(self) -> None:
         if self._pool is not None:

@@ -33,6 +33,11 @@ MEAS_OK = 0        # direction measured
 MEAS_MISS = 1      # window read, no spot above threshold (or too faint)
 SIGMA_FLOOR_PX = 0.005  # px: least centroid σ reported (the fit's own σ is below it only for saturating stars)
 MEAS_ABSENT = 2    # the window is not in the readout
+MEAS_BRIGHT = 4    # the window's background is near the converter's full scale (Sun, Earth limb, Moon):
+                   # nothing can be measured there; not a miss (the star is not gone)
+
+# Fault detection (docs/FLATSAT.md, output records).
+BRIGHT_FRACTION = 0.75     # a window whose background is above this fraction of full scale is MEAS_BRIGHT
 
 
 @njit(cache=True)
@@ -152,7 +157,7 @@ def plan_tracked(active, nav, vmag, refs, q, omega, bias, m, lag_s, dt, cam, mod
 
 @njit(cache=True, nogil=True)
 def measure_windows(spans, values, wins, off, off_start, off_len, cam, psf_sigma, thresh_sigma, min_signal,
-                    e_per_dn, n_iter, tol):
+                    e_per_dn, n_iter, tol, vmag, bright_dn):
     """Spot directions of the windows ``wins`` in one readout (``values`` in span order).
 
     Returns ``(state (w,) int8 MEAS_*, b (w, 3) unit body direction at exposure mid-time,
@@ -160,6 +165,9 @@ def measure_windows(spans, values, wins, off, off_start, off_len, cam, psf_sigma
     ``thresh_sigma`` noise σ above the window background; ≥ 2 pixels and ``min_signal`` DN
     needed) refined by the smeared-PSF fit along its predicted trajectory offsets; when the
     fit diverges (> 2 px from the CoG) the CoG is kept with σ = 0.3 px.
+
+    Fault detection: a window whose background is above ``bright_dn`` (DN) is ``MEAS_BRIGHT``.
+    ``vmag`` (w,): the windows' catalog magnitudes (nan: unknown).
     """
     nw = wins.shape[0]
     state = np.full(nw, MEAS_ABSENT, np.int8)
@@ -178,6 +186,9 @@ def measure_windows(spans, values, wins, off, off_start, off_len, cam, psf_sigma
             continue
         wv = values[v0:v0 + npx]
         bg, noise = window_background(wv, 3.0)
+        if bg > bright_dn:
+            state[i] = MEAS_BRIGHT
+            continue
         u, v, flux, npix = cog(sp, wv, bg, bg + thresh_sigma * noise)
         if npix < 2 or flux < min_signal:
             state[i] = MEAS_MISS
