@@ -105,3 +105,34 @@ def test_saa_pass_enters_the_anomaly_mid_run():
     assert min(x["earth_limb_angle_deg"] for x in tr) > 90.0
     # hot pixels appear during the run (a Poisson process of 360 an hour: P(none in 30 s) = 5 %; this seed: some)
     assert len(env.hot_pixels(30.0, PRESET)) >= 1
+
+
+def test_max_error_over_floor_judges_the_run_against_its_own_floor():
+    from gyrostar.hil.acceptance import evaluate, failures
+
+    scen = hc.load_scenario("moon-in-field")
+    base = {"track_fraction": 0.95, "attitude_error_arcsec_1sigma": 4.0}
+    ok = evaluate(scen, dict(base, measured_over_floor=1.1), scen.duration_s)
+    bad = evaluate(scen, dict(base, measured_over_floor=1.3), scen.duration_s)
+    never = evaluate(scen, dict(base, measured_over_floor=None), scen.duration_s)
+    assert ok["checks"]["max_error_over_floor"]["pass"] and not failures(ok)
+    assert failures(bad) == ["max_error_over_floor: 1.3 > 1.2 x floor"]
+    assert not never["checks"]["max_error_over_floor"]["pass"]
+
+
+def test_run_summary_lists_the_hazards_and_the_truth_along_the_run():
+    from gyrostar.hil import flatsat
+    from gyrostar.hil.environment_report import environment_summary, summary_line
+
+    cfg = hc.load_flatsat()
+    scen = hc.load_scenario("saa-pass")
+    truth = flatsat.Truth(scen, flatsat.simulated_gyro(cfg, scen, 3), t_origin=100.0)
+    env = flatsat.scenario_environment(scen, 3)
+    s = environment_summary(env, truth, PRESET, PARAMS, scen.duration_s, 100.0)
+    assert set(s["parameters"]) == {"orbit", "radiation"}
+    assert s["parameters"]["radiation"]["saa_flux_cm2_s"] == 300.0
+    assert s["truth"]["saa_seconds"] == 15.0 and s["truth"]["eclipse_seconds"] == 0.0
+    assert s["truth"]["earth_limb_angle_deg"][0] > 90.0 and "temperature_c" not in s["truth"]
+    line = summary_line({"environment": s})
+    assert "radiation (" in line and "saa_flux_cm2_s 300" in line and "SAA 15 s" in line
+    assert summary_line({}) is None
