@@ -51,7 +51,7 @@ from . import record as R
 from .attitude_filter import GATE, QD_MARGIN, SMOOTH_GAP_S, AttitudeFilter, fix_covariance
 from .floor import FloorInputs, pointing_bias_arcsec
 from .frame_kernel import N_ACCEPTED, N_CONSISTENT, N_MEASURED, N_USED, apply_frame
-from .image_kernels import MEAS_ABSENT, MEAS_BRIGHT
+from .image_kernels import MEAS_ABSENT, MEAS_BRIGHT, MEAS_HIT
 from .head_link import HeadLink
 from .image import ImagePipeline
 from .meters import LoopMeters
@@ -142,6 +142,7 @@ class Counters:
     inconsistent_stars: int = 0      # measured stars dropped before the update: off the others' attitude
     frames_blinded: int = 0          # images not measured: background near full scale in most windows (or frame)
     windows_bright: int = 0          # windows whose background was near full scale
+    spots_rejected_hit: int = 0      # spots not taken: one-pixel shape or flux far above their star's (radiation, glare)
     head_errors: int = 0
     head_reconnects: int = 0
     outputs: int = 0
@@ -675,6 +676,7 @@ class CoupledLoop:
         blinded = n_bright > 0 and 2 * n_bright >= n_read
         self.c.windows_bright += n_bright
         self.c.frames_blinded += blinded
+        self.c.spots_rejected_hit += int(np.count_nonzero(state == MEAS_HIT))
         too_fast = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]) > self.p.max_track_rate
         # one compiled call: windows whose slot was dropped or refilled meanwhile are skipped,
         # spots smeared past what the centroid model holds are not taken (coast on the gyro),

@@ -1,6 +1,7 @@
-"""Fault detection in the measurement of a frame's windows (issue 50): glare and blinding are
-told from stars, against independent truth — windows built here by hand (a Gaussian PSF of
-known flux and position, Gaussian read noise) with a bright background added at known pixels.
+"""Fault detection in the measurement of a frame's windows (issue 50): radiation hits, hot
+pixels, glare and blinding are told from stars, against independent truth — windows built
+here by hand (a Gaussian PSF of known flux and position, Gaussian read noise) with a hit,
+a track or a bright background added at known pixels.
 """
 
 import math
@@ -8,7 +9,14 @@ import math
 import numpy as np
 import pytest
 from gyrostar.loop import record as R
-from gyrostar.loop.image_kernels import MEAS_BRIGHT, MEAS_MISS, MEAS_OK, measure_windows
+from gyrostar.loop.image_kernels import (
+    FLUX_RATIO_MAX,
+    MEAS_BRIGHT,
+    MEAS_HIT,
+    MEAS_MISS,
+    MEAS_OK,
+    measure_windows,
+)
 
 F_PX = 2000.0
 W = H = 256
@@ -85,6 +93,61 @@ def test_clean_stars_are_all_measured_where_they_are():
             assert err < 4 * sig[i] + 1e-9, (i, err / sig[i])
 
 
+def test_single_pixel_hit_is_not_a_star():
+    """A proton hit (1650 e⁻ / 5 ≈ 330 DN, a fifth of it in the next pixel): in a window whose
+    star is out of sight, and beside a V = 3 star whose brightest pixel it outshines (the CoG
+    would be pulled towards it by ~0.7 px): neither is taken. One pixel alone is no spot at all."""
+    fr = Frame(CENTRES)
+    for i, ((u, v), m) in enumerate(zip(CENTRES, VMAG)):
+        if i:
+            fr.star(u, v, star_dn(m))
+    fr.img[52, 37] += 300.0
+    state, _, _ = fr.measure(VMAG)
+    assert state[0] == MEAS_MISS and np.all(state[1:] == MEAS_OK), state
+    fr.img[52, 37] -= 50.0
+    fr.img[52, 38] += 80.0
+    state, _, _ = fr.measure(VMAG)
+    assert state[0] == MEAS_HIT and np.all(state[1:] == MEAS_OK), state
+    fr = clean_frame()
+    fr.img[53, 38] += 250.0
+    fr.img[53, 39] += 80.0
+    state, _, _ = fr.measure(VMAG)
+    assert state[0] == MEAS_HIT and np.all(state[1:] == MEAS_OK), state
+
+
+def test_hot_pixel_over_a_faint_star_is_rejected_by_shape():
+    """A hot pixel that appeared in flight (400 DN in the exposure) next to the V = 5 star's
+    peak (~40 DN): the spot is the pixel, not the star."""
+    fr = clean_frame()
+    fr.img[190, 71] += 400.0
+    state, _, _ = fr.measure(VMAG)
+    assert state[3] == MEAS_HIT, state
+    assert np.all(state[[0, 1, 2, 4]] == MEAS_OK)
+
+
+def test_track_on_a_star_is_rejected_by_its_flux_against_the_other_stars():
+    """A cosmic-ray track (5 px, 12 000 e⁻ ≈ 2400 DN in all) crossing the V = 5 star: the spot is
+    a star-like blob no longer, its flux ~12× what V = 5 gives with the others' zero point."""
+    fr = clean_frame()
+    for j in range(5):
+        fr.img[187 + j, 68 + j] += 480.0
+    state, _, _ = fr.measure(VMAG)
+    assert state[3] == MEAS_HIT, state
+    assert np.all(state[[0, 1, 2, 4]] == MEAS_OK)
+    # without magnitudes (or with fewer than three known) the flux check cannot run
+    state, _, _ = fr.measure([np.nan] * 5)
+    assert state[3] == MEAS_OK
+
+
+def test_star_brighter_than_its_catalog_magnitude_by_less_than_the_limit_is_kept():
+    """A red star is brighter on silicon than its V: up to FLUX_RATIO_MAX it is kept."""
+    fr = Frame(CENTRES)
+    for i, ((u, v), m) in enumerate(zip(CENTRES, VMAG)):
+        fr.star(u, v, star_dn(m) * (0.8 * FLUX_RATIO_MAX if i == 3 else 1.0))
+    state, _, _ = fr.measure(VMAG)
+    assert np.all(state == MEAS_OK), state
+
+
 def test_background_near_full_scale_is_bright_not_a_miss():
     fr = clean_frame()
     fr.img[40:60, 30:50] += 750.0          # glare over star 0's window
@@ -132,3 +195,30 @@ def test_lost_in_space_does_not_search_a_blinded_full_frame(bright):
     assert (NoId.calls == 0) == bright
     if not bright:
         assert len(spots) == 5
+
+
+def test_lost_in_space_drops_spots_on_the_moon_and_keeps_a_saturated_star():
+    """The Moon's disk (radius 30 px, full scale) makes spots along its limb; they are not
+    handed to the identifier. A star bright enough to saturate its core is kept."""
+    from gyrostar.loop.image import off_extended
+    from gyrostar.loop.acquire import detect_spots
+
+    fr = clean_frame()
+    yy, xx = np.mgrid[0:H, 0:W]
+    disk = (xx - 200) ** 2 + (yy - 130) ** 2 <= 30 ** 2
+    img = fr.img.copy()
+    img[disk] = 1023.0
+    img[disk.nonzero()[0][::97], disk.nonzero()[1][::97]] = 1000.0   # bumps on the plateau: local maxima
+    sat = Frame([(100.0, 140.0)])
+    sat.star(100.0, 140.0, 60000.0)                                  # ~V −1.2: a saturated core
+    img += sat.img - BIAS_DN
+    img = np.clip(img, 0, 1023)
+    spots = detect_spots(img, 6.0, 104, 7)
+    kept = off_extended(spots, img > BRIGHT_DN)
+    near = np.hypot(spots[:, 0] - 200, spots[:, 1] - 130) < 30 + 12
+    assert near.any(), "the limb makes spots"
+    assert not np.any(np.hypot(kept[:, 0] - 200, kept[:, 1] - 130) < 30 + 12)
+    assert np.any(np.hypot(kept[:, 0] - 100, kept[:, 1] - 140) < 1.0), "the saturated star is kept"
+    for u, v in CENTRES:
+        if np.hypot(u - 200, v - 130) > 45:
+            assert np.any(np.hypot(kept[:, 0] - u, kept[:, 1] - v) < 1.0)
