@@ -113,7 +113,7 @@ def run(args) -> int:
         raise KeyboardInterrupt
     res = summarize(rows)
     res.update(wall_s=round(wall, 2), runs_per_minute=round(60.0 * len(rows) / wall, 2), workers=n_workers,
-               duration_s=args.duration, seed=args.seed, orbit=bool(args.orbit),
+               duration_s=args.duration, seed=args.seed, orbit_cases=bool(args.orbit),
                scheduler=args.scheduler or f"LocalCluster({args.workers} processes)")
     res["results_table"] = str(folder / "results.parquet")
     (folder / "summary.json").write_text(json.dumps(json_safe(res), indent=2))   # first: nothing after can lose it
@@ -174,7 +174,7 @@ def _text(r: dict) -> str:
              "  worst runs (re-run: gyrostar run --fast --scenario mc:SEED@DURATION --seed SEED): "
              + ", ".join(f"{w['seed']} ({w['profile']}, {_fmt(w['worst_arcsec'], '.0f')}″)" for w in r["worst_runs"]),
              f"  results {r['results_table']}   sha256 {r['results_sha256'][:16]}…"]
-    if r.get("orbit"):
+    if r.get("orbit_cases"):
         lines[-2] = lines[-2].replace("mc:SEED", "mco:SEED")
         lines[-1:-1] = _orbit_text(r)
     return "\n".join(lines)

@@ -9,7 +9,8 @@ temperature — and one hazard it is aimed at (:data:`HAZARDS`):
 * ``sun``: the boresight ``SUN_OFFSET_DEG`` from the baffle's exclusion angle to the Sun
   (a dawn–dusk orbit, never in the Earth's shadow);
 * ``moon``: the Moon's centre inside the field (``MOON_OFFSET_DEG`` from the boresight);
-* ``earth``: the boresight ``LIMB_ELEVATION_DEG`` above the Earth's limb (below it: on the Earth);
+* ``earth``: the boresight ``LIMB_OFFSET_DEG`` from the baffle's exclusion angle above the sunlit
+  Earth's limb (the Earth's light comes through the same baffle);
 * ``saa``: the sub-satellite point inside the South Atlantic Anomaly at the run's middle;
 * ``quiet``: a random pointing away from the Sun, the Earth and the Moon (the orbit's
   background hazards only: radiation outside the SAA, hot pixels, temperature).
@@ -36,8 +37,8 @@ HAZARDS = ("sun", "moon", "earth", "saa", "quiet")
 HAZARD_P = (0.2, 0.2, 0.2, 0.2, 0.2)
 SUN_OFFSET_DEG = (-3.0, 12.0)        # sun angle − exclusion angle at the start
 MOON_OFFSET_DEG = (0.5, 3.5)         # Moon centre from the boresight (the field's half width: 4.4°)
-LIMB_ELEVATION_DEG = (-1.0, 15.0)    # boresight above the Earth's limb
-CLEAR_DEG = 10.0                     # other bodies at least this far beyond their limits (Sun: exclusion)
+LIMB_OFFSET_DEG = (-3.0, 12.0)       # boresight elevation above the Earth's limb − exclusion angle
+CLEAR_DEG = 10.0                     # other bodies at least this far beyond their limits (Sun, Earth: exclusion)
 SAA_CORE_LAT_DEG = (-40.0, -10.0)    # where in the SAA box the run's middle is put
 SAA_CORE_LON_DEG = (-70.0, 20.0)
 TEMPERATURE_C = (-10.0, 40.0)        # mean sensor temperature
@@ -58,7 +59,7 @@ class OrbitCase:
     phase_deg: float
     temperature_c: float
     swing_c: float
-    angle_deg: float             # the hazard's angle as drawn (sun − exclusion, Moon offset, limb elevation)
+    angle_deg: float             # the hazard's angle as drawn (sun − exclusion, Moon offset, limb − exclusion)
 
 
 def _perp(rng, v):
@@ -116,7 +117,7 @@ def _clear(d, sun, moon, nadir, rho_deg, exclusion_deg, skip=()):
     if "sun" not in skip:
         ok &= _angle(d, sun) > exclusion_deg + CLEAR_DEG
     if "earth" not in skip:
-        ok &= _angle(d, nadir) - rho_deg > CLEAR_DEG
+        ok &= _angle(d, nadir) - rho_deg > exclusion_deg + CLEAR_DEG
     if "moon" not in skip:
         ok &= _angle(d, moon) > CLEAR_DEG
     return ok
@@ -171,8 +172,8 @@ def draw_orbit_case(seed: int, duration_s: float) -> OrbitCase:
             d = _rotate_towards(moon, _perp(rng, moon), math.radians(angle))
             skip = ("moon",)
         elif hazard == "earth":
-            angle = float(rng.uniform(*LIMB_ELEVATION_DEG))
-            d = _rotate_towards(nadir, _away(rng, nadir, sun), math.radians(rho + angle))
+            angle = float(rng.uniform(*LIMB_OFFSET_DEG))
+            d = _rotate_towards(nadir, _away(rng, nadir, sun), math.radians(rho + excl + angle))
             skip = ("earth",)
         else:
             angle = 0.0
