@@ -200,8 +200,8 @@ def test_lost_in_space_does_not_search_a_blinded_full_frame(bright):
 def test_lost_in_space_drops_spots_on_the_moon_and_keeps_a_saturated_star():
     """The Moon's disk (radius 30 px, full scale) makes spots along its limb; they are not
     handed to the identifier. A star bright enough to saturate its core is kept."""
-    from gyrostar.loop.image import off_extended
     from gyrostar.loop.acquire import detect_spots
+    from gyrostar.loop.image import off_extended
 
     fr = clean_frame()
     yy, xx = np.mgrid[0:H, 0:W]

@@ -37,8 +37,8 @@ def test_no_valid_output_outside_its_covariance(name, tmp_path):
     nees = _nees(out, truth)
     worst = int(np.argmax(np.where(valid, nees, 0.0)))
     assert not np.any(valid & (nees > NEES_MAX)), \
-        (f"valid output at t={out['t'][worst] - arrays['t0']:.2f} s: NEES {nees[worst]:.1f}, mode {out['mode'][worst]}, "
-         f"reason {R.REASON_NAMES.get(int(R.reason(out['flags'][worst])))}")
+        (f"valid output at t={out['t'][worst] - arrays['t0']:.2f} s: NEES {nees[worst]:.1f}, "
+         f"mode {out['mode'][worst]}, reason {R.REASON_NAMES.get(int(R.reason(out['flags'][worst])))}")
     reasons = R.reason(out["flags"])
     # the reason code is 0 exactly on tracked outputs after an image update has been applied
     assert np.all(reasons[out["mode"] == R.MODE_ACQUIRE] != R.REASON_NONE)
