@@ -51,9 +51,9 @@ from . import record as R
 from .attitude_filter import GATE, QD_MARGIN, SMOOTH_GAP_S, AttitudeFilter, fix_covariance
 from .floor import FloorInputs, pointing_bias_arcsec
 from .frame_kernel import N_ACCEPTED, N_CONSISTENT, N_MEASURED, N_USED, apply_frame
-from .image_kernels import MEAS_ABSENT, MEAS_BRIGHT, MEAS_HIT
 from .head_link import HeadLink
 from .image import ImagePipeline
+from .image_kernels import MEAS_ABSENT, MEAS_BRIGHT, MEAS_HIT
 from .meters import LoopMeters
 from .mode_keeper import Heard, ModeKeeper
 from .outputs import OutputStage
@@ -142,7 +142,7 @@ class Counters:
     inconsistent_stars: int = 0      # measured stars dropped before the update: off the others' attitude
     frames_blinded: int = 0          # images not measured: background near full scale in most windows (or frame)
     windows_bright: int = 0          # windows whose background was near full scale
-    spots_rejected_hit: int = 0      # spots not taken: one-pixel shape or flux far above their star's (radiation, glare)
+    spots_rejected_hit: int = 0      # spots not taken: one-pixel shape or flux far above their star's (hits, glare)
     head_errors: int = 0
     head_reconnects: int = 0
     outputs: int = 0
