@@ -1,7 +1,8 @@
 """A scenario's acceptance keys applied to a run's summary (``gyrostar run`` exits 1 on a failure).
 
 Keys (:class:`gyrostar.hil.config.Scenario`): ``max_error_arcsec_1sigma`` (cross-boresight
-1σ over TRACK samples against truth; 0 = not checked), ``min_track_fraction`` (share of
+1σ over TRACK samples against truth; 0 = not checked), ``max_error_over_floor`` (that error over
+the run's own attitude floor, ``measured_over_floor``; 0 = not checked), ``min_track_fraction`` (share of
 outputs in TRACK with a valid attitude; 0 = not checked), ``must_reacquire`` (TRACK lost
 and regained at least once). They describe the whole scenario: a run shorter than it, or
 one without simulator truth (a real flatsat, for the error and the TRACK share) is not
@@ -19,7 +20,8 @@ from __future__ import annotations
 
 def expects_tracking(scen) -> bool:
     """The scenario judges the tracking (any of its tracking keys is set)."""
-    return scen.max_error_arcsec_1sigma > 0 or scen.min_track_fraction > 0 or scen.must_reacquire
+    return (scen.max_error_arcsec_1sigma > 0 or scen.max_error_over_floor > 0 or scen.min_track_fraction > 0
+            or scen.must_reacquire)
 
 
 def evaluate(scen, summary: dict, duration_s: float) -> dict:
@@ -46,6 +48,10 @@ def evaluate(scen, summary: dict, duration_s: float) -> dict:
         err = summary.get("attitude_error_arcsec_1sigma")
         checks["max_error_arcsec_1sigma"] = {"value": err, "limit": scen.max_error_arcsec_1sigma, "unit": "arcsec",
                                              "pass": err is not None and err <= scen.max_error_arcsec_1sigma}
+    if scen.max_error_over_floor > 0 and has_truth:
+        ratio = summary.get("measured_over_floor")
+        checks["max_error_over_floor"] = {"value": ratio, "limit": scen.max_error_over_floor, "unit": "x floor",
+                                          "pass": ratio is not None and ratio <= scen.max_error_over_floor}
     if scen.min_track_fraction > 0 and has_truth:
         frac = summary["track_fraction"]
         checks["min_track_fraction"] = {"value": frac, "limit": scen.min_track_fraction, "unit": "",

@@ -370,6 +370,124 @@ class TrueDevices:
         return self == TrueDevices()
 
 
+def _in_range(table: str, obj, lo: float, hi: float, *keys: str) -> None:
+    """ValueError naming ``table.key`` for the first of ``keys`` of ``obj`` outside [lo, hi]."""
+    for key in keys:
+        v = getattr(obj, key)
+        if not (math.isfinite(v) and lo <= v <= hi):
+            raise ValueError(f"{table}.{key} = {v} outside [{lo:g}, {hi:g}]")
+
+
+@dataclass
+class OrbitConfig:
+    """The spacecraft's circular orbit and the run's epoch: the Sun, the Moon, the Earth's limb and
+    the Earth's shadow follow from it (:mod:`gyrostar.mocks.orbit`). Off: no Sun, Moon or Earth."""
+
+    enabled: bool = False              # the Sun, the Moon and the Earth around the spacecraft
+    altitude_km: float = 500.0         # altitude of the circular orbit, km
+    inclination_deg: float = 97.4      # sun-synchronous at 500 km
+    ltan_h: float = 10.5               # local time of the ascending node, h: the node's right ascension is
+                                       # the Sun's at the epoch + 15°/h · (ltan_h − 12)
+    raan_deg: float | None = None      # right ascension of the ascending node, deg: replaces ltan_h when set
+    phase_deg: float = 0.0             # argument of latitude at scenario time 0, deg (0: the ascending node)
+    epoch_utc: str = "2026-03-20T12:00:00"   # UTC at scenario time 0 (ISO 8601)
+
+    def validate(self):
+        _in_range("orbit", self, 160.0, 2000.0, "altitude_km")
+        _in_range("orbit", self, 0.0, 180.0, "inclination_deg")
+        _in_range("orbit", self, 0.0, 24.0, "ltan_h")
+        _in_range("orbit", self, -360.0, 360.0, "phase_deg", *(["raan_deg"] if self.raan_deg is not None else []))
+        from datetime import datetime
+
+        try:
+            t = datetime.fromisoformat(self.epoch_utc)
+        except ValueError:
+            raise ValueError(f"orbit.epoch_utc = {self.epoch_utc!r} is not an ISO 8601 time "
+                             "(e.g. 2026-03-20T12:00:00)") from None
+        if not 1950 <= t.year <= 2100:
+            raise ValueError(f"orbit.epoch_utc = {self.epoch_utc!r}: the built-in ephemeris covers 1950..2100")
+
+
+@dataclass
+class StrayLightConfig:
+    """Background from the Sun, the sunlit Earth and the Moon outside the field, through the baffle's
+    point-source transmittance (PST) curve (docs/SIMULATOR.md, "Stray light"); needs [orbit]."""
+
+    enabled: bool = False              # background from the Sun, the Moon and the sunlit Earth
+    exclusion_deg: float = 30.0        # the baffle's cut-off angle from the boresight: closer, the first lens
+                                       # is lit and the sensor is blinded
+    pst_edge: float = 1.0e-3           # PST of a source just outside the field (lit first lens)
+    pst_exclusion: float = 1.0e-9      # PST just beyond the exclusion angle (vanes' double scatter)
+    slope: float = 2.0                 # PST ∝ θ^-slope beyond the exclusion angle
+    transition_deg: float = 0.5        # width of the drop at the baffle's cut-off (logistic scale), deg
+    earth_albedo: float = 0.3          # Bond albedo of the sunlit Earth
+
+    def validate(self):
+        _in_range("stray_light", self, 5.0, 90.0, "exclusion_deg")
+        if not 0.0 < self.pst_exclusion < self.pst_edge <= 1.0:
+            raise ValueError("stray_light: need 0 < pst_exclusion < pst_edge <= 1")
+        _in_range("stray_light", self, 0.0, 6.0, "slope")
+        _in_range("stray_light", self, 0.05, 10.0, "transition_deg")
+        _in_range("stray_light", self, 0.0, 1.0, "earth_albedo")
+
+
+@dataclass
+class MoonConfig:
+    """The Moon rendered as a resolved disk (phase-lit, saturating) when it is in the field, and
+    the stars behind it hidden; needs [orbit]."""
+
+    enabled: bool = False              # the Moon's disk and its hidden stars
+
+
+@dataclass
+class RadiationConfig:
+    """Particle hits per frame (Poisson; short tracks, a Landau-like charge) with a higher flux
+    inside the South Atlantic Anomaly, and hot pixels that appear during the run."""
+
+    enabled: bool = False              # particle hits and new hot pixels
+    flux_cm2_s: float = 2.0            # particles per cm² per s outside the SAA (galactic cosmic rays, LEO)
+    saa_flux_cm2_s: float = 300.0      # inside the SAA box (trapped protons through the head's shielding)
+    saa_lat_deg: tuple[float, float] = (-50.0, 0.0)      # the SAA box: latitude range of the sub-satellite point
+    saa_lon_deg: tuple[float, float] = (-90.0, 40.0)     # longitude range (east +), deg
+    depth_um: float = 10.0             # charge-collection depth: a track at incidence θ runs depth·tan θ
+    charge_e_per_um: float = 80.0      # most probable charge per µm of path in silicon (minimum ionising)
+    landau_width: float = 0.15         # Landau (Moyal) width relative to the most probable charge
+    hot_pixels_per_hour: float = 0.0   # new hot pixels per hour of run (displacement damage)
+    hot_pixel_dark_e_s: float = 20000.0   # dark current of a new hot pixel, e-/s (median; log-normal 0.5 dex)
+
+    def validate(self):
+        _in_range("radiation", self, 0.0, 1e5, "flux_cm2_s", "saa_flux_cm2_s", "hot_pixels_per_hour",
+                  "hot_pixel_dark_e_s")
+        for key, lim in (("saa_lat_deg", 90.0), ("saa_lon_deg", 180.0)):
+            a, b = getattr(self, key)
+            if not -lim <= a < b <= lim:
+                raise ValueError(f"radiation.{key} = [{a}, {b}] must satisfy -{lim:g} <= low < high <= {lim:g}")
+        _in_range("radiation", self, 0.5, 100.0, "depth_um")
+        _in_range("radiation", self, 1.0, 1e4, "charge_e_per_um")
+        _in_range("radiation", self, 0.0, 1.0, "landau_width")
+
+
+@dataclass
+class ThermalConfig:
+    """Sensor temperature over the run: dark current doubling every ``dark_doubling_c`` and the
+    focal length drifting by ``focal_ppm_per_c`` from the preset's values at ``reference_c``."""
+
+    enabled: bool = False              # dark current and focal length follow the temperature
+    temperature_c: float = 20.0        # mean sensor temperature, °C
+    swing_c: float = 0.0               # amplitude of a sinusoid over one orbit period, °C
+    rate_c_per_s: float = 0.0          # steady drift, °C/s (e.g. a warm-up)
+    reference_c: float = 20.0          # the temperature of the preset's dark current and focal length
+    dark_doubling_c: float = 7.0       # dark current doubles every this many °C
+    focal_ppm_per_c: float = 4.0       # focal-length change, ppm/°C (N-BK7 singlet: α − (dn/dT)/(n − 1))
+
+    def validate(self):
+        _in_range("thermal", self, -60.0, 100.0, "temperature_c", "reference_c")
+        _in_range("thermal", self, 0.0, 60.0, "swing_c")
+        _in_range("thermal", self, -1.0, 1.0, "rate_c_per_s")
+        _in_range("thermal", self, 2.0, 20.0, "dark_doubling_c")
+        _in_range("thermal", self, -200.0, 200.0, "focal_ppm_per_c")
+
+
 @dataclass
 class Scenario:
     name: str
@@ -392,8 +510,15 @@ class Scenario:
     truth: TrueDevices = field(default_factory=TrueDevices)   # simulated devices off their nominal models
     gyro_overrides: dict[str, float] = field(default_factory=dict)  # fields of the gyro error set replaced
     false_spots: list[tuple[float, float, float]] = field(default_factory=list)  # [col, row, vmag] glints
+    # the orbit environment (every part off by default; docs/SIMULATOR.md, "Orbit environment")
+    orbit: OrbitConfig = field(default_factory=OrbitConfig)
+    stray_light: StrayLightConfig = field(default_factory=StrayLightConfig)
+    moon: MoonConfig = field(default_factory=MoonConfig)
+    radiation: RadiationConfig = field(default_factory=RadiationConfig)
+    thermal: ThermalConfig = field(default_factory=ThermalConfig)
     # acceptance of the scenario in the HIL suite
     max_error_arcsec_1sigma: float = 0.0   # 0 = not checked
+    max_error_over_floor: float = 0.0      # attitude error over the run's own floor at most this (0 = not checked)
     min_track_fraction: float = 0.0
     must_reacquire: bool = False
     max_samples_lost: int = 0          # gyro samples the run may lose (FIFO overflow), checked on every run
@@ -417,11 +542,25 @@ class Scenario:
             raise ValueError(f"max_stars = {self.max_stars} must be in [0, {MAX_STARS}] (0: the config's)")
         if not 0.0 <= self.min_track_fraction <= 1.0:
             raise ValueError(f"min_track_fraction = {self.min_track_fraction} must be in [0, 1]")
+        if self.max_error_over_floor < 0:
+            raise ValueError(f"max_error_over_floor = {self.max_error_over_floor} must be ≥ 0 (0: not checked)")
         if self.max_error_arcsec_1sigma < 0:
             raise ValueError(f"max_error_arcsec_1sigma = {self.max_error_arcsec_1sigma} must be ≥ 0 (0: not checked)")
         for a, b in self.eclipse:
             if not 0 <= a < b:
                 raise ValueError(f"eclipse [{a}, {b}] must satisfy 0 <= start < end")
+        for key in ("stray_light", "moon"):
+            if getattr(self, key).enabled and not self.orbit.enabled:
+                raise ValueError(f"[{key}] needs [orbit] enabled = true (the Sun, Moon and Earth come from the orbit)")
+
+    @property
+    def hazards(self) -> list[str]:
+        """The orbit-environment parts switched on (``orbit``, ``stray_light``, ``moon``,
+        ``radiation``, ``thermal``): empty for the flatsat's kind sky."""
+        return [k for k in HAZARD_TABLES if getattr(self, k).enabled]
+
+
+HAZARD_TABLES = ("orbit", "stray_light", "moon", "radiation", "thermal")
 
 
 def default_config_path() -> Path:
@@ -445,20 +584,25 @@ def scenario_names() -> list[str]:
 
 def load_scenario(name_or_path: str | None) -> Scenario:
     """A built-in scenario by name (default ``demo``), a scenario TOML file by path, or a
-    Monte Carlo case ``mc:SEED@DURATION`` (``gyrostar eval loop``; run it with ``--seed SEED``)."""
+    Monte Carlo case ``mc:SEED@DURATION`` (``gyrostar eval loop``; run it with ``--seed SEED``) or
+    ``mco:SEED@DURATION`` (an orbit case, ``gyrostar eval loop --orbit``)."""
     name_or_path = name_or_path or "demo"
-    if name_or_path.startswith("mc:"):
+    if name_or_path.startswith(("mc:", "mco:")):
         from .montecarlo.cases import case_scenario, draw_case
+        from .montecarlo.orbit_cases import draw_orbit_case, orbit_case_scenario
 
+        prefix = name_or_path.split(":", 1)[0]
         try:
-            seed_s, dur_s = name_or_path[3:].split("@")
+            seed_s, dur_s = name_or_path[len(prefix) + 1:].split("@")
             seed, dur = int(seed_s), float(dur_s)
             if not (math.isfinite(dur) and 0 < dur <= MAX_SCENARIO_S):     # before the case is drawn
                 raise ValueError(f"DURATION must be a number of seconds in (0, {MAX_SCENARIO_S:g}], got {dur_s!r}")
+            if prefix == "mco":
+                return orbit_case_scenario(draw_orbit_case(seed, dur), dur)
             return case_scenario(draw_case(seed, dur), dur)
         except ValueError as exc:
-            raise ConfigError(f"--scenario {name_or_path}: a Monte Carlo case is mc:SEED@DURATION, "
-                              f"e.g. mc:100007@30 ({exc})") from None
+            raise ConfigError(f"--scenario {name_or_path}: a Monte Carlo case is {prefix}:SEED@DURATION, "
+                              f"e.g. {prefix}:100007@30 ({exc})") from None
     path = Path(name_or_path)
     if not path.suffix == ".toml":
         path = Path(str(resources.files("gyrostar.hil") / "scenarios" / f"{name_or_path}.toml"))

@@ -117,7 +117,7 @@ def _type_name(tp) -> str:
     if typing.get_origin(tp) is typing.Literal:
         return " \\| ".join(repr(a).replace("'", '"') for a in typing.get_args(tp))
     s = getattr(tp, "__name__", None) or str(tp)
-    return str(s).replace("typing.", "")
+    return str(s).replace("typing.", "").replace(" | ", " \\| ")     # a union's bar is not a column
 
 
 def _default(f, key: str = "") -> str:

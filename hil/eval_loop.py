@@ -30,6 +30,9 @@ def configure(parser) -> None:
     parser.add_argument("--tls-key", default=None, metavar="PEM", help="client key for a TLS scheduler")
     parser.add_argument("--config", default=None, metavar="TOML",
                         help="flatsat config (default: the built-in simulated flatsat)")
+    parser.add_argument("--orbit", action="store_true",
+                        help="orbit cases: a LEO orbit with the Sun, the Moon, the Earth, radiation and temperature, "
+                             "each run aimed at one hazard; availability and re-acquisition per hazard")
     parser.add_argument("--out", default=None, metavar="DIR",
                         help="folder for results.parquet, summary.json and plots (default: runs/mc-<time>)")
     parser.add_argument("--plot", default=None, metavar="DIR", help="write the plots to DIR (default: --out)")
@@ -45,8 +48,14 @@ def _preflight(args) -> None:
 
     check_cache_writable()          # every worker compiles the kernels and loads the star index into it
     cfg = hc.load_flatsat(args.config)
-    preflight(cfg, hc.load_scenario(f"mc:{run_seeds(args.seed, 1)[0]}@{args.duration:g}"), simulated_clock=True,
-              devices=False)
+    seed = run_seeds(args.seed, 1)[0]
+    if getattr(args, "orbit", False):
+        from .montecarlo.orbit_cases import draw_orbit_case, orbit_case_scenario
+
+        scen = orbit_case_scenario(draw_orbit_case(seed, args.duration), args.duration)
+    else:
+        scen = hc.load_scenario(f"mc:{seed}@{args.duration:g}")
+    preflight(cfg, scen, simulated_clock=True, devices=False)
 
 
 def local_workers(asked: int, runs: int) -> int:
@@ -126,7 +135,7 @@ def run(args) -> int:
         raise KeyboardInterrupt
     res = summarize(rows)
     res.update(wall_s=round(wall, 2), runs_per_minute=round(60.0 * len(rows) / wall, 2), workers=n_workers,
-               duration_s=args.duration, seed=args.seed,
+               duration_s=args.duration, seed=args.seed, orbit_cases=bool(args.orbit),
                scheduler=args.scheduler or f"LocalCluster({workers} processes)")
     res["results_table"] = str(folder / "results.parquet")
     _write_json(folder / "summary.json", json.dumps(json_safe(res), indent=2))   # first: nothing after can lose it
@@ -177,7 +186,7 @@ def _with_progress(args, cluster, seeds, rows):
             if lines is not None:
                 lines.done(failed[0])
 
-        return run_campaign(cluster, seeds, args.duration, on_row, rows)
+        return run_campaign(cluster, seeds, args.duration, on_row, rows, orbit=args.orbit)
 
 
 class ProgressLines:
@@ -227,4 +236,23 @@ def _text(r: dict) -> str:
              "  worst runs (re-run: gyrostar run --fast --scenario mc:SEED@DURATION --seed SEED): "
              + ", ".join(f"{w['seed']} ({w['profile']}, {_fmt(w['worst_arcsec'], '.0f')}″)" for w in r["worst_runs"]),
              f"  results {r['results_table']}   sha256 {r['results_sha256'][:16]}…"]
+    if r.get("orbit_cases"):
+        lines[-2] = lines[-2].replace("mc:SEED", "mco:SEED")
+        lines[-1:-1] = _orbit_text(r)
     return "\n".join(lines)
+
+
+def _orbit_text(r: dict) -> list[str]:
+    o = r["orbit"]
+    out = ["  orbit: hazard   runs  availability mean (p5)   re-acquire p50/p95 s (outages, unrecovered)   "
+           "error while valid p50/p95″   valid outside cov   hits expected/rejected"]
+    for name, b in [("all", o["all"])] + list(o["by_hazard"].items()):
+        a, q, e = b["availability"], b["reacquire_s"], b["error_while_valid_arcsec"]
+        out.append(f"    {name:<8} {b['runs']:>4}  {_fmt(a['mean'], '.3f')} ({_fmt(a['p5'], '.3f')})"
+                   f"   {_fmt(q['p50'])}/{_fmt(q['p95'])} ({q['outages']}, {b['runs_unrecovered']})"
+                   f"   {_fmt(e['p50'])}/{_fmt(e['p95'])}   {b['valid_outside_covariance_outputs']}"
+                   f"   {b['radiation_hits_expected']:.0f}/{b['spots_rejected_hit']}")
+    out.append("  orbit worst runs (re-run: gyrostar run --fast --scenario mco:SEED@DURATION --seed SEED): "
+               + ", ".join(f"{w['seed']} ({w['hazard']}, {w['profile']}, avail {_fmt(w['availability'], '.2f')})"
+                           for w in o["worst_runs"]))
+    return out

@@ -152,6 +152,10 @@ class ScenarioScene:
         q = self.truth.q_at(t_host, "scene")
         return q, self.truth.rates(t_host + self._mid)
 
+    def env_time(self, t_host: float) -> float:
+        """Scenario time (s) of host time ``t_host``: the orbit environment's clock."""
+        return float(t_host) - self.truth.t_origin
+
 
 # ---------------------------------------------------------------------------- driver
 def loop_params(cfg: hc.FlatsatConfig, e_per_dn: float | None = None, scen: hc.Scenario | None = None,
@@ -344,6 +348,8 @@ class Flatsat:
     calibration: object = None          # gyrostar.calibration.apply.RunCalibration in use
     true_camera: object = None          # the simulated head's real optics (may differ from ``camera``)
     device_cpu: DeviceCpu | None = None  # CPU the loop's thread spends inside in-process emulated devices
+    environment: object = None          # the emulated head's orbit environment (gyrostar.mocks.environment)
+    sim_preset: object = None           # the emulated head's simulator preset (true camera)
 
     def start_scenario(self, t0: float) -> None:
         """Scenario time 0 of the emulated devices is host time ``t0`` (just before the loop starts)."""
@@ -472,8 +478,8 @@ def preflight(cfg: hc.FlatsatConfig, scen: hc.Scenario, simulated_clock: bool = 
     Any mix of real and emulated devices is allowed: an emulated device takes its scenario
     from the simulator, a real one its physics from the bench. What cannot work: the gyro
     emulator for a part it does not model, faults injected into a real device, a NACK on the
-    emulated gyro's SPI bus, an eclipse on a real sensor, and a simulated clock with a real
-    device (real devices keep real time).
+    emulated gyro's SPI bus, an eclipse on a real sensor, the orbit environment on any head but
+    the Python emulator, and a simulated clock with a real device (real devices keep real time).
     """
     import os
 
@@ -492,6 +498,9 @@ def preflight(cfg: hc.FlatsatConfig, scen: hc.Scenario, simulated_clock: bool = 
         if f.kind == "gyro-nack" and emulated_gyro(cfg) and cfg.gyro.emulator_bus == "spi":
             raise ConfigError(f"scenario '{scen.name}' injects 'gyro-nack', which an SPI bus cannot give (it has "
                               "no acknowledge): set gyro.emulator_bus = \"i2c\"")
+    if scen.hazards and cfg.head.kind != "emulator":
+        raise ConfigError(f"scenario '{scen.name}': the orbit environment ({', '.join(scen.hazards)}) is rendered "
+                          f"by the head emulator only (head.kind = \"emulator\"), not by head.kind = '{cfg.head.kind}'")
     if scen.eclipse and not emulated_head(cfg):
         raise ConfigError(f"scenario '{scen.name}' has an eclipse, which needs an emulated head "
                           f"(head.kind = '{cfg.head.kind}')")
@@ -648,7 +657,10 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
                                       f"b = {np.degrees(b).round(5).tolist()} °/s")
 
     # head link
-    open_link, head_wiring, head_closers = _head_devices(cfg, scen, sim, truth, seed, faults, lockstep)
+    environment = scenario_environment(scen, seed) if emulated_head(cfg) else None
+    if environment is not None:
+        wiring["environment"] = "orbit environment (gyrostar.mocks.environment): " + ", ".join(scen.hazards)
+    open_link, head_wiring, head_closers = _head_devices(cfg, scen, sim, truth, seed, faults, lockstep, environment)
     wiring["head"] = head_wiring
     closers += head_closers
     current = {}
@@ -683,7 +695,8 @@ def build(cfg: hc.FlatsatConfig, scen: hc.Scenario, seed: int, realtime: bool, w
     return Flatsat(cfg, scen, camera, rec_clock, base, gyro, head, truth if cfg.simulated else None,
                    simulated_clock=fast, wiring=wiring, lat_clock=lat_clock, e_per_dn=e_per_dn, faults=faults,
                    closers=tuple(closers), irq=irq, lockstep=lockstep, device_truth=truth, calibration=calib,
-                   true_camera=sim.camera if sim is not None else None, device_cpu=device_cpu)
+                   true_camera=sim.camera if sim is not None else None, device_cpu=device_cpu,
+                   environment=environment, sim_preset=sim)
 
 
 CH_IRQ = 5
@@ -750,7 +763,7 @@ class _IrqLine:
         return float("nan") if t is None else float(t)
 
 
-def _sim_head(cfg, scen, sim, truth, seed, faults, lockstep):
+def _sim_head(cfg, scen, sim, truth, seed, faults, lockstep, environment=None):
     """The head emulator in this process on a device clock, behind the line-rate link model."""
     from ..catalog import load_catalog
     from ..clock import SimulatedClock
@@ -761,7 +774,7 @@ def _sim_head(cfg, scen, sim, truth, seed, faults, lockstep):
 
     cat = load_catalog(cfg.sim.catalog, scen.mag_limit or cfg.sim.mag_limit)
     dev_clock = SimulatedClock(lockstep.clock.now())
-    sky = Sky(cat, sim, seed=seed, false_spots=scen.false_spots or None)
+    sky = Sky(cat, sim, seed=seed, false_spots=scen.false_spots or None, environment=environment)
     emu = HeadEmulator(sky, ScenarioScene(truth, sim.detector.exposure_s), noise=True,
                        clock=dev_clock)
     # its kernels compiled (cold cache) or loaded now, not at its first frame inside the run
@@ -787,13 +800,13 @@ def _sim_head(cfg, scen, sim, truth, seed, faults, lockstep):
             f"{head.preset.description}", [head.stop] + closers)
 
 
-def _head_devices(cfg, scen, sim, truth, seed, faults, lockstep=None):
+def _head_devices(cfg, scen, sim, truth, seed, faults, lockstep=None, environment=None):
     """(open_link() -> SerialLink, wiring text, closers) for the configured head."""
     from ..transport import SerialLink
 
     h = cfg.head
     if lockstep is not None:
-        return _sim_head(cfg, scen, sim, truth, seed, faults, lockstep)
+        return _sim_head(cfg, scen, sim, truth, seed, faults, lockstep, environment)
     if h.kind == "emulator":
         from .emuproc import EmulatorProcess
 
@@ -804,7 +817,7 @@ def _head_devices(cfg, scen, sim, truth, seed, faults, lockstep=None):
             from ..mocks.sky import Sky
 
             cat = load_catalog(cfg.sim.catalog, scen.mag_limit or cfg.sim.mag_limit)
-            sky = Sky(cat, sim, seed=seed, false_spots=scen.false_spots or None)
+            sky = Sky(cat, sim, seed=seed, false_spots=scen.false_spots or None, environment=environment)
             emu = HeadEmulator(sky, ScenarioScene(truth, sim.detector.exposure_s), noise=True)
             emu.warm_up(truth.q0)        # render once up front (numba load, fixed-pattern noise)
             return emu, truth
@@ -839,6 +852,16 @@ def _head_devices(cfg, scen, sim, truth, seed, faults, lockstep=None):
         return SerialLink(h.url, baudrate=h.baudrate)
 
     return open_serial, f"serial link {h.url} at {h.baudrate} Bd", []
+
+
+def scenario_environment(scen: hc.Scenario, seed: int, horizon_s: float | None = None):
+    """The scenario's orbit environment for the emulated head's sky
+    (:class:`gyrostar.mocks.environment.Environment`), or None when every hazard is off."""
+    if not scen.hazards:
+        return None
+    from ..mocks.environment import Environment
+
+    return Environment.from_scenario(scen, seed, horizon_s)
 
 
 class FaultPlan:

@@ -525,6 +525,11 @@ def _session(cfg, scen, duration, seed, folder, realtime, plots, status, writer,
         res_top["health"] = health(out, loop.gyro.odr_hz, counters, dict(client.stats) if client is not None else None)
         res_top["numba_startup"] = warm
         res_top["wiring"] = wiring
+        if getattr(fs, "environment", None) is not None and fs.device_truth is not None:
+            from .environment_report import environment_summary
+
+            res_top["environment"] = environment_summary(fs.environment, fs.device_truth, fs.sim_preset,
+                                                         fs.true_camera.as_array(), duration, fs.device_truth.t_origin)
         if rt is not None:
             res_top["realtime_setup"] = {"sched_fifo": rt.sched_fifo, "cpus": rt.cpus, "notes": rt.notes}
         if tm is not None:
@@ -811,6 +816,10 @@ def human_summary(r: dict) -> str:
                      f"{f(h.get('attitude_3sigma_arcsec_cross_median'), '.1f')}″, "
                      f"link errors {h['link_error_outputs']}"
                      + (f", head clock steps {h['head_clock_steps']}" if h.get("head_clock_steps") else ""))
+    from .environment_report import summary_line
+
+    if (env_line := summary_line(r)) is not None:
+        lines.append(env_line)
     cal = r.get("calibration")
     lines.append(f"  calibration: {cal['path']} (sha256 {cal['sha256'][:16]})" if cal else
                  "  calibration: none (nominal camera and gyro mounting)")

@@ -175,12 +175,17 @@ class HeadEmulator:
     def _sky_for(self, exposure_us: int):
         sky = self._skies.get(exposure_us)
         if sky is None:
-            from .sky import Sky
-
-            base = self.sky
-            sky = Sky(base.catalog, base.preset.with_exposure(exposure_us * 1e-6), seed=base.seed)
+            sky = self.sky.with_exposure(exposure_us * 1e-6)    # glints and environment kept
             self._skies = {exposure_us: sky}
         return sky
+
+    def _env_time(self, t_host: float):
+        """Scenario time (s) of host time ``t_host`` for the sky's environment, or None (no
+        environment, or a scene without a scenario clock)."""
+        if self.sky.environment is None:
+            return None
+        env_time = getattr(self.scene, "env_time", None)
+        return None if env_time is None else env_time(t_host)
 
     # --- frame handling -----------------------------------------------------------------------
     def handle(self, encoded: bytes, rx_us: int) -> bytes | None:
@@ -338,7 +343,8 @@ class HeadEmulator:
         q_start, omega = self.scene.at(t0_host)
         sky = self._sky_for(self.exposure_us)
         self.sensor_frame += 1
-        pixels = sky.window_pixels(self.spans, q_start, omega, frame=self.sensor_frame, noise=self.noise)
+        pixels = sky.window_pixels(self.spans, q_start, omega, frame=self.sensor_frame, noise=self.noise,
+                                   t_s=self._env_time(t0_host))
         self.rendered_pixels += len(pixels)
         # the exposure takes its time: the reply leaves after the exposure end
         remaining = t0_host + self.exposure_us * 1e-6 - self.clock.now()
@@ -397,9 +403,10 @@ class HeadEmulator:
         if off + count > self.width * self.height:
             raise _Reject(ErrorCode.FRAME_RANGE, off)
         if self._full is None or self._full[0] != self.sensor_frame:
-            q_start, omega = self.scene.at(self.clock.now())
+            t_host = self.clock.now()
+            q_start, omega = self.scene.at(t_host)
             img, _ = self._sky_for(self.exposure_us).render_frame(q_start, omega, frame=self.sensor_frame,
-                                                                 noise=self.noise)
+                                                                 noise=self.noise, t_s=self._env_time(t_host))
             self.full_renders += 1
             self._full = (self.sensor_frame, np.minimum(img.ravel(), 0x3FF).astype(np.uint16))
         px = self._full[1][off:off + count]
@@ -426,7 +433,7 @@ class HeadEmulator:
         q_start, omega = self.scene.at(t0_host)
         self.sensor_frame += 1
         img, _ = self._sky_for(self.exposure_us).render_frame(q_start, omega, frame=self.sensor_frame,
-                                                             noise=self.noise)
+                                                             noise=self.noise, t_s=self._env_time(t0_host))
         self.full_renders += 1
         img = np.minimum(img, 0x3FF).astype(np.uint16).reshape(self.height, self.width)
         self._full = (self.sensor_frame, img.ravel())
@@ -532,7 +539,8 @@ class HeadEmulator:
         ``exposure_us`` starting at host time ``t_start`` (s), sensor frame ``frame`` (its
         noise): the rendering itself, with no emulator state changed but the scene's."""
         q_start, omega = self.scene.at(t_start)
-        pixels = self._sky_for(exposure_us).window_pixels(spans, q_start, omega, frame=frame, noise=self.noise)
+        pixels = self._sky_for(exposure_us).window_pixels(spans, q_start, omega, frame=frame, noise=self.noise,
+                                                          t_s=self._env_time(t_start))
         return np.minimum(pixels, 0x3FF).astype(np.uint16)
 
     def _render(self, s, active) -> np.ndarray:
@@ -759,6 +767,9 @@ class HeadEmulator:
         img, _ = sky.render_frame(q0, np.zeros(3), frame=0)
         spans = np.array([[0, 10, 10, 16]], np.int32)
         sky.window_pixels(spans, q0, np.zeros(3), frame=0)
+        if sky.environment is not None:      # the orbit environment's kernels (and its ephemeris) too
+            sky.render_frame(q0, np.zeros(3), frame=0, t_s=0.0)
+            sky.window_pixels(spans, q0, np.zeros(3), frame=0, t_s=0.0)
         self._validate_spans(spans)
         for fmt in (PixelFormat.U16, PixelFormat.PACKED10):
             encode_windows_arrays([0], [6], np.ones(6, np.uint16), np.array([0, 6]), fmt)

@@ -21,6 +21,12 @@ Entry points:
 * ``expose(q_start, omega) -> Exposure``: the geometry only (star paths and truth), which
   both renderers use, for callers that render several readouts of one exposure.
 
+``environment`` (:class:`gyrostar.mocks.environment.Environment`, default None) adds the
+orbit's hazards — stray light, the Earth and the Moon, particle hits, hot pixels, the
+temperature's dark current and focal length — to the exposures given their scenario time
+``t_s`` (s, exposure start; keyword of every entry point). Without an environment, or
+without ``t_s``, the renderers run exactly as before.
+
 ``false_spots`` (k, 3) ``[col, row, vmag]`` adds stray-light glints: point sources fixed on
 the sensor (they do not move with the attitude), rendered like stars and listed after the
 stars in the truth with ids ``-1 … -k``.
@@ -38,6 +44,7 @@ import math
 
 import numpy as np
 from gyrostar.attitude import quat_conj, quat_mult, quat_to_dcm
+from gyrostar.camera import P_F
 from gyrostar.catalog import StarCatalog
 from gyrostar.core.windows import span_pixel_count
 from gyrostar.errors import ConfigError
@@ -70,6 +77,7 @@ class Exposure:
     paths: np.ndarray        # (n, n_sub, 2) [col, row] px
     boxes: np.ndarray        # int64 (n, 4) [r0, r1, c0, c1)
     truth: StarTruth
+    env: object = None       # the exposure's ExposureEnv (gyrostar.mocks.environment), or None
 
 
 def _as_rates(q_start, omega, quats, exposure_s) -> np.ndarray:
@@ -100,7 +108,7 @@ class Sky:
     """A catalog seen through a simulator preset; see the module docstring."""
 
     def __init__(self, catalog: StarCatalog, preset: SimPreset | str = "xing2012", seed: int = 0,
-                 false_spots=None):
+                 false_spots=None, environment=None):
         self.catalog = catalog
         self.preset = load_preset(preset) if isinstance(preset, str) else preset
         self.camera = self.preset.camera
@@ -121,6 +129,35 @@ class Sky:
             raise ConfigError("false_spots must be finite [col, row, vmag] triples")
         self.false_spots = spots
         self._spot_electrons = np.asarray(self.preset.star_electrons(spots[:, 2]), dtype=np.float64).reshape(-1)
+        self.environment = environment
+
+    def with_exposure(self, exposure_s: float) -> Sky:
+        """The same sky (catalog, seed, glints, environment) through the preset at another exposure (s)."""
+        return Sky(self.catalog, self.preset.with_exposure(exposure_s), seed=self.seed,
+                   false_spots=self.false_spots if len(self.false_spots) else None, environment=self.environment)
+
+    def _env_at(self, t_s, q_start, rates, frame):
+        """``(ExposureEnv or None, camera params)`` of an exposure from scenario time ``t_s``:
+        the environment evaluated at the mid-exposure attitude, and the camera array with its
+        focal length at the exposure's temperature."""
+        if self.environment is None or t_s is None:
+            return None, self.params
+        t_exp = self.preset.detector.exposure_s
+        q_mid = piecewise_attitudes(q_start, rates, t_exp, np.array([0.5 * t_exp]))[0]
+        env = self.environment.exposure(float(t_s), q_mid, int(frame), self.preset, self.params)
+        if env.focal_scale == 1.0:
+            return env, self.params
+        params = self.params.copy()
+        params[P_F] *= env.focal_scale
+        return env, params
+
+    def _env_electrons(self, env, electrons, vecs):
+        """Star electrons with the stars behind the Earth or the Moon put out."""
+        if env is None or not len(env.hidden_dirs):
+            return electrons
+        from .environment import visible_mask
+
+        return np.where(visible_mask(vecs, env.hidden_dirs), electrons, 0.0)
 
     @property
     def fixed_pattern(self) -> tuple[np.ndarray, np.ndarray]:
@@ -134,9 +171,10 @@ class Sky:
         self.fixed_pattern  # noqa: B018 - builds the maps on first use
         return self._fpn
 
-    def expose(self, q_start, omega=None, quats=None) -> Exposure:
-        """Star paths and truth for one exposure (no pixels)."""
+    def expose(self, q_start, omega=None, quats=None, t_s=None, frame: int = 0) -> Exposure:
+        """Star paths and truth for one exposure (no pixels); ``t_s``, ``frame``: the environment's."""
         q_start, rates2, n_sub, w_max = self._exposure_setup(q_start, omega, quats)
+        env, params = self._env_at(t_s, q_start, rates2, frame)
         t_exp = self.preset.detector.exposure_s
         # one exact attitude grid: 4·n_sub intervals; sub-step midpoints are every 4th from 2
         n_grid = 4 * n_sub
@@ -147,12 +185,13 @@ class Sky:
         reach = self._field_radius + w_max * t_exp
         sel = self.near(bore, reach)
         vecs = np.ascontiguousarray(self.catalog.vectors[sel])
-        grid_paths = render.star_paths(self.params, vecs, qs)
+        grid_paths = render.star_paths(params, vecs, qs)
         paths = np.ascontiguousarray(grid_paths[:, 2::4])
         boxes = render.star_boxes(paths, self.preset.optics.psf_sigma_px, self.camera.width_px,
                                   self.camera.height_px)
         uv = _simpson_mean(grid_paths)
         ids, vmag, electrons = self.catalog.ids[sel], self.catalog.vmag[sel], self.electrons[sel]
+        electrons = self._env_electrons(env, electrons, vecs)
         k = len(self.false_spots)
         if k:
             paths, boxes, electrons = self._add_glints(paths, boxes, electrons)
@@ -162,7 +201,7 @@ class Sky:
         w, h = self.camera.width_px, self.camera.height_px
         in_field = (uv[:, 0] >= -0.5) & (uv[:, 0] < w - 0.5) & (uv[:, 1] >= -0.5) & (uv[:, 1] < h - 0.5)
         truth = StarTruth(ids, vmag, uv, in_field, electrons, q_start.copy(), q_mid, q_fin, t_exp)
-        return Exposure(paths, boxes, truth)
+        return Exposure(paths, boxes, truth, env)
 
     def _exposure_setup(self, q_start, omega, quats):
         """``(q_start, rates (m, 3), n_sub, w_max)`` of one exposure: the validated start
@@ -177,22 +216,23 @@ class Sky:
                                  math.hypot(self.camera.width_px, self.camera.height_px) / 2.0)
         return q_start, rates, n_sub, w_max
 
-    def window_pixels(self, spans, q_start, omega=None, frame: int = 0, noise: bool = True) -> np.ndarray:
+    def window_pixels(self, spans, q_start, omega=None, frame: int = 0, noise: bool = True, t_s=None) -> np.ndarray:
         """Span pixels (uint16 (m,) ADU in span order) of one exposure: the pixels of
         :meth:`render_windows`, to the bit, without its truth (the star paths are taken at
         the sub-steps only; the emulated heads' per-frame path)."""
         spans = render.check_spans(spans, self.camera.width_px, self.camera.height_px)
         q_start, rates, n_sub, w_max = self._exposure_setup(q_start, omega, None)
+        env, params = self._env_at(t_s, q_start, rates, frame)
         t_exp = self.preset.detector.exposure_s
         qs, bore = _substep_attitudes(q_start, rates, t_exp, n_sub)
         reach = self._field_radius + w_max * t_exp
         sel, vecs = _within(*self._candidates(bore, reach), bore, math.cos(min(reach, math.pi)))
-        paths, boxes = render.star_paths_boxes(self.params, vecs, qs, self.preset.optics.psf_sigma_px,
+        paths, boxes = render.star_paths_boxes(params, vecs, qs, self.preset.optics.psf_sigma_px,
                                                self.camera.width_px, self.camera.height_px)
-        electrons = self.electrons[sel]
+        electrons = self._env_electrons(env, self.electrons[sel], vecs)
         if len(self.false_spots):
             paths, boxes, electrons = self._add_glints(paths, boxes, electrons)
-        return self._readout(paths, electrons, boxes, spans, frame, noise)
+        return self._readout(paths, electrons, boxes, spans, frame, noise, env)
 
     def _add_glints(self, paths, boxes, electrons):
         """``(paths, boxes, electrons)`` with the stray-light glints after the stars: they do
@@ -231,9 +271,10 @@ class Sky:
         render.add_stars_full(sig, exp.paths, exp.truth.electrons, exp.boxes, self.preset.optics.psf_sigma_px)
         return sig
 
-    def render_frame(self, q_start, omega=None, frame: int = 0, noise: bool = True, quats=None):
+    def render_frame(self, q_start, omega=None, frame: int = 0, noise: bool = True, quats=None, t_s=None):
         """Whole frame: (uint16 (H, W) ADU, StarTruth)."""
-        exp = self.expose(q_start, omega, quats)
+        exp = self.expose(q_start, omega, quats, t_s=t_s, frame=frame)
+        env = exp.env
         gain, dark, lam_bg, exp_bg = self._noise_maps()
         # zero-filled (H, W) buffers reused between frames, cleared box by box after use;
         # a pool (list.pop/append are atomic) so threads sharing one Sky never share a buffer
@@ -243,31 +284,46 @@ class Sky:
             sig = np.zeros((self.camera.height_px, self.camera.width_px))
         try:
             render.add_stars_full(sig, exp.paths, exp.truth.electrons, exp.boxes, self.preset.optics.psf_sigma_px)
+            if env is not None:
+                from .environment import add_env_full
+
+                add_env_full(sig, gain, dark, env.grid, env.params, env.deposits)
+                lit = np.ones(self.camera.height_px, np.bool_)
+            else:
+                lit = render.lit_rows(exp.boxes, self.camera.height_px)
             img = pixel_noise.digitise_frame(sig, gain, dark, lam_bg, exp_bg, self.seed, int(frame), self.det,
-                                             bool(noise), pixel_noise.normal_table(),
-                                             render.lit_rows(exp.boxes, self.camera.height_px))
+                                             bool(noise), pixel_noise.normal_table(), lit)
         finally:
-            render.clear_boxes(sig, exp.boxes)
+            if env is not None:
+                sig[:] = 0.0
+            else:
+                render.clear_boxes(sig, exp.boxes)
             self._sig_pool.append(sig)
         return img, exp.truth
 
-    def render_windows(self, spans, q_start, omega=None, frame: int = 0, noise: bool = True, quats=None):
+    def render_windows(self, spans, q_start, omega=None, frame: int = 0, noise: bool = True, quats=None, t_s=None):
         """Span pixels: (uint16 (m,) ADU in span order, StarTruth)."""
         spans = render.check_spans(spans, self.camera.width_px, self.camera.height_px)
-        exp = self.expose(q_start, omega, quats)
-        return self._readout(exp.paths, exp.truth.electrons, exp.boxes, spans, frame, noise), exp.truth
+        exp = self.expose(q_start, omega, quats, t_s=t_s, frame=frame)
+        return self._readout(exp.paths, exp.truth.electrons, exp.boxes, spans, frame, noise, exp.env), exp.truth
 
     def readout_windows(self, exp: Exposure, spans: np.ndarray, frame: int = 0, noise: bool = True) -> np.ndarray:
         """Span pixels (uint16, span order) of an already computed exposure; ``spans`` are validated."""
         return self._readout(exp.paths, exp.truth.electrons, exp.boxes,
-                             render.check_spans(spans, self.camera.width_px, self.camera.height_px), frame, noise)
+                             render.check_spans(spans, self.camera.width_px, self.camera.height_px), frame, noise,
+                             exp.env)
 
-    def _readout(self, paths, electrons, boxes, spans: np.ndarray, frame: int, noise: bool) -> np.ndarray:
-        """ADU of the (validated) ``spans`` under stars on ``paths`` with ``electrons`` and ``boxes``."""
+    def _readout(self, paths, electrons, boxes, spans: np.ndarray, frame: int, noise: bool, env=None) -> np.ndarray:
+        """ADU of the (validated) ``spans`` under stars on ``paths`` with ``electrons`` and ``boxes``
+        (and the exposure's environment ``env``, if any)."""
         sig = np.zeros(span_pixel_count(spans))
         render.add_stars_spans(sig, spans, paths, electrons, boxes, self.preset.optics.psf_sigma_px)
         if self._span_maps is None:
             self._span_maps = pixel_noise.span_maps(*self._noise_maps())
+        if env is not None:
+            from .environment import add_env_spans
+
+            add_env_spans(sig, spans, self._span_maps, env.grid, env.params, env.deposits)
         return pixel_noise.digitise_spans(sig, spans, self._span_maps, self.seed, int(frame), self.det,
                                           bool(noise), pixel_noise.normal_table())
 

@@ -53,6 +53,7 @@ from .floor import FloorInputs, pointing_bias_arcsec
 from .frame_kernel import N_ACCEPTED, N_CONSISTENT, N_MEASURED, N_USED, apply_frame
 from .head_link import HeadLink
 from .image import ImagePipeline
+from .image_kernels import MEAS_ABSENT, MEAS_BRIGHT, MEAS_HIT
 from .meters import LoopMeters
 from .mode_keeper import Heard, ModeKeeper
 from .outputs import OutputStage
@@ -95,6 +96,7 @@ class LoopParams:
     psf_sigma_px: float = 0.85        # PSF σ of the optics (px), for the smeared-spot fit
     bias_prior: float = 0.02          # initial drift uncertainty, rad/s (≈ 1.1 °/s: BMI088 offset ±1 °/s)
     min_signal: float = 30.0          # window flux (DN above background) to accept a centroid
+    adc_max_dn: float = 1023.0        # the head's full scale (DN; GET_INFO bits): a background near it is blinding
     thresh_sigma: float = 4.0         # CoG threshold above the window background, in noise σ
     max_misses: int = 50              # frames without a centroid before a spot is dropped (TRACK)
     pixel_budget: int = 8192          # head limits (GET_INFO)
@@ -138,6 +140,9 @@ class Counters:
     rejected_updates: int = 0
     wrong_ids_dropped: int = 0
     inconsistent_stars: int = 0      # measured stars dropped before the update: off the others' attitude
+    frames_blinded: int = 0          # images not measured: background near full scale in most windows (or frame)
+    windows_bright: int = 0          # windows whose background was near full scale
+    spots_rejected_hit: int = 0      # spots not taken: one-pixel shape or flux far above their star's (hits, glare)
     head_errors: int = 0
     head_reconnects: int = 0
     outputs: int = 0
@@ -199,6 +204,7 @@ class CoupledLoop:
         # the mode and the outputs' image flags, from each frame's outcome (streamed ones as StreamImages says)
         self.mode_keeper = ModeKeeper(params.mode_params(), self.streaming, params.stream_few_frames,
                                       params.stream_gap_frames)
+        self.image_reason = R.REASON_ACQUIRING   # why the last image did not update (record.REASON_*)
 
     # ------------------------------------------------------------------ views
     @property
@@ -391,7 +397,7 @@ class CoupledLoop:
         output batch (one compiled call)."""
         smp = self.samples
         f = self.filter
-        base = self.mode_keeper.flags
+        base = self.mode_keeper.flags | (self.reason() << R.REASON_SHIFT)
         if f.valid and self.mode != R.MODE_ACQUIRE:
             base |= R.FLAG_ATTITUDE_VALID
         if self.id_verified:
@@ -410,6 +416,18 @@ class CoupledLoop:
             n_stars = self._out["n_stars"][lo:hi]
             np.minimum(n_stars, self.stars_seen, out=n_stars)
         self.flags_pending = 0
+
+    def reason(self) -> int:
+        """The outputs' reason code now (:data:`gyrostar.loop.record.REASON_NAMES`): why they are
+        not a tracked, image-updated attitude, 0 when they are."""
+        if not self.link.up:
+            return R.REASON_HEAD_LOST
+        r = self.image_reason
+        if self.mode == R.MODE_ACQUIRE:
+            return R.REASON_BLINDED if r == R.REASON_BLINDED else R.REASON_ACQUIRING
+        if self.mode == R.MODE_COAST and r in (R.REASON_NONE, R.REASON_ACQUIRING):
+            return R.REASON_FEW_STARS
+        return r
 
     def _emit(self, lo: int, hi: int) -> int:
         """Emit outputs ``lo:hi`` of this step (predicted by :meth:`_predict`; parts in order)."""
@@ -578,8 +596,11 @@ class CoupledLoop:
 
     # -- ACQUIRE ----------------------------------------------------------------
     def _acquire(self, res, now: float) -> None:
-        spots, ident = res.measured          # ImagePipeline.lost_in_space ran on the head worker
+        spots, ident, blinded = res.measured   # ImagePipeline.lost_in_space ran on the head worker
         self.c.acquisitions += 1
+        self.image_reason = R.REASON_BLINDED if blinded else R.REASON_ACQUIRING
+        if blinded:
+            self.c.frames_blinded += 1
         if ident is None:
             self.c.acquisition_failures += 1
             return
@@ -653,6 +674,15 @@ class CoupledLoop:
             self.mode == R.MODE_COAST
             and math.sqrt(max(f.P[0, 0], f.P[1, 1])) * self.f_px > CONFIRM_PRIOR_PX)
         min_used = max(CONFIRM_MIN_STARS, self.p.min_stars) if wide else self.p.min_stars
+        # blinded (most windows read at a background near full scale: Sun or Earth glare, the
+        # Moon): nothing is measured, no miss is counted, the attitude coasts on the gyro
+        n_read = int(np.count_nonzero(state != MEAS_ABSENT))
+        n_bright = int(np.count_nonzero(state == MEAS_BRIGHT))
+        blinded = n_bright > 0 and 2 * n_bright >= n_read
+        self.c.windows_bright += n_bright
+        self.c.frames_blinded += blinded
+        self.c.spots_rejected_hit += int(np.count_nonzero(state == MEAS_HIT))
+        too_fast = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]) > self.p.max_track_rate
         # one compiled call: windows whose slot was dropped or refilled meanwhile are skipped,
         # spots smeared past what the centroid model holds are not taken (coast on the gyro),
         # stars that disagree with the others are dropped, the rest update the filter at
@@ -660,7 +690,7 @@ class CoupledLoop:
         counts, info, wrong = apply_frame(
             pend["wins"], pend["nav"], state, b_mid, sig, tr.active, tr.nav, tr.misses, tr.rejects, tr.ref,
             (self.p.camera_sigma_px / self.f_px) ** 2 if self.p.camera_sigma_px > 0 else 0.0,
-            math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]) > self.p.max_track_rate,
+            too_fast or blinded,
             CONSISTENT_SIGMA, CONSISTENT_MIN_PX / self.f_px, *f.update_operands,
             float(res.t_mid), int(min_used), GATE, QD_MARGIN, SMOOTH_GAP_S, self.p.wrong_id_rejects)
         n_measured = int(counts[N_MEASURED])
@@ -679,6 +709,8 @@ class CoupledLoop:
                     tr.drop_wrong(int(s), now)
                     self.c.wrong_ids_dropped += 1
         self.id_verified = updated >= 3 and updated == n_measured
+        self.image_reason = (R.REASON_NONE if updated >= self.p.min_stars else R.REASON_BLINDED if blinded
+                             else R.REASON_RATE if too_fast else R.REASON_FEW_STARS)
         self._after_image(now, updated)
 
     def _frames_missing(self, now: float) -> None:
@@ -788,7 +820,7 @@ def warmup() -> dict:
                                       af.ts[1:4], w, 4, 0.0025, 0.0025, cam, MODEL, 6, 1024, 1024, 8192, 2048, 512)),
         (image_kernels.measure_windows, (spans, vals, np.array([0], np.int64), np.zeros((2, 2)),
                                          np.array([0], np.int64), np.array([2], np.int64), cam, 0.85, 4.0, 30.0,
-                                         5.0, 10, 1e-3)),
+                                         5.0, 10, 1e-3, np.full(1, 5.0), 767.0)),
         (update_kernel.q_at_history, (af.q, af.ts, af.hist_t, af.hist_q, af.ih, 0.0)),
         (unproject_many, (cam, np.zeros((2, 2)))),                            # lost-in-space spots (head worker)
         (polygon_centroid, (np.arange(4.0), np.arange(4.0) * 0.0025, 0.0024, 0.0026)),   # gyro timebase, no irq

@@ -11,13 +11,39 @@ from __future__ import annotations
 
 import numpy as np
 
-from .image_kernels import measure_windows
+from .image_kernels import BRIGHT_FRACTION, measure_windows
 
 LIS_SIGMA = 6.0        # lost-in-space spot threshold: background + 6σ (full frame or the head's FIND_SPOTS)
 LIS_MAX_SPOTS = 40     # spots handed to the identifier, brightest first
 LIS_HEAD_SPOTS = 64    # spot windows a head's FIND_SPOTS sends (its neighbour score ranks a little
                        # differently from the full box flux: the host re-ranks and keeps 40)
 LIS_BOX = 7            # px: centroid box and suppression distance
+BLIND_PIXEL_FRACTION = 0.01   # a full frame with more of its pixels near full scale is blinded (not searched)
+# An extended object (the Moon's disk, the Earth's limb) makes spots along its edge that no catalog
+# holds: spots are not taken within EXTENDED_MARGIN_PX of a region of EXTENDED_MIN_PX or more pixels
+# near full scale (a star saturates a few), nor a head's spot window with EXTENDED_WINDOW_PX of them
+EXTENDED_MIN_PX = 30
+EXTENDED_MARGIN_PX = 12
+EXTENDED_WINDOW_PX = 16
+
+
+def off_extended(spots: np.ndarray, bright: np.ndarray) -> np.ndarray:
+    """The ``spots`` ((n, 3) [u, v, flux]) not within ``EXTENDED_MARGIN_PX`` of a connected
+    region of ``EXTENDED_MIN_PX`` or more ``bright`` pixels ((H, W) bool)."""
+    if len(spots) == 0 or np.count_nonzero(bright) < EXTENDED_MIN_PX:
+        return spots
+    from scipy import ndimage
+
+    lab, n = ndimage.label(bright)
+    area = np.bincount(lab.ravel(), minlength=n + 1)
+    big = area >= EXTENDED_MIN_PX
+    big[0] = False
+    if not big.any():
+        return spots
+    near = ndimage.maximum_filter(big[lab], size=2 * EXTENDED_MARGIN_PX + 1)
+    r = np.clip(np.rint(spots[:, 1]).astype(int), 0, bright.shape[0] - 1)
+    c = np.clip(np.rint(spots[:, 0]).astype(int), 0, bright.shape[1] - 1)
+    return spots[~near[r, c]]
 FIT_MAX_ITER = 10      # Gauss–Newton iterations of the smeared-PSF fit, at most
 FIT_TOL_PX = 1e-2      # px (|Δu| + |Δv|): the fit stops after a step this small. It converges
                        # linearly here, each step about 0.1× the one before: on the demo the
@@ -67,9 +93,12 @@ class ImagePipeline:
     def _measure(self, plan: dict, values) -> tuple:
         p = self.p
         vals = np.ascontiguousarray(values, dtype=np.float64)
+        vmag = plan.get("vmag")
+        if vmag is None:
+            vmag = np.full(len(plan["wins"]), np.nan)
         return measure_windows(plan["spans"], vals, plan["wins"], plan["off"], plan["off_start"], plan["off_len"],
                                self.cam, p.psf_sigma_px, p.thresh_sigma, p.min_signal, p.e_per_dn, FIT_MAX_ITER,
-                               FIT_TOL_PX)
+                               FIT_TOL_PX, vmag, BRIGHT_FRACTION * p.adc_max_dn)
 
     def _measure_pool(self):
         if self._pool is None:
@@ -81,21 +110,33 @@ class ImagePipeline:
         return self._pool
 
     def lost_in_space(self, image):
-        """Spots of a lost-in-space image and their identification: ``(spots, ident or None)``.
-        ``image``: a full frame ((H, W) array), or a head's FIND_SPOTS result
-        (:class:`gyrostar.head.SpotCapture`: its windows are centroided here). Runs on the head
-        port's worker, off the loop's steps; reads no loop state."""
+        """Spots of a lost-in-space image and their identification: ``(spots, ident or None,
+        blinded)``. ``image``: a full frame ((H, W) array), or a head's FIND_SPOTS result
+        (:class:`gyrostar.head.SpotCapture`: its windows are centroided here). A blinded
+        image — more than ``BLIND_PIXEL_FRACTION`` of a full frame's pixels, or the head's
+        background, above ``BRIGHT_FRACTION`` of full scale — is not searched (its glare
+        would make spots no catalog holds). Runs on the head port's worker, off the loop's
+        steps; reads no loop state."""
         from .acquire import detect_spots, spots_from_windows
 
+        bright = BRIGHT_FRACTION * self.p.adc_max_dn
         if isinstance(image, np.ndarray):
-            spots = detect_spots(image.astype(np.float64), LIS_SIGMA, LIS_MAX_SPOTS, LIS_BOX)
+            if np.count_nonzero(image > bright) > BLIND_PIXEL_FRACTION * image.size:
+                return np.zeros((0, 3)), None, True
+            spots = detect_spots(image.astype(np.float64), LIS_SIGMA, LIS_MAX_SPOTS + LIS_HEAD_SPOTS, LIS_BOX)
+            spots = off_extended(spots, image > bright)[:LIS_MAX_SPOTS]
         else:
-            values = np.concatenate([w.pixels for w in image.capture.windows]) if image.capture.windows \
-                else np.zeros(0)
-            spots = spots_from_windows(image.spans, values, image.background_dn, image.sigma_dn, LIS_MAX_SPOTS)
+            if image.background_dn > bright:
+                return np.zeros((0, 3)), None, True
+            wins = image.capture.windows
+            # a window with many pixels near full scale sits on an extended object (the Moon's limb)
+            keep = [k + 1 for k, w in enumerate(wins) if np.count_nonzero(w.pixels > bright) < EXTENDED_WINDOW_PX]
+            spans = image.spans[np.isin(image.spans[:, 0], keep)] if len(keep) < len(wins) else image.spans
+            values = np.concatenate([wins[k - 1].pixels for k in keep]) if keep else np.zeros(0)
+            spots = spots_from_windows(spans, values, image.background_dn, image.sigma_dn, LIS_MAX_SPOTS)
         if len(spots) < 3:
-            return spots, None
-        return spots, self.identifier.identify(np.ascontiguousarray(spots[:, :2]))
+            return spots, None, False
+        return spots, self.identifier.identify(np.ascontiguousarray(spots[:, :2])), False
 
     def close(self) -> None:
         if self._pool is not None:

@@ -33,6 +33,22 @@ MEAS_OK = 0        # direction measured
 MEAS_MISS = 1      # window read, no spot above threshold (or too faint)
 SIGMA_FLOOR_PX = 0.005  # px: least centroid σ reported (the fit's own σ is below it only for saturating stars)
 MEAS_ABSENT = 2    # the window is not in the readout
+MEAS_HIT = 3       # a spot not taken: its shape (one sharp pixel) or its flux (far above what its catalog
+                   # magnitude and the frame's other stars predict) says radiation hit, hot pixel or glare
+MEAS_BRIGHT = 4    # the window's background is near the converter's full scale (Sun, Earth limb, Moon):
+                   # nothing can be measured there; not a miss (the star is not gone)
+
+# Fault detection thresholds (docs/RELIABILITY.md, "what gyrostar tolerates").
+# A star's PSF (σ ≥ 0.5 px) puts at most 47 % of its 3×3 flux into one pixel (σ = 0.85 px:
+# 23 %); a radiation hit or a hot pixel puts nearly all of it there.
+PEAK_FRACTION_MAX = 0.6
+PEAK_MIN_SNR = 8.0         # the shape is judged only when the 3×3 excess is this many noise σ
+# flux × 10^(0.4·V) is one constant for every star of a frame (the optics' zero point, the same
+# exposure): a spot this many times above the frame's median is not its star alone. 10 (2.5 mag)
+# leaves room for colour: a red star is up to ~2 mag brighter on silicon than its V says
+FLUX_RATIO_MAX = 10.0
+FLUX_MIN_STARS = 3         # stars with a magnitude a frame needs before the flux check runs
+BRIGHT_FRACTION = 0.75     # a window whose background is above this fraction of full scale is MEAS_BRIGHT
 
 
 @njit(cache=True)
@@ -152,7 +168,7 @@ def plan_tracked(active, nav, vmag, refs, q, omega, bias, m, lag_s, dt, cam, mod
 
 @njit(cache=True, nogil=True)
 def measure_windows(spans, values, wins, off, off_start, off_len, cam, psf_sigma, thresh_sigma, min_signal,
-                    e_per_dn, n_iter, tol):
+                    e_per_dn, n_iter, tol, vmag, bright_dn):
     """Spot directions of the windows ``wins`` in one readout (``values`` in span order).
 
     Returns ``(state (w,) int8 MEAS_*, b (w, 3) unit body direction at exposure mid-time,
@@ -160,11 +176,18 @@ def measure_windows(spans, values, wins, off, off_start, off_len, cam, psf_sigma
     ``thresh_sigma`` noise σ above the window background; ≥ 2 pixels and ``min_signal`` DN
     needed) refined by the smeared-PSF fit along its predicted trajectory offsets; when the
     fit diverges (> 2 px from the CoG) the CoG is kept with σ = 0.3 px.
+
+    Fault detection (no spot is taken that is not its star's): a window whose background is
+    above ``bright_dn`` (DN) is ``MEAS_BRIGHT``; a spot whose brightest pixel holds more than
+    ``PEAK_FRACTION_MAX`` of its 3×3 excess, or (with ``FLUX_MIN_STARS`` measured stars of known
+    ``vmag`` (w,), nan: unknown) whose flux × 10^(0.4·V) is more than ``FLUX_RATIO_MAX`` times
+    the frame's median, is ``MEAS_HIT``.
     """
     nw = wins.shape[0]
     state = np.full(nw, MEAS_ABSENT, np.int8)
     b = np.zeros((nw, 3))
     sig = np.full(nw, np.inf)
+    zp = np.full(nw, np.nan)          # log10(flux) + 0.4·V of each measured spot
     f = cam[P_F]
     for i in range(nw):
         a, e, v0 = window_spans_of(spans, wins[i])
@@ -178,10 +201,19 @@ def measure_windows(spans, values, wins, off, off_start, off_len, cam, psf_sigma
             continue
         wv = values[v0:v0 + npx]
         bg, noise = window_background(wv, 3.0)
+        if bg > bright_dn:
+            state[i] = MEAS_BRIGHT
+            continue
         u, v, flux, npix = cog(sp, wv, bg, bg + thresh_sigma * noise)
         if npix < 2 or flux < min_signal:
             state[i] = MEAS_MISS
             continue
+        peak, box = peak_excess(sp, wv, bg)
+        if box > PEAK_MIN_SNR * 3.0 * noise and peak > PEAK_FRACTION_MAX * box:
+            state[i] = MEAS_HIT
+            continue
+        if math.isfinite(vmag[i]):
+            zp[i] = math.log10(flux) + 0.4 * vmag[i]
         o = off[off_start[i]:off_start[i] + off_len[i]]
         fu, fv, _, var_u, var_v, _ = smear_fit(sp, wv, bg, u, v, o, psf_sigma, noise * noise, e_per_dn,
                                                n_iter, tol)
@@ -197,7 +229,50 @@ def measure_windows(spans, values, wins, off, off_start, off_len, cam, psf_sigma
         b[i, 2] = d[2]
         sig[i] = math.sqrt(var) / f
         state[i] = MEAS_OK
+    flux_outliers(state, zp)
     return state, b, sig
+
+
+@njit(cache=True)
+def flux_outliers(state, zp):
+    """Mark ``MEAS_HIT`` (in place) the measured spots whose zero point ``zp`` (log10 flux +
+    0.4·V; nan: unknown) lies more than log10(``FLUX_RATIO_MAX``) above the median of the
+    frame's others, when ``FLUX_MIN_STARS`` or more are known."""
+    known = np.flatnonzero((state == MEAS_OK) & np.isfinite(zp))
+    if known.shape[0] < FLUX_MIN_STARS:
+        return
+    lim = math.log10(FLUX_RATIO_MAX)
+    vals = zp[known]
+    for j in range(known.shape[0]):
+        others = np.delete(vals, j)
+        if vals[j] - np.median(others) > lim:
+            state[known[j]] = MEAS_HIT
+
+
+@njit(cache=True)
+def peak_excess(sp, wv, bg):
+    """(brightest pixel's excess over ``bg``, excess summed over the 3×3 pixels around it) of
+    one window (its spans ``sp`` and values ``wv``)."""
+    best = -np.inf
+    r0 = 0
+    c0 = 0
+    k = 0
+    for j in range(sp.shape[0]):
+        for col in range(sp[j, 2], sp[j, 3]):
+            if wv[k] > best:
+                best = wv[k]
+                r0 = sp[j, 1]
+                c0 = col
+            k += 1
+    box = 0.0
+    k = 0
+    for j in range(sp.shape[0]):
+        row = sp[j, 1]
+        for col in range(sp[j, 2], sp[j, 3]):
+            if abs(row - r0) <= 1 and abs(col - c0) <= 1:
+                box += wv[k] - bg
+            k += 1
+    return best - bg, box
 
 
 @njit(cache=True)

@@ -12,7 +12,7 @@ field              type        meaning (frames: gyrostar.attitude; body = camera
 ``n_stars``        u1          stars tracked; in COAST the stars the newest image still measured (0 in
                                a star-less COAST). The tracked stars' rows of ``star_id``/``centroid_px``
                                are those with ``star_id`` ≥ 0 (in COAST more than ``n_stars``)
-``flags``          u2          quality flags, ``FLAG_*`` below
+``flags``          u2          quality flags, ``FLAG_*`` below; bits 12–15: the reason code ``REASON_*``
 ``q``              f8[4]       attitude estimate [x, y, z, w], ICRS → body
 ``omega``          f8[3]       body rate, bias-corrected, rad/s
 ``bias``           f8[3]       gyro bias estimate, rad/s
@@ -58,6 +58,19 @@ FLAG_BIAS_CONVERGED = 0x0100   # bias covariance below threshold
 FLAG_ID_VERIFIED = 0x0200      # identification verified by residuals after the last solve
 FLAG_GYRO_STUCK = 0x0400       # a gyro axis output is stuck (unchanged for ≥ 32 frames: gyro.convert.FLAG_STUCK_AXIS)
 FLAG_UPDATE_APPLIED = 0x0800   # the first output after an image update (the one before it: the last prior)
+# Bits 12–15 of ``flags``: why the output is not a tracked, image-updated attitude (0: it is).
+# Read it with :func:`reason`; FLAG_ATTITUDE_VALID says whether ``q`` may be used at all
+# (with ``cov``: a coasted attitude is valid, its covariance growing with the gyro's noise).
+REASON_SHIFT = 12
+REASON_MASK = 0xF000
+REASON_NONE = 0           # tracking: the last image updated the attitude
+REASON_ACQUIRING = 1      # no attitude yet (lost in space, or confirming a new identification)
+REASON_FEW_STARS = 2      # coasting on the gyro: the last images held too few usable stars
+REASON_BLINDED = 3        # coasting or waiting: the image background is near full scale (Sun, Earth, Moon)
+REASON_RATE = 4           # coasting: the body turns faster than the spots can be measured
+REASON_HEAD_LOST = 5      # coasting: the head does not answer
+REASON_NAMES = {REASON_NONE: "none", REASON_ACQUIRING: "acquiring", REASON_FEW_STARS: "few_stars",
+                REASON_BLINDED: "blinded", REASON_RATE: "rate", REASON_HEAD_LOST: "head_lost"}
 FLAG_NAMES = {
     FLAG_ATTITUDE_VALID: "attitude_valid", FLAG_IMAGE_UPDATE: "image_update",
     FLAG_GYRO_GAP: "gyro_gap", FLAG_GYRO_SATURATED: "gyro_saturated",
@@ -104,8 +117,14 @@ def flag_names(flags: int) -> list[str]:
     return [name for bit, name in FLAG_NAMES.items() if flags & bit]
 
 
+def reason(flags):
+    """The reason code(s) ``REASON_*`` of output flags (an int or an array)."""
+    return (flags & REASON_MASK) >> REASON_SHIFT
+
+
 def describe() -> dict:
     """JSON-safe description of the record layout (stored in every log's META)."""
     return {"dtype": OUTPUT_DTYPE.descr, "itemsize": OUTPUT_DTYPE.itemsize, "modes": MODE_NAMES,
             "flags": {name: bit for bit, name in FLAG_NAMES.items()},
+            "reason_shift": REASON_SHIFT, "reasons": REASON_NAMES,
             "truth_dtype": TRUTH_DTYPE.descr}

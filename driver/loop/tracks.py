@@ -197,4 +197,4 @@ class StarTracks:
         if not len(wins):
             return None
         return {"spans": spans, "wins": wins, "nav": nav, "off": off, "off_start": off_start,
-                "off_len": off_len, "n_stars": n_stars}
+                "off_len": off_len, "n_stars": n_stars, "vmag": np.ascontiguousarray(self.index.vmag[nav], np.float64)}

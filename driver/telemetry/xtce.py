@@ -10,9 +10,12 @@ from __future__ import annotations
 
 import sys
 
+from ..loop.record import REASON_NAMES
 from . import packets
 
 SYSTEM = "gyrostar"
+# the top 4 bits of the flags word (gyrostar.loop.record.REASON_*)
+REASON_DOC = "reason code (flags bits 12-15): " + ", ".join(f"{k} {v}" for k, v in REASON_NAMES.items())
 
 
 def build(apid: int = packets.APID_ATTITUDE, frame_apid: int = packets.APID_FRAME):
@@ -45,7 +48,8 @@ def build(apid: int = packets.APID_ATTITUDE, frame_apid: int = packets.APID_FRAM
             uint("seq", 32, "count", "output counter"),
             uint("mode", 8, "1", "0 ACQUIRE, 1 TRACK, 2 COAST"),
             uint("n_stars", 8, "count", "stars tracked"),
-            uint("flags", 16, "1", "quality flags (gyrostar.loop.record FLAG_*)")]
+            uint("reason", 4, "1", REASON_DOC),
+            uint("flags", 12, "1", "quality flags (gyrostar.loop.record FLAG_*; bit 0: attitude valid)")]
     body += [f64(f"q_{a}", "1", f"attitude quaternion ICRS → body, {a} (scalar last)") for a in "xyzw"]
     body += [f64(f"omega_{a}", "rad/s", f"body rate, bias-corrected, {a}") for a in "xyz"]
     body += [f64(f"bias_{a}", "rad/s", f"gyro bias estimate, {a}") for a in "xyz"]
@@ -60,7 +64,8 @@ def build(apid: int = packets.APID_ATTITUDE, frame_apid: int = packets.APID_FRAM
              uint("frame_seq", 32, "count", "output counter of the first output holding this frame's update"),
              uint("frame_mode", 8, "1", "0 ACQUIRE, 1 TRACK, 2 COAST"),
              uint("frame_n_stars", 8, "count", "stars tracked"),
-             uint("frame_flags", 16, "1", "quality flags (gyrostar.loop.record FLAG_*)")]
+             uint("frame_reason", 4, "1", REASON_DOC),
+             uint("frame_flags", 12, "1", "quality flags (gyrostar.loop.record FLAG_*; bit 0: attitude valid)")]
     frame += [f64(f"q_mid_{a}", "1", f"attitude at mid-exposure, filtered with the frame, ICRS → body, {a}")
               for a in "xyzw"]
     frame += [f32(f"sigma_theta_mid_{a}", "rad", f"1-sigma error of q_mid about body {a}") for a in "xyz"]

@@ -99,15 +99,18 @@ class Cluster:
             self.cluster.close()
 
 
-def run_campaign(cluster: Cluster, seeds, duration_s: float, on_row=None, rows: list | None = None) -> list[dict]:
+def run_campaign(cluster: Cluster, seeds, duration_s: float, on_row=None, rows: list | None = None,
+                 orbit: bool = False) -> list[dict]:
     """Rows of every seed (sorted by seed); ``on_row(row)`` as each completes. ``rows``: a
-    list the rows are collected into as they come (what ran is kept if the wait is interrupted)."""
+    list the rows are collected into as they come (what ran is kept if the wait is interrupted).
+    ``orbit``: the orbit cases (``eval loop --orbit``)."""
     from dask.distributed import as_completed
 
     from .worker import run_case
 
-    futures = [cluster.client.submit(run_case, int(s), float(duration_s), cluster.config_path, pure=False,
-                                     key=f"mc-{duration_s:g}-{int(s)}", retries=1) for s in seeds]
+    prefix = "mco" if orbit else "mc"
+    futures = [cluster.client.submit(run_case, int(s), float(duration_s), cluster.config_path, bool(orbit),
+                                     pure=False, key=f"{prefix}-{duration_s:g}-{int(s)}", retries=1) for s in seeds]
     rows = [] if rows is None else rows
     try:
         for fut in as_completed(futures):
@@ -178,7 +181,36 @@ def summarize(rows: list[dict], worst: int = 5) -> dict:
                         "worst_arcsec": r["worst_arcsec"], "wrong_attitude": r["wrong_attitude"]}
                        for r in ranked[:worst]],
         "results_sha256": results_sha256(rows),
-    }
+    } | (summarize_hazards(ok) if any("hazard" in r for r in rows) else {})
+
+
+def summarize_hazards(ok: list[dict]) -> dict:
+    """Orbit campaign figures, per hazard and over all runs (docs/MONTECARLO.md, "Orbit")."""
+
+    def block(rs):
+        hist = np.sum([r["valid_err_hist"] for r in rs], axis=0) if rs else np.zeros(len(ERR_EDGES_ARCSEC) - 1)
+        outages = [x for r in rs for x in r["outages_s"]]
+        return {"runs": len(rs),
+                "availability": {"mean": float(np.mean([r["availability"] for r in rs])) if rs else None,
+                                 **{k: v for k, v in _pct([r["availability"] for r in rs], (5, 50)).items()}},
+                "blinded_fraction_mean": float(np.mean([r["blinded_fraction"] for r in rs])) if rs else None,
+                "reacquire_s": {"outages": len(outages), **_pct(outages)},
+                "runs_unrecovered": int(sum(np.isfinite(r["unrecovered_s"]) for r in rs)),
+                "error_while_valid_arcsec": hist_percentiles(hist, (50, 95, 99)),
+                "valid_outside_covariance_outputs": int(sum(r["valid_wrong_outputs"] for r in rs)),
+                "wrong_attitude_runs": int(sum(r["wrong_attitude"] for r in rs)),
+                "wrong_id_runs": int(sum(r["wrong_id"] for r in rs)),
+                "radiation_hits_expected": float(np.nansum([r["hits_expected"] for r in rs])),
+                "spots_rejected_hit": int(sum(r["spots_rejected_hit"] for r in rs)),
+                "frames_blinded": int(sum(r["frames_blinded"] for r in rs)),
+                "saa_seconds": float(sum(r["saa_seconds"] for r in rs))}
+
+    hazards = sorted({r["hazard"] for r in ok})
+    worst = sorted(ok, key=lambda r: (-r["valid_wrong_outputs"], r["availability"]))[:5]
+    return {"orbit": {"all": block(ok), "by_hazard": {h: block([r for r in ok if r["hazard"] == h]) for h in hazards},
+                      "worst_runs": [{"seed": r["seed"], "hazard": r["hazard"], "profile": r["profile"],
+                                      "availability": r["availability"], "valid_outside_covariance_outputs":
+                                      r["valid_wrong_outputs"], "worst_arcsec": r["worst_arcsec"]} for r in worst]}}
 
 
 def write_table(rows: list[dict], path) -> None:

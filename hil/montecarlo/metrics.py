@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...loop.record import FLAG_ATTITUDE_VALID, FLAG_IMAGE_UPDATE, MODE_COAST, MODE_TRACK
+from ...loop.record import FLAG_ATTITUDE_VALID, FLAG_IMAGE_UPDATE, MODE_COAST, MODE_TRACK, REASON_BLINDED, reason
 from ..analysis import ARCSEC, attitude_errors
 
 ERR_EDGES_ARCSEC = np.concatenate([[0.0], np.logspace(-2, 5, 1401)])   # 0.01″ … 1e5″, 0.5 %/bin
@@ -130,3 +130,58 @@ def _wrong_labels(out: np.ndarray, truth: np.ndarray, camera, star_vec: dict) ->
         res = (d.ravel() - a @ sol).reshape(-1, 2)
         wrong += int(np.count_nonzero(np.hypot(res[:, 0], res[:, 1]) > LABEL_TOL_PX))
     return wrong
+
+
+MAX_OUTAGES = 16        # outages kept per run (longest first beyond that)
+
+
+def empty_orbit_metrics() -> dict:
+    """The orbit figures of a run that produced no outputs."""
+    return {"availability": 0.0, "blinded_fraction": 0.0, "outages_s": [], "unrecovered_s": np.nan,
+            "valid_err_hist": np.zeros(len(ERR_EDGES_ARCSEC) - 1, np.int64), "valid_wrong_outputs": 0,
+            "spots_rejected_hit": 0, "frames_blinded": 0, "hits_expected": np.nan, "saa_seconds": 0.0}
+
+
+def orbit_metrics(out: np.ndarray, truth: np.ndarray, t0: float, res: dict) -> dict:
+    """Orbit figures of one run (``gyrostar eval loop --orbit``): ``availability`` (fraction of
+    the run's outputs flagged valid), ``blinded_fraction`` (outputs whose reason code is
+    ``blinded``), ``outages_s`` (each stretch after the first fix without a TRACK output, from its
+    first non-TRACK output to the next TRACK one: the time to re-acquire), ``unrecovered_s`` (an
+    outage still open at the end, nan: none), the error histogram of every valid output
+    (TRACK and COAST), the valid outputs outside their own covariance (NEES > χ²(2) at P = 1e-9,
+    whatever their size), the spots the loop rejected as hits and the frames it found blinded,
+    and the hits the simulator put on the sensor (its mean rate × frames) and the seconds in the SAA."""
+    m = empty_orbit_metrics()
+    counters = res.get("counters") or {}
+    m["spots_rejected_hit"] = int(counters.get("spots_rejected_hit", 0))
+    m["frames_blinded"] = int(counters.get("frames_blinded", 0))
+    tr = (res.get("environment") or {}).get("truth") or {}
+    if tr.get("hits_per_frame"):
+        m["hits_expected"] = float(np.mean(tr["hits_per_frame"]) * int(res.get("frames") or 0))
+    m["saa_seconds"] = float(tr.get("saa_seconds") or 0.0)
+    if not len(out):
+        return m
+    valid = (out["flags"] & FLAG_ATTITUDE_VALID) != 0
+    m["availability"] = float(valid.mean())
+    m["blinded_fraction"] = float(np.mean(reason(out["flags"]) == REASON_BLINDED))
+    track = out["mode"] == MODE_TRACK
+    first = np.flatnonzero(track)
+    if first.size:
+        t = out["t"]
+        after = np.zeros(len(out), np.int8)
+        after[first[0]:] = (~track[first[0]:]).astype(np.int8)
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], after, [0]])))
+        outages = []
+        for a, b in zip(edges[::2], edges[1::2]):
+            if b < len(out):
+                outages.append(float(t[b] - t[a]))
+            else:
+                m["unrecovered_s"] = float(t[-1] - t[a])
+        m["outages_s"] = sorted(outages, reverse=True)[:MAX_OUTAGES]
+    err = attitude_errors(out, truth) * ARCSEC
+    cross = np.hypot(err[:, 0], err[:, 1])
+    m["valid_err_hist"] = np.histogram(np.minimum(cross[valid], ERR_EDGES_ARCSEC[-1] * 0.999), ERR_EDGES_ARCSEC)[0]
+    var = np.maximum(out["cov"][:, 0, 0], 1e-30), np.maximum(out["cov"][:, 1, 1], 1e-30)
+    nees = (err[:, 0] / ARCSEC) ** 2 / var[0] + (err[:, 1] / ARCSEC) ** 2 / var[1]
+    m["valid_wrong_outputs"] = int(np.count_nonzero(valid & (nees > WRONG_NEES)))
+    return m

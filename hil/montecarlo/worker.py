@@ -63,12 +63,20 @@ def preload_plugin(config_path: str | None = None):
     return Preload()
 
 
-def run_case(seed: int, duration_s: float, config_path: str | None = None) -> dict:
-    """Row of run ``seed``: the case's description and its figures (never raises)."""
+def run_case(seed: int, duration_s: float, config_path: str | None = None, orbit: bool = False) -> dict:
+    """Row of run ``seed``: the case's description and its figures (never raises). ``orbit``:
+    the orbit case (:mod:`gyrostar.hil.montecarlo.orbit_cases`), with its hazard's figures."""
     from .cases import draw_case
-    from .metrics import empty_metrics
+    from .metrics import empty_metrics, empty_orbit_metrics
 
-    case = draw_case(seed, duration_s)
+    ocase = None
+    if orbit:
+        from .orbit_cases import draw_orbit_case
+
+        ocase = draw_orbit_case(seed, duration_s)
+        case = ocase.loop
+    else:
+        case = draw_case(seed, duration_s)
     row = {"seed": int(seed), "profile": case.profile, "peak_rate_dps": case.peak_rate_dps,
            "ra_deg": case.ra_deg, "dec_deg": case.dec_deg, "roll_deg": case.roll_deg,
            "false_spots": len(case.false_spots), "link_faults": len(case.link_faults),
@@ -76,27 +84,37 @@ def run_case(seed: int, duration_s: float, config_path: str | None = None) -> di
            "bias_instability_dph": case.gyro_overrides["bias_instability_dph"], "failed": False, "reason": "",
            **empty_metrics(), "frames": 0, "overruns": 0, "samples_lost": 0, "wall_s": np.nan,
            "mid_exposure_error_arcsec": np.nan}
+    if ocase is not None:
+        row.update(hazard=ocase.hazard, hazard_angle_deg=ocase.angle_deg, temperature_c=ocase.temperature_c,
+                   epoch_utc=ocase.epoch_utc, **empty_orbit_metrics())
     try:
-        row.update(_run(case, duration_s, config_path))
+        row.update(_run(case, duration_s, config_path, ocase))
     except Exception as exc:  # noqa: BLE001 - a failed run is a result, reported with its reason
         row.update(failed=True, reason=f"{type(exc).__name__}: {exc}".splitlines()[0][:300])
     return row
 
 
-def _run(case, duration_s: float, config_path: str | None) -> dict:
+def _run(case, duration_s: float, config_path: str | None, ocase=None) -> dict:
     from .. import config as hc
     from ..runner import run_flatsat
     from .cases import case_scenario
-    from .metrics import run_metrics
+    from .metrics import orbit_metrics, run_metrics
 
     preload(config_path)
     cfg = hc.load_flatsat(config_path)
-    scen = case_scenario(case, duration_s)
+    if ocase is not None:
+        from .orbit_cases import orbit_case_scenario
+
+        scen = orbit_case_scenario(ocase, duration_s)
+    else:
+        scen = case_scenario(case, duration_s)
     with tempfile.TemporaryDirectory(prefix="gyrostar-mc-") as tmp:
         res = run_flatsat(cfg, scen, duration=duration_s, seed=case.seed, folder=Path(tmp), fast=True,
                           plots=False, status=False, record=False, keep_arrays=True)
     arrays = res.pop("arrays")
     m = run_metrics(arrays["out"], arrays["truth"], arrays["t0"], arrays["camera"], _PROCESS["star_vec"])
+    if ocase is not None:
+        m.update(orbit_metrics(arrays["out"], arrays["truth"], arrays["t0"], res))
     return {**m, "frames": int(res.get("frames") or 0), "overruns": int(res.get("overruns") or 0),
             "samples_lost": int(res.get("samples_lost") or 0), "wall_s": float(res.get("wall_s") or np.nan),
             "mid_exposure_error_arcsec": float(res.get("mid_exposure_error_arcsec_1sigma") or np.nan)}

@@ -44,6 +44,9 @@ def _files(d):
     (d / "fast_rate.toml").write_text('name = "fast"\nsegments = [{ seconds = 3.0, rate_dps = [1e6, 0.0, 0.0] }]\n')
     (d / "long.toml").write_text('name = "long"\nduration_s = 1e9\n')
     (d / "nominal_camera.toml").write_text("[camera]\nfocal_length_px = 6666.7\nprincipal_point_px = [511.5, 511.5]\n")
+    (d / "stray_no_orbit.toml").write_text('name = "s"\n[stray_light]\nenabled = true\n')
+    (d / "orbit_epoch.toml").write_text('name = "s"\n[orbit]\nenabled = true\nepoch_utc = "yesterday"\n')
+    (d / "saa_box.toml").write_text('name = "s"\n[radiation]\nenabled = true\nsaa_lat_deg = [10.0, -10.0]\n')
     return d
 
 
@@ -95,6 +98,9 @@ CASES = [
                              "--config", ("head", "kind", '"serial"'), '+url="/dev/ttyUSB9"'], USAGE, ["emulated"]),
     ("eval-loop-out-holds-campaign", ["eval", "loop", "--runs", "1", "--duration", "10", "--out", "{d}/camp"],
      USAGE, ["already holds"]),
+    ("eval-loop-orbit-short", ["eval", "loop", "--orbit", "--runs", "1", "--duration", "5", "--out", "{d}/mco"],
+     USAGE, ["--duration", "≥ 10"]),
+    ("run-orbit-case-malformed", ["run", "--scenario", "mco:12x@30"], USAGE, ["mco:SEED@DURATION"]),
     ("sim-frame-missing-folder", ["sim", "frame", "--out", "{d}/no/x.fits"], USAGE, ["does not exist"]),
     ("sim-frame-dec-200", ["sim", "frame", "--out", "{d}/x.fits", "--ra-deg", "10", "--dec-deg", "200"], USAGE,
      ["--dec-deg"]),
@@ -123,6 +129,12 @@ CASES = [
     ("run-head-port-missing", ["run", "--duration", "2", "--config", ("head", "kind", '"serial"'),
                                '+url="/dev/ttyACM0"'], DEVICE, ["/dev/ttyACM0", "does not exist"]),
     ("run-scenario-missing-file", ["run", "--scenario", "{d}/nosuch.toml"], USAGE, ["nosuch.toml"]),
+    ("run-stray-light-no-orbit", ["run", "--scenario", "{d}/stray_no_orbit.toml"], USAGE,
+     ["stray_light", "orbit", "stray_no_orbit.toml"]),
+    ("run-orbit-bad-epoch", ["run", "--scenario", "{d}/orbit_epoch.toml"], USAGE, ["orbit.epoch_utc", "yesterday"]),
+    ("run-saa-box-inverted", ["run", "--scenario", "{d}/saa_box.toml"], USAGE, ["radiation.saa_lat_deg"]),
+    ("run-hazards-fwhost", ["run", "--config", FWHOST, "--scenario", "saa-pass"], USAGE,
+     ["orbit environment", "firmware-host"]),
     ("run-out-under-file", ["run", "--out", "/dev/null/x"], USAGE, ["--out", "/dev/null/x"]),
     # --- replay
     ("replay-missing", ["replay", "{d}/nope.gslog"], USAGE, ["nope.gslog"]),

@@ -5,6 +5,7 @@ the value behind every index; the model gives every sample's time. The driver's 
 must match frame for frame, with jumps only at flagged gaps.
 """
 
+import ctypes
 import errno
 import math
 
@@ -25,6 +26,7 @@ from gyrostar.gyro import (
 )
 from gyrostar.mocks.bmi088_model import Bmi088GyroModel
 from gyrostar.mocks.fake_rates import ProfileRates
+from gyrostar.mocks.fake_smbus import I2C_M_RD, FakeSMBus
 from gyrostar.mocks.faults import FaultyBus
 from gyrostar.mocks.l3gd20h_model import L3gd20hModel
 from gyrostar.transport import I2CBus, I2CRegisters, SPIRegisters
@@ -513,3 +515,61 @@ def test_watermark_edge_that_fires_while_the_level_is_read_anchors_this_read():
     t = out.view()[0]
     assert np.all(np.diff(t) > 0)
     check_against_truth(model, out, source, 500 / 32768 * DPS, t_tol=2e-6)
+
+
+class _DataPhaseBus(FakeSMBus):
+    """An I2C adapter timed as the wire is (issue 50, against an independent device model): the
+    part answers when its first data byte is clocked out — after START, its address, the
+    register and the repeated START with its address again (29 clocks at 400 kHz, 72.5 µs) —
+    not at the start of the transaction, and each data byte takes 9 clocks after that. A
+    frame sampled during those 72.5 µs is in the FIFO level the driver reads."""
+
+    HEADER_CLOCKS = 9 * 3 + 2
+
+    def _read(self, addr, reg, n):
+        dev = self._dev(addr)
+        r, inc = dev.i2c_decode(reg)
+        self.clock.advance(self.HEADER_CLOCKS / self.bus_hz)
+        data = dev.read(r, n, inc)
+        self.transactions += 1
+        self.clock.advance(9 * n / self.bus_hz)
+        return data
+
+    def i2c_rdwr(self, *msgs):
+        for m in msgs:
+            if m.flags & I2C_M_RD:
+                dev = self._dev(m.addr)
+                r, inc = dev.i2c_decode(self._pointer.get(m.addr, 0))
+                self.clock.advance(11 / self.bus_hz)          # repeated START + address
+                data = dev.read(r, m.len, inc)
+                self.clock.advance(9 * m.len / self.bus_hz)
+                ctypes.memmove(m.buf, data, m.len)
+            else:
+                raw = bytes(m)
+                self._pointer[m.addr] = raw[0]
+                self.clock.advance((9 * (len(raw) + 1) + 1) / self.bus_hz)
+
+
+@pytest.mark.parametrize("events", [None, "clock"])
+def test_indices_and_times_stay_exact_when_the_part_answers_at_its_data_phase(events):
+    """Issue 50's second timing defect (gyro sample indices one frame low, from the first read
+    on, when each bus transaction takes its real I2C time) reproduced against a bus that times
+    the part's answer as the wire does: every index counts from the FIFO start and every time
+    is the sample's own (interrupt edge) or within half a period (polls only)."""
+    clock = SimulatedClock(50.0)
+    source = ProfileRates(seed=7)
+    model = Bmi088GyroModel(clock, source, odr_error_ppm=1500.0)
+    regs = I2CRegisters(I2CBus(_DataPhaseBus({0x68: model}, clock=clock, bus_hz=400e3), name="i2c-wire"), 0x68,
+                        autoincrement=0)
+    gyro = Bmi088Gyro(regs, clock=clock)
+    gyro.configure(400, 500, 10)
+    gyro.start()
+    k0 = model.next_sample_index
+    out = GyroSamples(8000)
+    line = _EdgeLine(model) if events else None
+    rng = np.random.default_rng(5)
+    t_end = clock.now() + 8.0
+    while clock.now() < t_end:
+        clock.advance(rng.uniform(0.012, 0.03))
+        gyro.read(out, event_clock=line)
+    check_against_truth(model, out, source, 500 / 32768 * DPS, t_tol=2e-6 if events else 0.5 / 400, k0=k0)

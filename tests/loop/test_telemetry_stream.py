@@ -49,7 +49,7 @@ def test_xtce_matches_the_packet_layout_and_every_parameter_has_a_unit(repo):
     root = ET.fromstring(text)
     types = {t.get("name"): t for t in root.find("x:TelemetryMetaData/x:ParameterTypeSet", NS)}
     params = root.findall("x:TelemetryMetaData/x:ParameterSet/x:Parameter", NS)
-    assert len(params) == 7 + (2 + 4 + 4 + 3 + 3 + 3 + 3 + 1) + (2 + 4 + 4 + 3 + 2 + 4 + 3 + 2)
+    assert len(params) == 7 + (2 + 5 + 4 + 3 + 3 + 3 + 3 + 1) + (2 + 5 + 4 + 3 + 2 + 4 + 3 + 2)
     for p in params:
         unit = types[p.get("parameterTypeRef")].find("x:UnitSet/x:Unit", NS)
         assert unit is not None and unit.text, p.get("name")
@@ -62,6 +62,11 @@ def test_xtce_matches_the_packet_layout_and_every_parameter_has_a_unit(repo):
             for e in containers[name].find("x:EntryList", NS):
                 total += bits[e.get("parameterRef")]
         assert total == 8 * size, body
+    # the flags word: its top 4 bits (big-endian: sent first) are the reason code, then 12 flag bits
+    for body, reason, flags in (("attitude", "reason", "flags"), ("frame_attitude", "frame_reason", "frame_flags")):
+        names = [e.get("parameterRef") for e in containers[body].find("x:EntryList", NS)]
+        i = names.index(reason)
+        assert names[i + 1] == flags and bits[reason] == 4 and bits[flags] == 12
 
 
 def test_frame_packet_round_trip_by_hand():

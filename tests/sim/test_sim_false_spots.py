@@ -47,3 +47,23 @@ def test_windows_see_the_glint_as_the_full_frame_does():
     spans = np.array([[0, r, 295, 306] for r in range(606, 618)], np.int32)
     pix, _ = sky.render_windows(spans, IDENTITY_Q, np.zeros(3), frame=7)
     assert np.array_equal(pix, np.concatenate([img[r, a:b] for _, r, a, b in spans]))
+
+
+def test_head_emulator_renders_the_glints_at_any_exposure():
+    """The emulator's sky for an exposure (a new Sky per exposure time) keeps the scenario's
+    glints: a window on the glint reads its light, as the plain sky renders it."""
+    from gyrostar.clock import SimulatedClock
+    from gyrostar.mocks.head_emulator import ConstantRateScene, HeadEmulator
+
+    cat = one_star_catalog([0.0, 0.0, 1.0], vmag=4.5)
+    sky = Sky(cat, "xing2012", seed=3, false_spots=[SPOT])
+    emu = HeadEmulator(sky, ConstantRateScene(IDENTITY_Q, t0=0.0), clock=SimulatedClock(0.0), noise=False)
+    u, v = int(round(SPOT[0])), int(round(SPOT[1]))
+    spans = np.array([[0, r, u - 5, u + 6] for r in range(v - 5, v + 6)], np.int32)
+    for exposure_us in (10_000, 5_000):
+        px = emu.render_windows(spans, 0.0, 1, exposure_us).astype(float)
+        ref = sky.with_exposure(exposure_us * 1e-6).window_pixels(spans, IDENTITY_Q, np.zeros(3), frame=1,
+                                                                  noise=False)
+        assert np.array_equal(px, np.minimum(ref, 0x3FF))
+        signal = (px - np.median(px)).clip(0).sum() * 5.0        # e- (xing2012: 5 e-/ADU)
+        assert signal > 0.8 * float(sky.preset.with_exposure(exposure_us * 1e-6).star_electrons(SPOT[2]))
