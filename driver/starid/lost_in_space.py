@@ -19,13 +19,17 @@ fitted by least squares to Pyramid's matched stars (:mod:`gyrostar.starid.plate_
 Conventions (those of :mod:`gyrostar.attitude` and :mod:`gyrostar.camera`): pixel
 ``xy = [col, row]``, pixel centres at integers; camera frame +x along increasing column,
 +y along increasing row, +z the boresight; ``q_icrs_to_camera = [x, y, z, w]`` maps ICRS
-vectors to the camera frame. ``ra_deg, dec_deg``: the boresight (+z). ``roll_deg``: the
-angle ψ of :func:`gyrostar.attitude.quat_from_boresight` — at ψ = 0 image up (−y, towards
-row 0) points to celestial north and +x (increasing column) to the west (the sky seen from
-inside, east to the left); ψ > 0 turns the camera's x/y axes from +x towards +y about the
-boresight, i.e. north on the image then lies ψ clockwise... from image up turned towards
-+x. ``fov_deg``: horizontal, edge to edge through the principal point, of the pinhole
-focal length (k1 not included).
+vectors to the camera frame. ``ra_deg, dec_deg``: the boresight (+z). ``roll_deg`` (0–360°): the angle ψ of
+:func:`gyrostar.attitude.quat_from_boresight` — at ψ = 0 image up (−y, towards row 0) points
+to celestial north and +x (increasing column) to the west (the sky seen from inside: east to
+the left of north); at ψ north lies on the image ψ from image up (−y) towards −x
+(counter-clockwise on a displayed image, row 0 at the top).
+``quat_from_boresight(ra, dec, roll)`` rebuilds ``q`` exactly.
+``fov_deg``: horizontal, the angle between the directions seen at the sensor's left and
+right edges on the principal point's row, from the radial model ``u = cx + f·xn·(1 + k1 r²)``
+whose ``focal_length_px`` and ``k1`` are fitted per image (with a known camera: its own).
+A pinhole-only solver (tetra3rs's ``solve_from_centroids``) absorbs k1 into its scale, which
+then depends on where the image's stars lie.
 """
 
 from __future__ import annotations
@@ -48,6 +52,7 @@ AGREE_PX = 5.0            # Pyramid's attitude must agree with the pattern propo
 MAX_PROPOSALS = 6         # proposals handed to Pyramid before "not solved"
 PATTERN_SPOTS = 12        # brightest spots whose four-spot combinations are tried
 LABEL_SPOTS = 40          # brightest spots labelled when a proposal is checked
+RANGE_MARGIN = 1.03       # × the focal-length range searched (its ends included)
 MIN_PROPOSAL_STARS = 7    # labelled stars a proposal needs before Pyramid sees it
 PIXEL_PITCH_M = 1e-5      # nominal pitch of a camera known only in pixels (scales focal_length_m)
 
@@ -66,7 +71,8 @@ def camera_diagonal_deg(camera) -> float:
 
 def build_pyramid(camera, catalog: str = "hip2", mag_limit: float = 7.5, *, index=None, per_field: int = 0,
                   fast_per_field: int = FAST_PER_FIELD, label_depth_mag: float = 0.0, sigma_px: float = 0.5,
-                  sigma_mag: float = 0.0, p_false_max: float = 1e-6, faint_catalog=None, max_sep_deg=None):
+                  sigma_mag: float = 0.0, p_false_max: float = 1e-6, faint_catalog=None, max_sep_deg=None,
+                  absent_max: int = 0):
     """The lost-in-space Pyramid for ``camera`` (:class:`gyrostar.camera.CameraModel`).
 
     ``index``: a :class:`gyrostar.starid.index.StarIndex` to use (None: ``catalog`` to
@@ -75,8 +81,8 @@ def build_pyramid(camera, catalog: str = "hip2", mag_limit: float = 7.5, *, inde
     ``fast_per_field``: the thinned first tier's stars per field (0: none; only with an
     unthinned index); ``faint_catalog``: the catalog whose stars the index leaves out are
     checked against labels (None: ``catalog`` to the index limit + label depth +
-    ``gyrostar.starid.faint.DEPTH_MAG``). ``sigma_px``, ``sigma_mag``, ``p_false_max``: as
-    :class:`gyrostar.starid.pyramid.Pyramid`."""
+    ``gyrostar.starid.faint.DEPTH_MAG``). ``sigma_px``, ``sigma_mag``, ``p_false_max``,
+    ``absent_max``: as :class:`gyrostar.starid.pyramid.Pyramid`."""
     from ..catalog import deepest_limit, load_catalog
     from .faint import DEPTH_MAG, faint_stars
     from .index import load_index
@@ -84,15 +90,16 @@ def build_pyramid(camera, catalog: str = "hip2", mag_limit: float = 7.5, *, inde
 
     sep = round(camera_diagonal_deg(camera) + 0.01, 3) if max_sep_deg is None else float(max_sep_deg)
     fast = None
-    if index is None:
+    given = index is not None
+    if not given:
         index = load_index(catalog, mag_limit, sep, per_field, label_depth_mag=label_depth_mag)
         if per_field == 0 and fast_per_field > 0:
             fast = load_index(catalog, mag_limit, sep, fast_per_field, label_depth_mag=label_depth_mag)
     if faint_catalog is None:
-        faint_catalog = load_catalog(index.catalog, deepest_limit(index.catalog,
-                                                                  index.nav_limit + label_depth_mag + DEPTH_MAG))
+        base = index.mag_limit if given else mag_limit
+        faint_catalog = load_catalog(index.catalog, deepest_limit(index.catalog, base + label_depth_mag + DEPTH_MAG))
     return Pyramid(index, camera, sigma_px=sigma_px, fast_index=fast, sigma_mag=sigma_mag,
-                   faint=faint_stars(faint_catalog, index), p_false_max=p_false_max)
+                   faint=faint_stars(faint_catalog, index), p_false_max=p_false_max, absent_max=absent_max)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -147,11 +154,15 @@ def boresight_radec_roll(q) -> tuple[float, float, float]:
 
 class LostInSpace:
     """Plate solver over a catalog: a known camera, or a sensor whose focal length is sought
-    in ``fov_range_deg`` (horizontal, °). Build with :meth:`for_camera` or :meth:`for_sensor`."""
+    in ``fov_range_deg`` (horizontal, °). Build with :meth:`for_camera` or :meth:`for_sensor`.
+
+    ``absent_max`` (Pyramid's absent-star check) is off by default (-1): images from the
+    ground lose stars behind trees, roofs and clouds, so a missing star is no evidence
+    against a solution there; the false-match bound and the verification decide."""
 
     def __init__(self, width_px: int, height_px: int, *, camera=None, fov_range_deg=DEFAULT_FOV_RANGE,
                  mag_limit=None, catalog: str = "hip2", sigma_px: float | None = None, p_false_max: float = 1e-6,
-                 quiet: bool = False):
+                 absent_max: int = -1, quiet: bool = False):
         if int(width_px) != width_px or int(height_px) != height_px or width_px < 16 or height_px < 16:
             raise ConfigError(f"sensor size must be whole pixels ≥ 16, got {width_px!r} × {height_px!r}")
         lo, hi = (float(v) for v in fov_range_deg)
@@ -166,6 +177,7 @@ class LostInSpace:
         self.catalog = catalog
         self.p_false_max = float(p_false_max)
         self.sigma_px = float(sigma_px if sigma_px is not None else (0.5 if camera is not None else SIGMA_PX_UNKNOWN))
+        self.absent_max = int(absent_max)
         self.quiet = quiet
         self._pyramids: dict = {}
         self._patterns = None
@@ -212,12 +224,10 @@ class LostInSpace:
         key = (sep, mag)
         if key not in self._pyramids:
             proto = build_pyramid(camera, self.catalog, mag, sigma_px=self.sigma_px, p_false_max=self.p_false_max,
-                                  max_sep_deg=sep)
+                                  max_sep_deg=sep, absent_max=self.absent_max)
             self._pyramids[key] = proto
         proto = self._pyramids[key]
-        if proto.camera == camera:
-            return proto
-        return dataclasses.replace(proto, camera=camera, check=None)
+        return proto if proto.camera == camera else proto.with_camera(camera)
 
     def _camera(self, f, k1, cx, cy):
         return CameraModel(f * PIXEL_PITCH_M, PIXEL_PITCH_M, self.width_px, self.height_px, cx, cy, k1)
@@ -252,8 +262,9 @@ class LostInSpace:
         lo, hi = self.fov_range_deg
         if fov_hint_deg is not None:
             lo, hi = fov_hint_deg / 1.05, fov_hint_deg * 1.05
-        f_min = 0.5 * w / math.tan(math.radians(hi) / 2.0)
-        f_max = 0.5 * w / math.tan(math.radians(lo) / 2.0)
+        # a field at an end of the range is found: its focal length may come out a little beyond
+        f_min = 0.5 * w / math.tan(math.radians(hi) / 2.0) / RANGE_MARGIN
+        f_max = 0.5 * w / math.tan(math.radians(lo) / 2.0) * RANGE_MARGIN
         return f_min, f_max
 
     def _f_guesses(self, f_min, f_max) -> np.ndarray:
@@ -316,11 +327,10 @@ class LostInSpace:
                                             f"{self.p_false_max:.0e}", n, cam.cx_px, cam.cy_px, p_false, t0)
         q = np.asarray(res.q, dtype=np.float64)
         if q_prop is not None:
-            corner = math.atan(0.5 * math.hypot(cam.width_px, cam.height_px) / cam.focal_length_px)
+            # the rotation between them, in pixels across the field (× f: an upper bound)
             da = quat_to_dcm(q) @ quat_to_dcm(q_prop).T
             ang = math.acos(max(-1.0, min(1.0, (np.trace(da) - 1.0) / 2.0)))
-            if ang * cam.focal_length_px / max(1.0, math.cos(corner)) > AGREE_PX * 4 and \
-                    ang > AGREE_PX / cam.focal_length_px * 4:
+            if ang * cam.focal_length_px > AGREE_PX:
                 return PlateSolution.not_solved("Pyramid's attitude disagrees with the pattern proposal", n,
                                                 cam.cx_px, cam.cy_px, p_false, t0)
         got = res.index >= 0
@@ -329,6 +339,7 @@ class LostInSpace:
         f, k1, cx, cy = cam.focal_length_px, cam.k1, cam.cx_px, cam.cy_px
         if self.camera is None and uvm.shape[0] >= 4:
             q, f, k1, cx, cy, _ = fit_plate(uvm, ref, q, f, k1, cx, cy, uvm.shape[0] >= 10, False, 20)
+        fov = fov_x_deg(f, cam.width_px, cx, k1)
         resid = np.full((n, 2), np.nan)
         if self.camera is None:
             resid[got] = pixel_residuals(uvm, ref, q, f, k1, cx, cy)
@@ -337,6 +348,6 @@ class LostInSpace:
             resid[got] = uvm - pred
         rms_px = float(np.sqrt(np.nanmean(np.sum(resid[got] ** 2, axis=1)))) if got.any() else math.nan
         ra, dec, roll = boresight_radec_roll(q)
-        return PlateSolution(True, "ok", q, ra, dec, roll, fov_x_deg(f, cam.width_px, cx), float(f), float(k1),
+        return PlateSolution(True, "ok", q, ra, dec, roll, fov, float(f), float(k1),
                              float(cx), float(cy), np.asarray(res.ids, dtype=np.int64), resid,
                              rms_px / f * 206264.806, int(got.sum()), p_false, (time.perf_counter() - t0) * 1e3)

@@ -22,7 +22,9 @@ bin within ``max_error``; a catalog pattern whose ratios all lie within ``max_er
 candidate: the focal length from its six angles, the attitude from its four stars (mirror
 images rejected), then the other spots labelled with catalog stars, the attitude, focal
 length and k1 refitted and labelled again within a few pixels. A candidate with enough
-labelled stars is returned for verification (:mod:`gyrostar.starid.lost_in_space`).
+labelled stars, whose labels beyond its four would come by chance (Poisson, from the catalog
+stars it puts on the sensor and the label tolerance) with probability at most ``CHANCE_MAX``,
+is returned for verification (:mod:`gyrostar.starid.lost_in_space`).
 """
 
 from __future__ import annotations
@@ -35,18 +37,19 @@ import tempfile
 import numpy as np
 from numba import njit
 
+from ..attitude import quat_to_dcm
 from ..core.quest import quest
 from ..errors import ConfigError
 from ..paths import cache_dir
 from .index import cone_query, voxel_grid
 from .plate_fit import fit_plate, project_radial
-from ..attitude import quat_to_dcm
 
 PATTERN_VERSION = 1
 SCALE_STEP = 1.4          # ratio of successive pattern scales
 STARS_PER_FIELD = 25      # pattern stars per s×s field (sets the thinning separation)
 PATTERN_SPAN = 0.75       # × s: the largest separation within a pattern
 MAX_ERROR = 0.01          # edge-ratio tolerance of a lookup
+CHANCE_MAX = 1e-6         # a proposal's labels beyond its four stars must be this unlikely by chance
 _PRIME = np.int64(2654435761)
 
 
@@ -266,7 +269,7 @@ def build_pattern_database(catalog, fov_range_deg, max_error=MAX_ERROR, progress
                            float(catalog.vmag[-1]) if len(catalog.vmag) else 0.0)
 
 
-def pattern_db_path(catalog_name: str, mag_limit: float, fov_range_deg, max_error: float) -> "os.PathLike":
+def pattern_db_path(catalog_name: str, mag_limit: float, fov_range_deg, max_error: float) -> os.PathLike:
     lo, hi = fov_range_deg
     return cache_dir("starid") / (f"patterns_{catalog_name}_m{mag_limit:.2f}_f{lo:.3f}-{hi:.3f}_e{max_error:.4f}"
                                   f"_s{SCALE_STEP:.2f}_n{STARS_PER_FIELD}_p{PATTERN_SPAN:.2f}_v{PATTERN_VERSION}.npz")
@@ -388,6 +391,41 @@ def _label(uv, n_lab, a, f, k1, cx, cy, vec, cand, tol0, tol_slope, centre, matc
             dist[s] = math.sqrt(best)
             n += 1
     return n
+
+
+@njit(cache=True)
+def _chance_labels(a, f, k1, cx, cy, width, height, vec, cand, n_spots, k, tol):
+    """The chance that ``n_spots`` random spots get ``k`` or more labels within ``tol`` px
+    from the catalog stars (rows ``cand``) the attitude puts on the sensor (Poisson)."""
+    m = 0
+    for t in range(cand.shape[0]):
+        u, v, ok = project_radial(a, vec[cand[t]], f, k1, cx, cy)
+        if ok and -0.5 <= u < width - 0.5 and -0.5 <= v < height - 0.5:
+            m += 1
+    lam = max(n_spots, 0) * m * math.pi * tol * tol / (width * height)
+    if k <= 0:
+        return 1.0
+    term = math.exp(-lam)
+    below = term
+    for j in range(1, k):
+        term *= lam / j
+        below += term
+    return max(0.0, 1.0 - below) if below < 0.999 else _tail(lam, k)
+
+
+@njit(cache=True)
+def _tail(lam, k):
+    """P(X ≥ k) for X ~ Poisson(lam), summed upwards (accurate when it is small)."""
+    term = math.exp(-lam)
+    for j in range(1, k + 1):
+        term *= lam / j
+    total = 0.0
+    j = k
+    while term > 1e-300 and j < k + 200:
+        total += term
+        j += 1
+        term *= lam / j
+    return total
 
 
 @njit(cache=True)
@@ -539,6 +577,7 @@ def match_patterns(uv, width, height, cx, cy, f_guesses, f_min, f_max, n_pattern
                                                 centre, match, dist)
                                     if nm < min_stars:
                                         break
-                                if nm >= min_stars:
+                                if nm >= min_stars and _chance_labels(am, f, k1, cx, cy, width, height, vec, cand,
+                                                                      nl - 4, nm - 4, tol_px) <= CHANCE_MAX:
                                     return combo + 1, q, f, k1, match, nm, tried, lookups
     return -1, q0, 0.0, 0.0, best_match, 0, tried, lookups

@@ -132,6 +132,15 @@ def pixel_residuals(uv, ref, q, f, k1, cx, cy):
     return out.reshape(uv.shape[0], 2)
 
 
-def fov_x_deg(f_px: float, width_px: int, cx_px: float) -> float:
-    """Horizontal field of view (°, edge to edge through the principal point) of focal length ``f_px``."""
-    return math.degrees(math.atan((cx_px + 0.5) / f_px) + math.atan((width_px - 0.5 - cx_px) / f_px))
+def fov_x_deg(f_px: float, width_px: int, cx_px: float, k1: float = 0.0) -> float:
+    """Horizontal field of view (°): the angle between the directions seen at the left and
+    right sensor edges on the principal point's row, with radial distortion ``k1``
+    (undistorted by fixed-point iteration; k1 = 0: the pinhole's)."""
+    total = 0.0
+    for edge in (cx_px + 0.5, width_px - 0.5 - cx_px):
+        xd = edge / f_px
+        xn = xd
+        for _ in range(50):
+            xn = xd / (1.0 + k1 * xn * xn)
+        total += math.atan(xn)
+    return math.degrees(total)
