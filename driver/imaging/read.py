@@ -92,17 +92,19 @@ def read_frames(path) -> list[Frame]:
     kind = suffix_of(path)
     if kind not in IMAGE_SUFFIXES:
         raise ConfigError(f"{path}: not an image file this reads ({', '.join(IMAGE_SUFFIXES)})")
-    try:
-        if kind in FITS_SUFFIXES:
-            arrays = [_read_fits(path)]
-        elif kind in TIFF_SUFFIXES:
-            import tifffile
+    import logging
+    import warnings
 
-            arrays = [tifffile.imread(path)]
-        elif kind in PILLOW_SUFFIXES:
-            arrays = [_read_pillow(path)]
-        else:
-            arrays = _read_dump(path)
+    tiff_log = logging.getLogger("tifffile")
+    level = tiff_log.level
+    try:
+        tiff_log.setLevel(logging.CRITICAL)       # a corrupt file is our one line, not its warnings
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            arrays = _read_arrays(path, kind)
+        for a in arrays:
+            if np.asarray(a).ndim not in (2, 3) or np.asarray(a).size == 0:
+                raise ValueError(f"no image data (array of shape {np.shape(a)})")
     except ConfigError:
         raise
     except (OSError, ValueError, TypeError, KeyError, IndexError, EOFError, RuntimeError, MemoryError) as exc:
@@ -115,6 +117,18 @@ def read_frames(path) -> list[Frame]:
         name = str(path) if len(arrays) == 1 else f"{path}#{i}"
         frames.append(to_frame(name, np.asarray(arr)))
     return frames
+
+
+def _read_arrays(path: Path, kind: str) -> list[np.ndarray]:
+    if kind in FITS_SUFFIXES:
+        return [_read_fits(path)]
+    if kind in TIFF_SUFFIXES:
+        import tifffile
+
+        return [tifffile.imread(path)]
+    if kind in PILLOW_SUFFIXES:
+        return [_read_pillow(path)]
+    return _read_dump(path)
 
 
 def to_frame(name: str, arr: np.ndarray) -> Frame:

@@ -16,6 +16,8 @@ import pytest
 from gyrostar.cli.main import main
 from gyrostar.imaging.plate import JSON_KEYS
 
+pytestmark = pytest.mark.timeout(1800)   # solves real frames: minutes on a loaded machine
+
 TETRA3 = Path(__file__).resolve().parents[1] / "data" / "tetra3"
 
 
