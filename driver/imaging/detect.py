@@ -91,7 +91,7 @@ def tile_stats(vals, rr, cc, n, r0, c0):
     res = v - a0
     med = 0.0
     sig = _robust_sigma(res, keep, med)
-    for it in range(3):
+    for _ in range(3):
         for i in range(n):
             keep[i] = abs(res[i] - med) <= 3.0 * sig
         m = 0

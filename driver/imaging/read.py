@@ -112,6 +112,8 @@ def read_frames(path) -> list[Frame]:
             raise ConfigError(f"{path}: {exc.strerror or exc}") from None
         raise ConfigError(f"{path}: not a readable {kind[1:].upper()} image ({type(exc).__name__}: "
                           f"{str(exc).splitlines()[0] if str(exc) else 'corrupt data'})") from None
+    finally:
+        tiff_log.setLevel(level)
     frames = []
     for i, arr in enumerate(arrays):
         name = str(path) if len(arrays) == 1 else f"{path}#{i}"

@@ -255,7 +255,6 @@ def run(args) -> int:
     from ...calibration import calfile, report
     from ...calibration.intrinsics import NAMES, fit, model_difference
     from ...camera import camera_preset
-
     from ...errors import ConfigError
 
     per_image = None

@@ -12,7 +12,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from gyrostar.cli.main import main
 from gyrostar.imaging.plate import JSON_KEYS
 
@@ -42,23 +41,13 @@ def solved(tmp_path_factory):
 @pytest.fixture(scope="module")
 def peer_solutions():
     """tetra3rs's (RA, Dec, FOV) of each image: its extract_centroids + solve_from_centroids."""
-    tetra3rs = pytest.importorskip("tetra3rs")
-    import tifffile
+    pytest.importorskip("tetra3rs")
+    from tetra3_peer import peer_solves
 
-    from gyrostar.paths import cache_dir
-
-    path = cache_dir("starid") / f"tetra3rs_{tetra3rs.__version__}_f10-13_test.bin"
-    db = (tetra3rs.SolverDatabase.load_from_file(str(path)) if path.exists()
-          else tetra3rs.SolverDatabase.generate_from_gaia(max_fov_deg=13.0, min_fov_deg=10.0))
-    if not path.exists():
-        db.save_to_file(str(path))
     got = {}
-    for f in sorted(TETRA3.glob("*.tiff")):
-        img = tifffile.imread(f)
-        s = db.solve_from_centroids(tetra3rs.extract_centroids(img).centroids, image_shape=img.shape,
-                                    fov_estimate_deg=11.5, fov_max_error_deg=1.5)
-        assert s, f"tetra3rs did not solve {f.name}"
-        got[f.name] = (s.ra_deg, s.dec_deg, s.fov_deg)
+    for name, s, _ in peer_solves()[1]:
+        assert s, f"tetra3rs did not solve {name}"
+        got[name] = (s.ra_deg, s.dec_deg, s.fov_deg)
     return got
 
 

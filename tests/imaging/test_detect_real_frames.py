@@ -9,11 +9,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from gyrostar.imaging.detect import (FLAG_EDGE, FLAG_EXTENDED, FLAG_HOT, FLAG_SATURATED, detect_stars,
-                                     flag_text)
+from gyrostar.imaging.detect import FLAG_EDGE, FLAG_EXTENDED, FLAG_HOT, FLAG_SATURATED, detect_stars
 from gyrostar.imaging.read import read_frames
-
 from imaging_synth import gaussian_star, match, star_field
 
 TETRA3 = Path(__file__).resolve().parents[1] / "data" / "tetra3"

@@ -4,7 +4,6 @@ catalog's position and V of the star the table's HIP number names)."""
 import math
 
 import numpy as np
-
 from gyrostar.catalog import load_catalog
 from gyrostar.imaging.star_names import star_names, star_table
 
