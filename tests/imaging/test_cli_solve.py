@@ -89,3 +89,52 @@ def test_wcs_header_maps_matched_stars_to_their_catalog_positions(solved):
         assert np.max(np.hypot(pu - [float(r["u_pred_px"]) for r in rows],
                                pv - [float(r["v_pred_px"]) for r in rows])) < 0.1
         assert stem.with_name(stem.name + ".png").stat().st_size > 10_000
+
+
+def test_workers_give_the_serial_solutions(solved):
+    import contextlib
+    import io
+
+    _, out, _ = solved
+    files = [out["images"][0]["file"], out["images"][5]["file"]]
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        code = main(["solve", *files, "--workers", "2", "--json", "-q"])
+    assert code == 0
+    par = json.loads(buf.getvalue())["images"]
+    for a, b in zip(par, [out["images"][0], out["images"][5]]):
+        assert a["file"] == b["file"]
+        assert _sep_arcsec(a["ra_deg"], a["dec_deg"], b["ra_deg"], b["dec_deg"]) < 1e-3
+
+
+def _gmst_deg(jd_ut1: float) -> float:
+    """Greenwich mean sidereal time (IAU 1982, to ~0.1 s): an independent hand formula."""
+    t = (jd_ut1 - 2451545.0) / 36525.0
+    return (280.46061837 + 360.98564736629 * (jd_ut1 - 2451545.0) + 0.000387933 * t * t) % 360.0
+
+
+def test_alt_az_of_the_pole_and_of_a_meridian_transit():
+    """Independent truth: the celestial pole stands at the site's latitude; a star on the
+    meridian (local sidereal time = its RA) at δ < φ stands due south at 90° − (φ − δ).
+    The RA given is the meridian's, precessed back to J2000 by hand (m + n sin α tan δ per
+    year); tolerance 0.2°: the hand formulas ignore nutation, aberration and polar motion."""
+    from datetime import datetime, timezone
+
+    from gyrostar.cli.solve import alt_az
+
+    lat, lon = 52.0, 4.4
+    when = "2026-11-29T21:30:00"
+    jd = datetime(2026, 11, 29, 21, 30, tzinfo=timezone.utc).timestamp() / 86400.0 + 2440587.5
+    lst = (_gmst_deg(jd) + lon) % 360.0
+    years = (jd - 2451545.0) / 365.25
+    m_deg, n_deg = 46.1 / 3600.0, 20.04 / 3600.0            # general precession in RA and Dec per year
+    ra2000 = lst - years * (m_deg + n_deg * math.sin(math.radians(lst)) * math.tan(math.radians(20.0)))
+    dec2000 = 20.0 - years * n_deg * math.cos(math.radians(lst))
+    recs = [{"solved": True, "ra_deg": 10.0, "dec_deg": 89.99}, {"solved": True, "ra_deg": ra2000, "dec_deg": dec2000},
+            {"solved": False, "ra_deg": None, "dec_deg": None}]
+    note = alt_az(recs, (lat, lon, 10.0), when)
+    assert abs(recs[0]["alt_deg"] - lat) < 0.2
+    assert abs(recs[1]["alt_deg"] - (90.0 - (lat - 20.0))) < 0.2
+    assert abs(recs[1]["az_deg"] - 180.0) < 0.2
+    assert "alt_deg" not in recs[2]
+    assert note is None or "degraded" in note
