@@ -8,6 +8,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+from datetime import UTC
 from pathlib import Path
 
 import numpy as np
@@ -118,13 +119,13 @@ def test_alt_az_of_the_pole_and_of_a_meridian_transit():
     meridian (local sidereal time = its RA) at δ < φ stands due south at 90° − (φ − δ).
     The RA given is the meridian's, precessed back to J2000 by hand (m + n sin α tan δ per
     year); tolerance 0.2°: the hand formulas ignore nutation, aberration and polar motion."""
-    from datetime import datetime, timezone
+    from datetime import datetime
 
     from gyrostar.cli.solve import alt_az
 
     lat, lon = 52.0, 4.4
     when = "2026-11-29T21:30:00"
-    jd = datetime(2026, 11, 29, 21, 30, tzinfo=timezone.utc).timestamp() / 86400.0 + 2440587.5
+    jd = datetime(2026, 11, 29, 21, 30, tzinfo=UTC).timestamp() / 86400.0 + 2440587.5
     lst = (_gmst_deg(jd) + lon) % 360.0
     years = (jd - 2451545.0) / 365.25
     m_deg, n_deg = 46.1 / 3600.0, 20.04 / 3600.0            # general precession in RA and Dec per year
