@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from gyrostar.errors import ConfigError
 from gyrostar.imaging.read import expand_paths, read_frames
 
