@@ -211,7 +211,7 @@ class LostInSpace:
 
         if self._patterns is None:
             lo, hi = self.fov_range_deg
-            mag = self.mag_limit if self.mag_limit is not None else auto_mag_limit(lo) - 0.5
+            mag = self.mag_limit if self.mag_limit is not None else auto_mag_limit(lo)
             self._patterns = load_pattern_database(self.catalog, mag, (lo, hi), quiet=self.quiet)
         return self._patterns
 
