@@ -109,12 +109,19 @@ def tile_stats(vals, rr, cc, n, r0, c0):
                 svy += v[i] * y[i]
         if m < 8:
             break
-        mat = np.array([[m, sx, sy], [sx, sxx, sxy], [sy, sxy, syy]], np.float64)
-        rhs = np.array([sv, svx, svy])
-        if abs(np.linalg.det(mat)) < 1e-9:
+        # 3×3 normal equations [[m, sx, sy], [sx, sxx, sxy], [sy, sxy, syy]] · (a0, ax, ay) = (sv, svx, svy)
+        c00 = sxx * syy - sxy * sxy
+        c01 = sy * sxy - sx * syy
+        c02 = sx * sxy - sy * sxx
+        det = m * c00 + sx * c01 + sy * c02
+        if abs(det) < 1e-9:
             break
-        sol = np.linalg.solve(mat, rhs)
-        a0, ax, ay = sol[0], sol[1], sol[2]
+        c11 = m * syy - sy * sy
+        c12 = sx * sy - m * sxy
+        c22 = m * sxx - sx * sx
+        a0 = (c00 * sv + c01 * svx + c02 * svy) / det
+        ax = (c01 * sv + c11 * svx + c12 * svy) / det
+        ay = (c02 * sv + c12 * svx + c22 * svy) / det
         res = v - (a0 + ax * x + ay * y)
         kept = np.empty(m)
         k = 0
@@ -255,9 +262,9 @@ def _axis_table(n, tile, ng):
 def excess_and_noise(img, tile):
     """Background-subtracted frame and noise map (h, w) float32, bilinear between the tile
     centres of :func:`background_planes`, and the level and σ grids. Across a step — the
-    planes of the four tiles around a pixel, each extended to it, disagree by more than
-    ``STEP_SIGMA`` σ: a horizon, a roof, a lit wall; a smooth glow's planes agree — a pixel
-    takes the plane nearest its own value instead, so the sky next to a dark edge keeps the
+    planes of the four tiles around a cell, each extended over it, disagree by more than
+    ``STEP_SIGMA`` σ: a horizon, a roof, a lit wall; a smooth glow's planes agree — a pixel of
+    that cell takes the plane nearest its own value instead, so the sky next to a dark edge keeps the
     sky's level and its stars are not swallowed by the edge."""
     h, w = img.shape
     bgg, sgg, gxx, gyy = background_planes(img, tile)
@@ -270,6 +277,24 @@ def excess_and_noise(img, tile):
     cx = np.empty(nx)
     for k in range(nx):
         cx[k] = (k * tile + min(w, (k + 1) * tile) - 1) / 2.0
+    # a cell (between four tile centres) is a step when the four planes, each extended to the
+    # cell's corners and centre, disagree there by more than STEP_SIGMA σ
+    step = np.zeros((max(ny - 1, 1), max(nx - 1, 1)), np.bool_)
+    for a in range(max(ny - 1, 1)):
+        b = min(a + 1, ny - 1)
+        for k in range(max(nx - 1, 1)):
+            k1 = min(k + 1, nx - 1)
+            smin = min(min(sgg[a, k], sgg[a, k1]), min(sgg[b, k], sgg[b, k1]))
+            for py in (cy[a], 0.5 * (cy[a] + cy[b]), cy[b]):
+                for px in (cx[k], 0.5 * (cx[k] + cx[k1]), cx[k1]):
+                    lo = 1e300
+                    hi = -1e300
+                    for ty, tx in ((a, k), (a, k1), (b, k), (b, k1)):
+                        p = bgg[ty, tx] + gxx[ty, tx] * (px - cx[tx]) + gyy[ty, tx] * (py - cy[ty])
+                        lo = min(lo, p)
+                        hi = max(hi, p)
+                    if hi - lo > STEP_SIGMA * smin:
+                        step[a, k] = True
     d = np.empty((h, w), np.float32)
     sg = np.empty((h, w), np.float32)
     lv = np.empty(4)
@@ -282,14 +307,12 @@ def excess_and_noise(img, tile):
             k = x0[c]
             k1 = min(k + 1, nx - 1)
             u = fx[c]
-            j = 0
-            for ty, tx in ((a, k), (a, k1), (b, k), (b, k1)):
-                lv[j] = bgg[ty, tx] + gxx[ty, tx] * (c - cx[tx]) + gyy[ty, tx] * (r - cy[ty])
-                sv[j] = sgg[ty, tx]
-                j += 1
-            lo = min(min(lv[0], lv[1]), min(lv[2], lv[3]))
-            hi = max(max(lv[0], lv[1]), max(lv[2], lv[3]))
-            if hi - lo > STEP_SIGMA * min(min(sv[0], sv[1]), min(sv[2], sv[3])):
+            if step[min(a, step.shape[0] - 1), min(k, step.shape[1] - 1)]:
+                j = 0
+                for ty, tx in ((a, k), (a, k1), (b, k), (b, k1)):
+                    lv[j] = bgg[ty, tx] + gxx[ty, tx] * (c - cx[tx]) + gyy[ty, tx] * (r - cy[ty])
+                    sv[j] = sgg[ty, tx]
+                    j += 1
                 x = img[r, c]
                 best = 0
                 for j in range(1, 4):
@@ -298,10 +321,12 @@ def excess_and_noise(img, tile):
                 d[r, c] = x - lv[best]
                 sg[r, c] = sv[best]
             else:
-                l00, l01, l10, l11 = bgg[a, k], bgg[a, k1], bgg[b, k], bgg[b, k1]
-                s00, s01, s10, s11 = sv[0], sv[1], sv[2], sv[3]
-                d[r, c] = img[r, c] - ((1.0 - t) * ((1.0 - u) * l00 + u * l01) + t * ((1.0 - u) * l10 + u * l11))
-                sg[r, c] = (1.0 - t) * ((1.0 - u) * s00 + u * s01) + t * ((1.0 - u) * s10 + u * s11)
+                w00 = (1.0 - t) * (1.0 - u)
+                w01 = (1.0 - t) * u
+                w10 = t * (1.0 - u)
+                w11 = t * u
+                d[r, c] = img[r, c] - (w00 * bgg[a, k] + w01 * bgg[a, k1] + w10 * bgg[b, k] + w11 * bgg[b, k1])
+                sg[r, c] = w00 * sgg[a, k] + w01 * sgg[a, k1] + w10 * sgg[b, k] + w11 * sgg[b, k1]
     return d, sg, bgg, sgg
 
 
