@@ -139,3 +139,26 @@ def test_alt_az_of_the_pole_and_of_a_meridian_transit():
     assert abs(recs[1]["az_deg"] - 180.0) < 0.2
     assert "alt_deg" not in recs[2]
     assert note is None or "degraded" in note
+
+
+def test_fov_hint_and_known_camera_give_the_no_hint_solution(solved, tmp_path):
+    """The same image solved with --fov-deg (the pattern search narrowed to ±5 %) and with
+    --camera calibration.toml (LostInSpace.for_camera: no search over the focal length) lands on
+    the no-hint boresight."""
+    import contextlib
+    import io
+
+    from gyrostar.calibration import calfile
+
+    _, out, _ = solved
+    ref = out["images"][2]
+    toml = tmp_path / "calibration.toml"
+    calfile.write_section(toml, "camera", calfile.CameraCal(ref["focal_length_px"], (511.5, 383.5), ref["k1"],
+                                                            image_size_px=(1024, 768)), source="test")
+    for extra in (["--fov-deg", f"{ref['fov_deg'] * 1.02:.3f}"], ["--camera", str(toml)]):
+        buf = io.StringIO()
+        with contextlib.redirect_stdout(buf):
+            code = main(["solve", ref["file"], "--json", "-q", *extra])
+        assert code == 0, extra
+        (rec,) = json.loads(buf.getvalue())["images"]
+        assert _sep_arcsec(rec["ra_deg"], rec["dec_deg"], ref["ra_deg"], ref["dec_deg"]) < 10.0, extra
