@@ -306,13 +306,13 @@ def make_loop(cfg, clock, gyro, head, camera, sinks, lat_clock=None, e_per_dn=No
     from ..catalog import deepest_limit, load_catalog
     from ..loop.coupled import CoupledLoop
     from ..starid.blends import BLEND_DMAG, BLEND_PX, blended
-    from ..starid.faint import DEPTH_MAG, faint_stars
-    from ..starid.pyramid import Pyramid
+    from ..starid.faint import DEPTH_MAG
+    from ..starid.lost_in_space import build_pyramid
 
     idx = star_index(cfg, camera)
     # the sky holds stars beyond the index's limit: a lost-in-space label next to one is dropped
     deep = load_catalog(cfg.sim.catalog, deepest_limit(cfg.sim.catalog, idx.mag_limit + max(DEPTH_MAG, BLEND_DMAG)))
-    ident = Pyramid(idx, camera, faint=faint_stars(deep.brighter_than(idx.mag_limit + DEPTH_MAG), idx))
+    ident = build_pyramid(camera, index=idx, faint_catalog=deep.brighter_than(idx.mag_limit + DEPTH_MAG))
     # stars whose spot is a blend with a neighbour: tracked only when too few others are
     blends = blended(idx, deep, BLEND_PX / camera.focal_length_px, BLEND_DMAG)
     budget = None

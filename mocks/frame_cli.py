@@ -52,18 +52,9 @@ def configure(parser) -> None:
 
 def wcs_cd(q, camera):
     """TAN CD matrix (deg/px) and boresight (ra, dec) in deg for attitude ``q`` (ICRS→body)."""
-    import numpy as np
-    from gyrostar.attitude import quat_to_dcm
+    from gyrostar.imaging.wcs import tan_cd
 
-    a = quat_to_dcm(np.asarray(q, dtype=np.float64))
-    z = a[2]
-    ra = math.atan2(z[1], z[0]) % (2 * math.pi)
-    dec = math.asin(max(-1.0, min(1.0, z[2])))
-    east = np.array([-math.sin(ra), math.cos(ra), 0.0])
-    north = np.array([-math.sin(dec) * math.cos(ra), -math.sin(dec) * math.sin(ra), math.cos(dec)])
-    k = math.degrees(1.0) / camera.focal_length_px
-    cd = k * np.array([[a[0] @ east, a[1] @ east], [a[0] @ north, a[1] @ north]])
-    return cd, math.degrees(ra), math.degrees(dec)
+    return tan_cd(q, camera.focal_length_px)
 
 
 def run(args) -> int:

@@ -9,6 +9,7 @@ Sub-commands (each has ``--help``):
     replay     feed a recorded log back through the driver; export it
     fw         camera-head firmware tools (build, host program, ARM image, ping, spots)
     sim        the physical simulator (frame rendering)
+    solve      plate-solve night-sky image files (attitude, field of view, lens; WCS, CSV, PNG)
 
 Exit codes: see :data:`gyrostar.errors.EXIT_CODES` (also printed by ``gyrostar --help``).
 Every failure is one line on stderr (``gyrostar COMMAND: error: ...``) and, with
@@ -39,6 +40,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
                "gyrostar.cli.replay"),
     "fw": ("camera-head firmware: build, host program, ARM image, ping, spots", "gyrostar.cli.fw"),
     "sim": ("physical simulator: render frames", "gyrostar.cli.sim"),
+    "solve": ("plate-solve night-sky images (no field-of-view hint): attitude, field of view, lens; WCS, CSV, PNG",
+              "gyrostar.cli.solve"),
 }
 
 # OS errors on paths the user named are usage errors; any other OS error is a device/link one

@@ -57,6 +57,7 @@ A 3-star field is accepted on a unique triangle when E₃ allows it.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 
@@ -820,15 +821,8 @@ class Pyramid:
                 and list(self.budgets) == sorted(self.budgets)):
             raise ConfigError(f"pyramid spot budgets must be ascending and ≥ 3, got {self.budgets!r}")
         self._budgets = np.asarray(self.budgets, dtype=np.int64)
-        self._params = self.camera.as_array()
-        sig = self.sigma_px / self.camera.focal_length_px
-        self.eps = self.n_sigma * math.sqrt(2.0) * sig + 2e-6
-        self.label_tol = self.n_sigma * 1.25 * sig + 2e-6
-        w, h = self.camera.width_px, self.camera.height_px
-        self.fov_radius = math.atan(0.5 * math.hypot(w, h) / self.camera.focal_length_px)
-        if 2.0 * self.fov_radius > self.index.max_sep + 1e-9:
-            raise ConfigError(f"index pairs reach {math.degrees(self.index.max_sep):.2f}° but the camera "
-                              f"diagonal is {math.degrees(2 * self.fov_radius):.2f}°")
+        self._default_check = self.check is None
+        self._set_camera()
         self._mark = np.zeros(len(self.index), dtype=np.int32)
         tiers = [self.index] if self.fast_index is None else [self.fast_index, self.index]
         if self.fast_index is not None and not (len(self.fast_index) == len(self.index)
@@ -845,7 +839,23 @@ class Pyramid:
         self._lab_sorted_v = mag_share_table(self.index.vmag, self.mwin)
         # every indexed star (labels): the full tier's navigation density scaled to all stars
         self._lab_nloc = dens[-1] * (len(self.index) / np.count_nonzero(self.index.is_nav))
-        if self.check is None:
+        f = self.faint
+        self._faint_grid = (np.empty((0, 3)), np.zeros(2, np.int64), 1.0, 1) if f is None else (
+            f.vox_vec, f.vox_start, float(f.vox_h), int(f.vox_g))
+        self._no_mag = np.empty(0)
+
+    def _set_camera(self) -> None:
+        """The camera's share of the set-up: tolerances, field radius, default per-star check."""
+        self._params = self.camera.as_array()
+        sig = self.sigma_px / self.camera.focal_length_px
+        self.eps = self.n_sigma * math.sqrt(2.0) * sig + 2e-6
+        self.label_tol = self.n_sigma * 1.25 * sig + 2e-6
+        w, h = self.camera.width_px, self.camera.height_px
+        self.fov_radius = math.atan(0.5 * math.hypot(w, h) / self.camera.focal_length_px)
+        if 2.0 * self.fov_radius > self.index.max_sep + 1e-9:
+            raise ConfigError(f"index pairs reach {math.degrees(self.index.max_sep):.2f}° but the camera "
+                              f"diagonal is {math.degrees(2 * self.fov_radius):.2f}°")
+        if self._default_check:
             self.check = StarCheck(self.sigma_px, self.camera.focal_length_px, mag_limit=self.index.nav_limit,
                                    min_stars=3)
         # a StarCheck runs inside the compiled call; another stage runs after it
@@ -853,10 +863,15 @@ class Pyramid:
         near = self.label_tol + BLEND_PX / self.camera.focal_length_px
         self._absent_cfg = np.empty(0) if self.absent_max < 0 else np.array(
             [float(self.absent_max), MARGIN_MAG, near, EDGE_PX, self.index.nav_limit])
-        f = self.faint
-        self._faint_grid = (np.empty((0, 3)), np.zeros(2, np.int64), 1.0, 1) if f is None else (
-            f.vox_vec, f.vox_start, float(f.vox_h), int(f.vox_g))
-        self._no_mag = np.empty(0)
+
+    def with_camera(self, camera) -> Pyramid:
+        """The same identifier (index, tiers, tables shared) for another camera whose diagonal
+        the index's pairs still span — cheap: only the camera's tolerances are recomputed."""
+        other = copy.copy(self)
+        other.camera = camera
+        other._mark = np.zeros(len(self.index), dtype=np.int32)
+        other._set_camera()
+        return other
 
     def identify_vectors(self, b: np.ndarray, mag=None) -> StarIdResult:
         """Identify body unit vectors (n, 3), brightest first; ``mag`` (n,) measured V or None."""

@@ -8,6 +8,13 @@ writes from a flatsat run), or a CSV with the header
 ``field,u,v,ra_deg,dec_deg``. The nominal camera (start point, sensor size) is a
 ``gyrostar.camera`` preset (``--camera``).
 
+``--images PATH...``: real sky frames (files or folders, any format ``gyrostar solve`` reads).
+Each is solved with no field-of-view hint (:mod:`gyrostar.starid.lost_in_space`, the
+``--fov-range`` searched); the matched stars' centroids (the real-frame detector's, without
+saturated or border-cut spots) and catalog directions form the table. The nominal camera is the
+median of the per-image solutions (focal length, k1; principal point at the sensor's centre),
+and the fit frees f, cx, cy and k1 (``--fix`` to change).
+
 ``--simulate``: random attitudes; the simulator's sky (:class:`gyrostar.mocks.sky.Sky`,
 Hipparcos to ``--mag-limit``) seen through the preset camera with an injected principal
 point offset and distortion gives the true centroids; Gaussian centroid noise
@@ -76,6 +83,11 @@ def configure(parser) -> None:
                              "narrow field the tangential terms trade with the principal point), none with "
                              "--simulate (its camera has tangential terms); '' fits all of "
                              "f_px,cx_px,cy_px,k1,k2,k3,p1,p2")
+    parser.add_argument("--images", nargs="+", default=None, metavar="PATH",
+                        help="real night-sky frames (files or folders): solved with no field-of-view hint, their "
+                             "matched stars are the table (the fit frees f_px,cx_px,cy_px,k1 unless --fix)")
+    parser.add_argument("--fov-range", type=_fov_range_arg, default=(5.0, 30.0), metavar="MIN,MAX",
+                        help="--images: horizontal fields of view searched (deg, default 5,30)")
     parser.add_argument("--fields", type=int_in(1, MAX_FIELDS), default=2000,
                         help=f"--simulate: star fields, 1 to {MAX_FIELDS} (default 2000)")
     parser.add_argument("--mag-limit", type=float_in(3.0, 12.0), default=7.0,
@@ -85,6 +97,71 @@ def configure(parser) -> None:
     parser.add_argument("--outliers", type=float_in(0.0, MAX_OUTLIER_FRACTION, hi_open=True), default=0.01,
                         help="--simulate: fraction of misidentified stars, in [0, 0.5): the fit's median-based "
                              "rejection needs most stars right (default 0.01)")
+
+
+def _fov_range_arg(text: str):
+    from ...cli.solve import _fov_range
+
+    return _fov_range(text)
+
+
+
+def images_table(args):
+    """``(StarFields, nominal CameraModel, per-image list)`` from real frames (``--images``)."""
+    from ...calibration.intrinsics import StarFields
+    from ...camera import CameraModel
+    from ...catalog import load_catalog
+    from ...cli.output import progress
+    from ...errors import ConfigError
+    from ...imaging.detect import FLAG_EDGE, FLAG_SATURATED
+    from ...imaging.plate import solve_frame
+    from ...imaging.read import expand_paths, read_frames
+    from ...starid.lost_in_space import LostInSpace
+
+    files = expand_paths(args.images)
+    cat = load_catalog("hip2", 10.0)
+    index = {int(i): k for k, i in enumerate(cat.ids)}
+    solvers: dict = {}
+    fl, uvl, refl, starl, per_image = [], [], [], [], []
+    size = None
+    with progress(args, "solving images", len(files)) as step:
+        for f in files:
+            for frame in read_frames(f):
+                if size is None:
+                    size = (frame.width, frame.height)
+                elif (frame.width, frame.height) != size:
+                    raise ConfigError(f"--images: {frame.name} is {frame.width}x{frame.height} px, the first image "
+                                      f"{size[0]}x{size[1]}: one camera's frames only")
+                key = size
+                if key not in solvers:
+                    solvers[key] = LostInSpace.for_sensor(*size, fov_range_deg=args.fov_range,
+                                                          mag_limit=None, quiet=True)
+                res = solve_frame(frame, solvers[key])
+                sol = res.solution
+                info = {"file": frame.name, "solved": bool(sol.solved), "status": sol.status}
+                if sol.solved:
+                    flags = res.detection.flags[res.rows]
+                    ok = (sol.match >= 0) & ((flags & (FLAG_SATURATED | FLAG_EDGE)) == 0)
+                    rows = [index[int(c)] for c in sol.match[ok]]
+                    info.update(focal_length_px=float(sol.focal_length_px), k1=float(sol.k1), stars=int(ok.sum()))
+                    if ok.sum() >= 3:
+                        fl.append(np.full(ok.sum(), len(fl)))
+                        uvl.append(res.xy[ok])
+                        refl.append(cat.vectors[rows])
+                        starl.append(sol.match[ok])
+                per_image.append(info)
+            step()
+    solved = [p for p in per_image if p["solved"]]
+    if not fl:
+        raise ConfigError(f"--images: none of the {len(per_image)} images was solved "
+                          f"({'; '.join(sorted({p['status'] for p in per_image}))})")
+    f0 = float(np.median([p["focal_length_px"] for p in solved]))
+    k1 = float(np.median([p["k1"] for p in solved]))
+    w, h = size
+    pitch = 1e-5
+    nominal = CameraModel(f0 * pitch, pitch, w, h, (w - 1) / 2.0, (h - 1) / 2.0, k1)
+    stars = StarFields(np.concatenate(fl), np.concatenate(uvl), np.concatenate(refl), star=np.concatenate(starl))
+    return stars, nominal, per_image
 
 
 def load_table(path):
@@ -210,20 +287,29 @@ def run(args) -> int:
     from ...calibration import calfile, report
     from ...calibration.intrinsics import NAMES, fit, model_difference
     from ...camera import camera_preset
+    from ...errors import ConfigError
 
-    source = report.check_source(args)
-    nominal = camera_preset(args.camera)
+    per_image = None
+    if args.images:
+        if args.input is not None or args.simulate:
+            raise ConfigError("--images replaces INPUT and --simulate: give one of them")
+        source = "images"
+        stars, nominal, per_image = images_table(args)
+    else:
+        source = report.check_source(args)
+        nominal = camera_preset(args.camera)
     w, h = nominal.width_px, nominal.height_px
     truth_cam, bad = None, None
     if source == "simulate":
         stars, truth_cam, bad = simulate(args, nominal)
-    else:
+    elif source == "file":
         stars = load_table(args.input)
     theta0 = nominal.as_array()[:8]
     r_corner = np.hypot(w, h) / 2.0 / nominal.focal_length_px
     f0 = nominal.focal_length_px
     before = fit(stars, theta0, free=np.zeros(8, bool), reject_k=5.0)
-    fix = args.fix if args.fix is not None else ("" if source == "simulate" else "k3,p1,p2")
+    default_fix = {"simulate": "", "images": "k2,k3,p1,p2"}.get(source, "k3,p1,p2")
+    fix = args.fix if args.fix is not None else default_fix
     fixed = {n.strip() for n in fix.split(",") if n.strip()}     # names checked at parse time (fix_names)
     free = np.array([n not in fixed for n in NAMES])
     res = fit(stars, theta0, free=free, prior_k2=1.0 / (f0 * r_corner**5), prior_k3=1.0 / (f0 * r_corner**7))
@@ -242,7 +328,12 @@ def run(args) -> int:
                          if stars.sigma is not None else "uniform (the table gives no centroid σ)"),
              "fixed": sorted(fixed), "n_fields": int(stars.n_fields), "n_stars": int(len(stars.field)),
              "n_rejected": int((~res.inlier).sum()), "residual_rms_before_px": before.rms_px,
-             "residual_rms_after_px": res.rms_px}
+             "residual_rms_after_px": res.rms_px,
+             "residual_rms_after_arcsec": float(res.rms_px / res.theta[0] * 206264.806),
+             "residual_rms_2d_px": float(np.sqrt((res.residuals[res.inlier] ** 2).sum(axis=1).mean()))}
+    if per_image is not None:
+        extra["images"] = per_image
+        extra["images_solved"] = sum(p["solved"] for p in per_image)
     wild = implausible(res.theta, res.sigma, free, f0, r_corner)
     extra["implausible_terms"] = {n: {"corner_px": px, "sigma_px": spx} for n, (px, spx) in wild.items()}
     checks = {"implausible_terms": report.check(len(wild), 0, "terms beyond their plausible corner displacement "
@@ -267,7 +358,8 @@ def run(args) -> int:
                             residual_rms_px=res.rms_px,
                             principal_point_sigma_px=(float(res.sigma[1]), float(res.sigma[2])))
     toml = args.toml or folder / "calibration.toml"
-    calfile.write_section(toml, "camera", cal, source=str(args.input) if args.input else source)
+    calfile.write_section(toml, "camera", cal, source=str(args.input) if args.input else
+                          (f"{len(per_image)} images: {', '.join(args.images)}" if per_image else source))
     extra["toml"] = str(toml)
     if not args.no_plots:
         _plots(folder, stars, before, res, w, h)

@@ -48,7 +48,6 @@ HELP = "star identification Monte Carlo (paper 001 Figs 10–16): pyramid, grid,
 METHODS = ("pyramid", "grid", "extended-grid", "extended-triangle")
 SWEEPS = ("fig10", "fig11", "fig12", "fig13", "fig14", "fig15", "fig16")
 DPH = math.pi / 180.0 / 3600.0
-FAST_PER_FIELD = 10  # navigation stars per field of Pyramid's first (thinned) tier
 MAG_SIGMA_FLOOR = 0.2    # mag: the narrowest photometric window Pyramid is given (the paper-001 camera)
 LABEL_DEPTH_SIGMA = 3.0  # × the fields' magnitude noise: how far beyond its limit Pyramid's index labels spots
 FOV_RANGE_DEG = (1.0, 40.0)      # --fov-deg: a square field's diagonal must stay inside the index's 60° pairs
@@ -225,10 +224,9 @@ def setup(cfg: TrialConfig) -> dict:
     from ...catalog import deepest_limit, load_catalog
     from ...mocks.star_lists import Sky
     from ...starid.extended import ExtendedIdentifier
-    from ...starid.faint import DEPTH_MAG, faint_stars
     from ...starid.grid import GridIdentifier, GridParams, load_grid_database
     from ...starid.index import load_index
-    from ...starid.pyramid import Pyramid
+    from ...starid.lost_in_space import build_pyramid
 
     cam = trial_camera(cfg)
     diag = 2.0 * math.degrees(math.atan(0.5 * math.hypot(cam.width_px, cam.height_px) / cam.focal_length_px))
@@ -238,16 +236,11 @@ def setup(cfg: TrialConfig) -> dict:
     if cfg.method == "pyramid":
         per_field = cfg.per_field if cfg.per_field >= 0 else (12 if cfg.catalog == "gaia" else 0)
         sep = round(diag + 0.01, 3)
-        # navigation stars to the sensor's limit; stars label_depth fainter label spots too
-        index = load_index(cfg.catalog, cfg.mag_limit, sep, per_field, label_depth_mag=label_depth)
-        # thinned first tier (the brightest stars per field) unless the index is thinned already
-        fast = load_index(cfg.catalog, cfg.mag_limit, sep, FAST_PER_FIELD,
-                          label_depth_mag=label_depth) if per_field == 0 else None
-        # labels next to a star the index leaves out (fainter than its stars, or the fainter
-        # of a close double) are dropped: the sensor sees such stars now and then
-        below = load_catalog(cfg.catalog, deepest_limit(cfg.catalog, cfg.mag_limit + label_depth + DEPTH_MAG))
-        out["ident"] = Pyramid(index, cam, sigma_px=sigma, fast_index=fast, sigma_mag=sigma_mag,
-                               faint=faint_stars(below, index), p_false_max=cfg.p_false_max)
+        # navigation stars to the sensor's limit (stars label_depth fainter label spots too), the
+        # thinned first tier, and the faint stars the index leaves out: the public builder
+        out["ident"] = build_pyramid(cam, cfg.catalog, cfg.mag_limit, per_field=per_field, label_depth_mag=label_depth,
+                                     sigma_px=sigma, sigma_mag=sigma_mag, p_false_max=cfg.p_false_max,
+                                     max_sep_deg=sep)
         if cfg.peer:
             from .starid_peers import load_peer
 

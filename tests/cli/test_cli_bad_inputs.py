@@ -47,6 +47,12 @@ def _files(d):
     (d / "stray_no_orbit.toml").write_text('name = "s"\n[stray_light]\nenabled = true\n')
     (d / "orbit_epoch.toml").write_text('name = "s"\n[orbit]\nenabled = true\nepoch_utc = "yesterday"\n')
     (d / "saa_box.toml").write_text('name = "s"\n[radiation]\nenabled = true\nsaa_lat_deg = [10.0, -10.0]\n')
+    (d / "corrupt.png").write_bytes(b"\x89PNG\r\n\x1a\n" + b"\x00garbage" * 40)
+    (d / "corrupt.tiff").write_bytes(b"II*\x00" + b"\x07garbage" * 40)
+    (d / "truncated.jpg").write_bytes(b"\xff\xd8\xff\xe0" + b"\x00" * 30)
+    from PIL import Image
+
+    Image.fromarray(np.zeros((480, 640), np.uint8)).save(d / "blank.png")
     return d
 
 
@@ -104,6 +110,25 @@ CASES = [
     ("sim-frame-missing-folder", ["sim", "frame", "--out", "{d}/no/x.fits"], USAGE, ["does not exist"]),
     ("sim-frame-dec-200", ["sim", "frame", "--out", "{d}/x.fits", "--ra-deg", "10", "--dec-deg", "200"], USAGE,
      ["--dec-deg"]),
+    # --- solve: unreadable images, paths and options (exit 2), a frame with no star (exit 1)
+    ("solve-missing", ["solve", "{d}/nope.png"], USAGE, ["nope.png", "no such file"]),
+    ("solve-corrupt-png", ["solve", "{d}/corrupt.png"], USAGE, ["corrupt.png", "not a readable PNG"]),
+    ("solve-corrupt-tiff", ["solve", "{d}/corrupt.tiff"], USAGE, ["corrupt.tiff", "not a readable TIFF"]),
+    ("solve-truncated-jpeg", ["solve", "{d}/truncated.jpg"], USAGE, ["truncated.jpg", "not a readable JPG"]),
+    ("solve-corrupt-fits", ["solve", "{d}/fits/dark1.fits"], USAGE, ["dark1.fits"]),
+    ("solve-not-an-image", ["solve", "{d}/plain.txt"], USAGE, ["plain.txt", "not an image file"]),
+    ("solve-folder-no-image", ["solve", "{d}/camp"], USAGE, ["camp", "no image file"]),
+    ("solve-fov-range-reversed", ["solve", "{d}/blank.png", "--fov-range", "30,5"], USAGE, ["--fov-range"]),
+    ("solve-fov-outside-range", ["solve", "{d}/blank.png", "--fov-deg", "40"], USAGE, ["--fov-deg", "--fov-range"]),
+    ("solve-site-no-time", ["solve", "{d}/blank.png", "--site", "52.0,4.4"], USAGE, ["--site", "--time"]),
+    ("solve-site-bad", ["solve", "{d}/blank.png", "--site", "95,4", "--time", "2020-01-01T00:00:00"], USAGE,
+     ["--site"]),
+    ("solve-camera-unknown", ["solve", "{d}/blank.png", "--camera", "nosuch"], USAGE, ["nosuch"]),
+    ("solve-camera-size", ["solve", "{d}/blank.png", "--camera", "xing2012"], USAGE, ["640x480", "1024x1024"]),
+    ("cal-camera-images-corrupt", ["calibrate", "camera", "--images", "{d}/corrupt.png", "--report", "{d}/rep"],
+     USAGE, ["corrupt.png"]),
+    ("cal-camera-images-and-input", ["calibrate", "camera", "{d}/plain.npz", "--images", "{d}/blank.png"], USAGE,
+     ["--images"]),
     # --- run: configuration the devices reject (exit 2 naming key and file)
     ("run-config-missing", ["run", "--config", "{d}/nope.toml"], USAGE, ["nope.toml"]),
     ("run-config-not-toml", ["run", "--config", "{d}/bad.toml"], USAGE, ["bad.toml", "TOML"]),
@@ -286,7 +311,8 @@ def test_bad_input_one_line_and_exit_code(name, argv, code, words, bad, tmp_path
 
 
 JSON_CASES = [c for c in CASES if c[0] in ("run-duration-nan", "run-bmi088-odr", "replay-folder",
-                                           "cal-static-text-npz", "fw-ping-no-device", "run-unknown-flag")]
+                                           "cal-static-text-npz", "fw-ping-no-device", "run-unknown-flag",
+                                           "solve-corrupt-png")]
 
 
 @pytest.mark.parametrize("name,argv,code,words", JSON_CASES, ids=[c[0] for c in JSON_CASES])

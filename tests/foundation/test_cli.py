@@ -14,7 +14,7 @@ GYROSTAR = [str(Path(sys.executable).parent / "gyrostar")]
 
 def test_help_lists_every_subcommand():
     out = subprocess.run(GYROSTAR + ["--help"], capture_output=True, text=True, check=True).stdout
-    for name in ("run", "eval", "bench", "calibrate", "replay", "fw", "sim"):
+    for name in ("run", "eval", "bench", "calibrate", "replay", "fw", "sim", "solve"):
         assert name in out
     assert "exit codes" in out
 
