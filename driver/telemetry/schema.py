@@ -32,7 +32,8 @@ COLUMNS: tuple[Column, ...] = tuple([
     Column("tai_s", "f8", "s", "TAI seconds since 1958-01-01T00:00:00 TAI of the same instant"),
     Column("seq", "u4", "", "output counter (a gap means lost outputs)"),
     Column("mode", "u1", "", "0 ACQUIRE, 1 TRACK, 2 COAST"),
-    Column("flags", "u2", "", "quality flags (gyrostar.loop.record FLAG_*)"),
+    Column("flags", "u2", "", "quality flags (gyrostar.loop.record FLAG_*); bits 12–15: the reason code "
+           "(FLATSAT §output records: 0 tracking, 1 acquiring, 2 few stars, 3 blinded, 4 rate, 5 head lost)"),
     Column("n_stars", "u1", "", "stars tracked; in COAST those the newest image still measured (0: none)"),
     *_vec("q", "xyzw", "f8", "1", "attitude quaternion ICRS → body, scalar last"),
     *_vec("omega", "xyz", "f8", "rad/s", "body rate, bias-corrected, body axes"),

@@ -105,7 +105,7 @@ CASES = [
     ("eval-loop-out-holds-campaign", ["eval", "loop", "--runs", "1", "--duration", "10", "--out", "{d}/camp"],
      USAGE, ["already holds"]),
     ("eval-loop-orbit-short", ["eval", "loop", "--orbit", "--runs", "1", "--duration", "5", "--out", "{d}/mco"],
-     USAGE, ["--duration", "≥ 10"]),
+     USAGE, ["--duration", "[10, 86400]"]),
     ("run-orbit-case-malformed", ["run", "--scenario", "mco:12x@30"], USAGE, ["mco:SEED@DURATION"]),
     ("sim-frame-missing-folder", ["sim", "frame", "--out", "{d}/no/x.fits"], USAGE, ["does not exist"]),
     ("sim-frame-dec-200", ["sim", "frame", "--out", "{d}/x.fits", "--ra-deg", "10", "--dec-deg", "200"], USAGE,

@@ -111,7 +111,7 @@ def test_max_error_over_floor_judges_the_run_against_its_own_floor():
     from gyrostar.hil.acceptance import evaluate, failures
 
     scen = hc.load_scenario("moon-in-field")
-    base = {"track_fraction": 0.95, "attitude_error_arcsec_1sigma": 4.0}
+    base = {"track_fraction": 0.95, "attitude_error_arcsec_1sigma": 4.0, "mode_seconds": {"TRACK": 28.5}}
     ok = evaluate(scen, dict(base, measured_over_floor=1.1), scen.duration_s)
     bad = evaluate(scen, dict(base, measured_over_floor=1.3), scen.duration_s)
     never = evaluate(scen, dict(base, measured_over_floor=None), scen.duration_s)
